@@ -1,0 +1,151 @@
+"""Fixtures for the bus conformance suite: one CAN bus per test, kernel vcan
+where the kernel has it, else the userspace hub; tools run as subprocesses so
+the preload library applies to them exactly as it would to a user's program."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+BUILD = Path(os.environ.get("UCAN_BUILD", REPO / "build" / "ucan"))
+HELPER = Path(__file__).with_name("pycan_helper.py")
+READY_TIMEOUT_S = 10.0
+
+
+def kernel_has_vcan() -> bool:
+    """True if vcan interfaces exist or can be created here (needs CAP_NET_ADMIN)."""
+    probe = "ucanprobe0"
+    rc = subprocess.run(["ip", "link", "add", "dev", probe, "type", "vcan"], capture_output=True)
+    if rc.returncode != 0:
+        return False
+    subprocess.run(["ip", "link", "del", probe], capture_output=True)
+    return True
+
+
+def wait_for(condition, what: str, timeout: float = READY_TIMEOUT_S):
+    """Poll an explicit readiness condition (never a fixed sleep) until it holds."""
+    deadline = time.monotonic() + timeout
+    delay = 0.001
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(delay)
+        delay = min(delay * 2, 0.05)
+
+
+class Bus:
+    """A CAN bus with interfaces vcan0, vcan1 (and vcan2: classic-only, MTU 16)."""
+
+    def __init__(self, mode: str, workdir: Path):
+        self.mode = mode
+        self.workdir = workdir
+        self.env = dict(os.environ)
+        self.env.pop("LD_PRELOAD", None)
+        self.hub: subprocess.Popen | None = None
+        self.hub_log = workdir / "hub.log"
+        self.hub_args: list[str] = []
+
+    # -- userspace hub ----------------------------------------------------
+    def start_hub(self, *ifaces: str) -> None:
+        self.hub_args = list(ifaces) or ["vcan0", "vcan1", "vcan2:mtu=16"]
+        self.env["UCAN_DIR"] = str(self.workdir)
+        self.env["LD_PRELOAD"] = str(BUILD / "libucan-preload.so")
+        read_fd, write_fd = os.pipe()
+        with open(self.hub_log, "ab") as log:
+            self.hub = subprocess.Popen(
+                [str(BUILD / "ucan-hub"), "-d", str(self.workdir), "-r", str(write_fd), *self.hub_args],
+                stdout=log, stderr=log, pass_fds=(write_fd,), env={**self.env, "LD_PRELOAD": ""},
+            )
+        os.close(write_fd)
+        with os.fdopen(read_fd) as ready:
+            if ready.readline().strip() != "ready":
+                raise RuntimeError(f"ucan-hub did not start: {self.hub_log.read_text()}")
+
+    def stop_hub(self, sig: int = signal.SIGTERM) -> None:
+        if self.hub and self.hub.poll() is None:
+            self.hub.send_signal(sig)
+            self.hub.wait(timeout=10)
+
+    def stats(self) -> dict:
+        out = subprocess.run([str(BUILD / "ucanctl"), "-d", str(self.workdir), "stats", "-j"],
+                             capture_output=True, text=True, check=True)
+        return json.loads(out.stdout)
+
+    # -- either kind ------------------------------------------------------
+    def receivers(self) -> int:
+        """Number of bound CAN_RAW sockets on the bus (readiness of readers)."""
+        if self.mode == "userspace":
+            return sum(1 for c in self.stats()["clients"] if c["bound"])
+        text = Path("/proc/net/can/rcvlist_all").read_text()
+        return sum(1 for line in text.splitlines() if line.strip().startswith("vcan"))
+
+    def wait_receivers(self, count: int) -> None:
+        wait_for(lambda: self.receivers() >= count, f"{count} CAN receiver(s) bound")
+
+    def popen(self, args: list[str], **kw) -> subprocess.Popen:
+        kw.setdefault("stdout", subprocess.PIPE)
+        kw.setdefault("stderr", subprocess.PIPE)
+        kw.setdefault("text", True)
+        return subprocess.Popen(args, env=kw.pop("env", self.env), **kw)
+
+    def run(self, args: list[str], check: bool = True, timeout: float = 60, **kw) -> subprocess.CompletedProcess:
+        rc = subprocess.run(args, env=kw.pop("env", self.env), capture_output=True, text=True,
+                            timeout=timeout, **kw)
+        if check and rc.returncode != 0:
+            raise AssertionError(f"{args} exited {rc.returncode}: {rc.stderr.strip()}")
+        return rc
+
+    def python(self, *args: str, **kw) -> subprocess.Popen:
+        """Run pycan_helper.py (python-can) under this bus's environment."""
+        return self.popen([sys.executable, str(HELPER), *args], **kw)
+
+    def tool(self, name: str) -> str:
+        return str(BUILD / name)
+
+
+def bus_modes() -> list[str]:
+    forced = os.environ.get("BENCH_CAN", "auto")
+    if forced in ("kernel", "userspace"):
+        return [forced]
+    return ["kernel"] if kernel_has_vcan() else ["userspace"]
+
+
+@pytest.fixture(params=bus_modes())
+def bus(request, tmp_path_factory):
+    workdir = Path(tempfile.mkdtemp(prefix="ucan-", dir="/tmp"))  # short: unix socket paths are limited
+    b = Bus(request.param, workdir)
+    if b.mode == "userspace":
+        b.start_hub()
+    else:
+        for name in ("vcan0", "vcan1", "vcan2"):
+            subprocess.run(["ip", "link", "add", "dev", name, "type", "vcan"], capture_output=True)
+            subprocess.run(["ip", "link", "set", name, "mtu", "16" if name == "vcan2" else "72"], check=True)
+            subprocess.run(["ip", "link", "set", "up", name], check=True)
+    yield b
+    b.stop_hub()
+    if b.hub_log.exists():  # captured by pytest: shown only when the test failed
+        print(f"--- {b.hub_log} ---\n{b.hub_log.read_text()}")
+    shutil.rmtree(workdir, ignore_errors=True)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if "bus" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.bus)
+
+
+def require_userspace(bus: Bus, why: str) -> None:
+    if bus.mode != "userspace":
+        pytest.skip(f"userspace hub only: {why}")

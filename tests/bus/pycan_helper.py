@@ -1,0 +1,86 @@
+"""python-can driver for the conformance suite, run as a subprocess under the
+bus's environment (LD_PRELOAD for the userspace hub).
+
+  recv  --channel vcan0 --count N [--filters JSON] [--own] [--fd] [--errors] [--join]
+        prints "ready" once bound, then one JSON object per received message
+  send  --channel vcan0 --frames JSON [--fd] [--own]
+        sends the frames; with --own also reads them back and prints them
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import sys
+
+import can
+
+CAN_RAW_ERR_FILTER = 2  # linux/can/raw.h; not exported by Python's socket module
+CAN_RAW_JOIN_FILTERS = 6
+
+
+def message_json(msg: can.Message) -> str:
+    return json.dumps({
+        "id": msg.arbitration_id, "ext": msg.is_extended_id, "rtr": msg.is_remote_frame,
+        "err": msg.is_error_frame, "fd": msg.is_fd, "dlc": msg.dlc, "data": msg.data.hex(),
+        "channel": msg.channel, "is_rx": msg.is_rx, "ts": msg.timestamp,
+    })
+
+
+def to_message(frame: dict) -> can.Message:
+    return can.Message(
+        arbitration_id=frame["id"], is_extended_id=frame.get("ext", False),
+        is_remote_frame=frame.get("rtr", False), is_error_frame=frame.get("err", False),
+        is_fd=frame.get("fd", False), dlc=frame.get("dlc"),
+        data=bytes.fromhex(frame.get("data", "")), channel=frame.get("channel"),
+    )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("cmd", choices=["recv", "send"])
+    ap.add_argument("--channel", default="vcan0")
+    ap.add_argument("--count", type=int, default=1)
+    ap.add_argument("--filters", default=None)
+    ap.add_argument("--frames", default="[]")
+    ap.add_argument("--own", action="store_true")
+    ap.add_argument("--fd", action="store_true")
+    ap.add_argument("--errors", action="store_true", help="receive error frames")
+    ap.add_argument("--join", action="store_true")
+    ap.add_argument("--timeout", type=float, default=10.0)
+    args = ap.parse_args()
+
+    kwargs: dict = {"interface": "socketcan", "channel": args.channel, "fd": args.fd,
+                    "receive_own_messages": args.own}
+    if args.filters:
+        kwargs["can_filters"] = json.loads(args.filters)
+    with can.Bus(**kwargs) as bus:
+        if not args.errors:
+            # python-can subscribes to all error classes; a plain reader does not
+            bus.socket.setsockopt(socket.SOL_CAN_RAW, CAN_RAW_ERR_FILTER, 0)
+        if args.join:
+            bus.socket.setsockopt(socket.SOL_CAN_RAW, CAN_RAW_JOIN_FILTERS, 1)
+        if args.cmd == "recv":
+            print("ready", flush=True)
+            for _ in range(args.count):
+                msg = bus.recv(args.timeout)
+                if msg is None:
+                    print("timeout", file=sys.stderr)
+                    return 1
+                print(message_json(msg), flush=True)
+            return 0
+        frames = json.loads(args.frames)
+        for frame in frames:
+            bus.send(to_message(frame))
+        if args.own:
+            for _ in frames:
+                msg = bus.recv(args.timeout)
+                if msg is None:
+                    print("timeout waiting for own message", file=sys.stderr)
+                    return 1
+                print(message_json(msg), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

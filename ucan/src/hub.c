@@ -1,0 +1,972 @@
+/* ucan-hub - userspace SocketCAN bus: serves virtual CAN interfaces to
+ * programs running under libucan-preload.so, with kernel vcan semantics.
+ *
+ * Usage: ucan-hub [-d dir] [-q frames] [-r fd] [-v] [iface[:opt=val,...]]...
+ *   iface options: bitrate=<bit/s> (0 = unthrottled, vcan behaviour),
+ *                  stuffing=worst|exact|none, mtu=16|72
+ *   example: ucan-hub vcan0 vcan1:bitrate=500000,stuffing=exact,mtu=16
+ *
+ * One thread, one epoll loop. Every frame accepted from a sender is delivered
+ * to all matching readers before the next frame is read, which gives the one
+ * global frame order per interface that vcan has. A reader that cannot keep
+ * up gets frames queued in the hub up to its limit, then dropped and counted;
+ * no reader ever blocks the bus. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <getopt.h>
+#include <inttypes.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/file.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/timerfd.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "canfilter.h"
+#include "canframelen.h"
+#include "ucan_msg.h"
+#include "ucan_proto.h"
+
+#define DEFAULT_QUEUE_FRAMES 4096
+#define MSGS_PER_WAKEUP 256	 /* fairness between senders */
+#define TX_PENDING_SOFT_LIMIT 256 /* bitrate interfaces: pause senders above this */
+#define MAX_MSG 8192		 /* BIND with 512 filters is 4120 bytes */
+#define TAG_LISTEN UINT64_MAX
+#define TAG_STATS_TIMER (UINT64_MAX - 1)
+#define TAG_IFACE_TIMER_BASE (UINT64_MAX - 1 - UCAN_MAX_IFACES)
+
+struct outmsg {
+	uint8_t len;
+	uint8_t data[sizeof(struct ucan_rxhdr) + CANFD_MTU];
+};
+
+struct client {
+	int fd; /* -1 = free slot */
+	uint32_t generation;
+	pid_t pid;
+	char cookie[UCAN_COOKIE_MAX];
+	int bound, header_mode, epollout, paused;
+	struct ucan_sockopts opts;
+	struct can_filter *filters;
+	struct outmsg *queue; /* ring, grown on demand up to queue_limit */
+	uint32_t queue_cap, queue_head, queue_len, queue_limit;
+	uint64_t tx_frames, rx_frames, rx_bytes, rx_drops;
+	uint32_t arb_epoch;
+};
+
+struct pending_frame {
+	uint32_t client, generation, key;
+	uint8_t loopback, size;
+	struct canfd_frame frame;
+};
+
+struct iface {
+	struct ucan_ifinfo info;
+	struct ucan_ifstats stats;
+	uint64_t window_bits;
+	/* bitrate emulation */
+	int timerfd;
+	struct pending_frame *pending;
+	uint32_t npending, pending_cap;
+	int on_wire; /* index into pending of the frame being transmitted, -1 if idle */
+	struct timespec wire_end;
+};
+
+static struct {
+	const char *dir;
+	char sock_path[sizeof(((struct sockaddr_un *)0)->sun_path)];
+	int listen_fd, epoll_fd, stats_timer_fd, verbose;
+	uint32_t default_queue;
+	struct iface ifaces[UCAN_MAX_IFACES];
+	struct ucan_ifinfo ifinfos[UCAN_MAX_IFACES]; /* the same, in the layout the validator takes */
+	unsigned nifs;
+	struct client *clients;
+	uint32_t nclients_alloc;
+	uint32_t arb_epoch;
+	struct timespec start;
+	uint64_t proto_errors;
+	volatile sig_atomic_t stop;
+} hub = { .listen_fd = -1, .epoll_fd = -1, .stats_timer_fd = -1, .default_queue = DEFAULT_QUEUE_FRAMES };
+
+static void logmsg(const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	fputs("ucan-hub: ", stderr);
+	vfprintf(stderr, fmt, ap);
+	fputc('\n', stderr);
+	va_end(ap);
+}
+
+static void usage(void)
+{
+	fprintf(stderr,
+		"Usage: ucan-hub [-d dir] [-q frames] [-r fd] [-v] [iface[:opt=val,...]]...\n"
+		"  -d dir     socket directory (default $" UCAN_DIR_ENV " or " UCAN_DEFAULT_DIR ")\n"
+		"  -q frames  frames queued per slow reader before drops (default %d)\n"
+		"  -r fd      write \"ready\\n\" to fd once accepting connections\n"
+		"  -v         log connections\n"
+		"  iface options: bitrate=<bit/s>, stuffing=worst|exact|none, mtu=16|72\n"
+		"  default interface: vcan0 (unthrottled, mtu 72, like kernel vcan)\n",
+		DEFAULT_QUEUE_FRAMES);
+}
+
+static void on_signal(int sig)
+{
+	(void)sig;
+	hub.stop = 1;
+}
+
+static void ts_add_ns(struct timespec *ts, uint64_t ns)
+{
+	uint64_t total = (uint64_t)ts->tv_nsec + ns;
+	ts->tv_sec += (time_t)(total / 1000000000u);
+	ts->tv_nsec = (long)(total % 1000000000u);
+}
+
+static int ts_before_eq(const struct timespec *a, const struct timespec *b)
+{
+	return a->tv_sec < b->tv_sec || (a->tv_sec == b->tv_sec && a->tv_nsec <= b->tv_nsec);
+}
+
+/* ---- configuration ---- */
+
+static int parse_iface(const char *spec)
+{
+	struct iface *ifc;
+	char buf[256], *opts, *tok, *save = NULL;
+
+	if (hub.nifs >= UCAN_MAX_IFACES) {
+		logmsg("too many interfaces (max %d)", UCAN_MAX_IFACES);
+		return -1;
+	}
+	if (snprintf(buf, sizeof(buf), "%s", spec) >= (int)sizeof(buf)) {
+		logmsg("interface spec too long: %s", spec);
+		return -1;
+	}
+	ifc = &hub.ifaces[hub.nifs];
+	memset(ifc, 0, sizeof(*ifc));
+	ifc->timerfd = -1;
+	ifc->on_wire = -1;
+	opts = strchr(buf, ':');
+	if (opts)
+		*opts++ = '\0';
+	if (buf[0] == '\0' || strlen(buf) >= sizeof(ifc->info.name) || strchr(buf, '/')) {
+		logmsg("invalid interface name '%s' (1-15 characters, no '/')", buf);
+		return -1;
+	}
+	for (unsigned i = 0; i < hub.nifs; i++)
+		if (strcmp(hub.ifaces[i].info.name, buf) == 0) {
+			logmsg("interface %s given twice", buf);
+			return -1;
+		}
+	strcpy(ifc->info.name, buf);
+	ifc->info.ifindex = UCAN_IFINDEX_BASE + hub.nifs;
+	ifc->info.mtu = CANFD_MTU;
+	ifc->info.stuffing = UCAN_STUFF_WORST;
+	for (tok = opts ? strtok_r(opts, ",", &save) : NULL; tok; tok = strtok_r(NULL, ",", &save)) {
+		char *val = strchr(tok, '='), *end;
+		if (!val) {
+			logmsg("%s: option '%s' needs a value", ifc->info.name, tok);
+			return -1;
+		}
+		*val++ = '\0';
+		if (strcmp(tok, "bitrate") == 0) {
+			unsigned long rate = strtoul(val, &end, 10);
+			if (*end || rate > 10000000ul) {
+				logmsg("%s: bitrate '%s' is not 0..10000000 bit/s", ifc->info.name, val);
+				return -1;
+			}
+			ifc->info.bitrate = (uint32_t)rate;
+		} else if (strcmp(tok, "stuffing") == 0) {
+			if (strcmp(val, "worst") == 0)
+				ifc->info.stuffing = UCAN_STUFF_WORST;
+			else if (strcmp(val, "exact") == 0)
+				ifc->info.stuffing = UCAN_STUFF_EXACT;
+			else if (strcmp(val, "none") == 0)
+				ifc->info.stuffing = UCAN_STUFF_NONE;
+			else {
+				logmsg("%s: stuffing '%s' is not worst|exact|none", ifc->info.name, val);
+				return -1;
+			}
+		} else if (strcmp(tok, "mtu") == 0) {
+			if (strcmp(val, "16") == 0)
+				ifc->info.mtu = CAN_MTU;
+			else if (strcmp(val, "72") == 0)
+				ifc->info.mtu = CANFD_MTU;
+			else {
+				logmsg("%s: mtu '%s' is not 16 or 72", ifc->info.name, val);
+				return -1;
+			}
+		} else {
+			logmsg("%s: unknown option '%s' (bitrate, stuffing, mtu)", ifc->info.name, tok);
+			return -1;
+		}
+	}
+	hub.nifs++;
+	return 0;
+}
+
+static struct iface *find_iface(uint32_t ifindex)
+{
+	if (ifindex < UCAN_IFINDEX_BASE || ifindex - UCAN_IFINDEX_BASE >= hub.nifs)
+		return NULL;
+	return &hub.ifaces[ifindex - UCAN_IFINDEX_BASE];
+}
+
+/* ---- epoll helpers ---- */
+
+/* Tags: clients are (generation << 32 | slot) so an event queued for a client
+ * closed earlier in the same batch never reaches the slot's next owner. */
+static int epoll_set(int fd, uint32_t events, uint64_t tag, int op)
+{
+	struct epoll_event ev = { .events = events, .data.u64 = tag };
+	return epoll_ctl(hub.epoll_fd, op, fd, &ev);
+}
+
+static void client_update_events(struct client *c, uint32_t idx)
+{
+	uint32_t events = (c->paused ? 0 : EPOLLIN) | (c->epollout ? EPOLLOUT : 0);
+	epoll_set(c->fd, events, (uint64_t)c->generation << 32 | idx, EPOLL_CTL_MOD);
+}
+
+/* ---- clients ---- */
+
+static void client_close(uint32_t idx, const char *why)
+{
+	struct client *c = &hub.clients[idx];
+	if (c->fd < 0)
+		return;
+	if (hub.verbose || why)
+		logmsg("client %u (pid %d, %s) closed%s%s", idx, (int)c->pid, c->cookie[0] ? c->cookie : "-",
+		       why ? ": " : "", why ? why : "");
+	epoll_ctl(hub.epoll_fd, EPOLL_CTL_DEL, c->fd, NULL);
+	close(c->fd);
+	free(c->filters);
+	free(c->queue);
+	uint32_t generation = c->generation + 1;
+	memset(c, 0, sizeof(*c));
+	c->fd = -1;
+	c->generation = generation;
+}
+
+static uint32_t client_alloc(void)
+{
+	for (uint32_t i = 0; i < hub.nclients_alloc; i++)
+		if (hub.clients[i].fd < 0)
+			return i;
+	uint32_t old = hub.nclients_alloc, grown = old ? old * 2 : 64;
+	struct client *clients = realloc(hub.clients, grown * sizeof(*clients));
+	if (!clients)
+		return UINT32_MAX;
+	hub.clients = clients;
+	for (uint32_t i = old; i < grown; i++) {
+		memset(&clients[i], 0, sizeof(clients[i]));
+		clients[i].fd = -1;
+	}
+	hub.nclients_alloc = grown;
+	return old;
+}
+
+static void accept_clients(void)
+{
+	for (;;) {
+		struct sockaddr_un addr;
+		socklen_t addrlen = sizeof(addr);
+		int fd = accept4(hub.listen_fd, (struct sockaddr *)&addr, &addrlen, SOCK_NONBLOCK | SOCK_CLOEXEC);
+		if (fd < 0) {
+			if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
+				logmsg("accept: %s", strerror(errno));
+			return;
+		}
+		uint32_t idx = client_alloc();
+		if (idx == UINT32_MAX) {
+			logmsg("out of memory for client");
+			close(fd);
+			continue;
+		}
+		struct client *c = &hub.clients[idx];
+		c->fd = fd;
+		c->queue_limit = hub.default_queue;
+		c->opts.loopback = 1;
+		/* the abstract name the preload library bound to, after the leading NUL */
+		size_t path_len = addrlen > offsetof(struct sockaddr_un, sun_path)
+					  ? addrlen - offsetof(struct sockaddr_un, sun_path)
+					  : 0;
+		if (path_len > 1 && addr.sun_path[0] == '\0') {
+			size_t n = path_len - 1 < UCAN_COOKIE_MAX - 1 ? path_len - 1 : UCAN_COOKIE_MAX - 1;
+			memcpy(c->cookie, addr.sun_path + 1, n);
+		}
+		struct ucred cred;
+		socklen_t credlen = sizeof(cred);
+		if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &credlen) == 0)
+			c->pid = cred.pid;
+		if (epoll_set(fd, EPOLLIN, (uint64_t)c->generation << 32 | idx, EPOLL_CTL_ADD) < 0) {
+			logmsg("epoll add: %s", strerror(errno));
+			client_close(idx, "epoll failure");
+			continue;
+		}
+		if (hub.verbose)
+			logmsg("client %u connected (pid %d, %s)", idx, (int)c->pid, c->cookie);
+	}
+}
+
+static int client_send_raw(struct client *c, const void *buf, size_t len)
+{
+	ssize_t n = send(c->fd, buf, len, MSG_DONTWAIT | MSG_NOSIGNAL);
+	return n == (ssize_t)len ? 0 : -1;
+}
+
+static int client_queue_grow(struct client *c, uint32_t cap)
+{
+	struct outmsg *q = malloc(cap * sizeof(*q));
+	if (!q)
+		return -1;
+	for (uint32_t i = 0; i < c->queue_len; i++)
+		q[i] = c->queue[(c->queue_head + i) % c->queue_cap];
+	free(c->queue);
+	c->queue = q;
+	c->queue_cap = cap;
+	c->queue_head = 0;
+	return 0;
+}
+
+enum send_result { SENT, QUEUED, DROPPED, CLOSED };
+
+/* Send now if nothing is queued before this message, else queue it behind.
+ * force: queue past the reader's limit (control messages must never be lost,
+ * or the client would lose track of the stream). */
+static enum send_result client_send(uint32_t idx, const void *msg, size_t len, int force)
+{
+	struct client *c = &hub.clients[idx];
+	if (c->queue_len == 0) {
+		if (client_send_raw(c, msg, len) == 0)
+			return SENT;
+		if (errno != EAGAIN && errno != ENOBUFS) {
+			client_close(idx, NULL);
+			return CLOSED;
+		}
+	}
+	if (c->queue_len >= c->queue_limit && !force)
+		return DROPPED;
+	if (c->queue_len == c->queue_cap) {
+		uint32_t cap = c->queue_cap ? c->queue_cap * 2 : 64;
+		if (cap > c->queue_limit && !force)
+			cap = c->queue_limit;
+		if (client_queue_grow(c, cap) < 0)
+			return DROPPED;
+	}
+	struct outmsg *m = &c->queue[(c->queue_head + c->queue_len++) % c->queue_cap];
+	m->len = (uint8_t)len;
+	memcpy(m->data, msg, len);
+	if (!c->epollout) {
+		c->epollout = 1;
+		client_update_events(c, idx);
+	}
+	return QUEUED;
+}
+
+static void client_send_ctl(uint32_t idx, uint32_t type, int status)
+{
+	struct ucan_ctl ctl = { .type = type, .status = status };
+	if (client_send(idx, &ctl, sizeof(ctl), 1) == DROPPED)
+		client_close(idx, "out of memory");
+}
+
+static void client_flush(uint32_t idx)
+{
+	struct client *c = &hub.clients[idx];
+	while (c->queue_len > 0) {
+		struct outmsg *m = &c->queue[c->queue_head];
+		if (client_send_raw(c, m->data, m->len) < 0) {
+			if (errno == EAGAIN || errno == ENOBUFS)
+				break;
+			client_close(idx, NULL);
+			return;
+		}
+		c->queue_head = (c->queue_head + 1) % c->queue_cap;
+		c->queue_len--;
+	}
+	int want_out = c->queue_len > 0;
+	if (want_out != c->epollout) {
+		c->epollout = want_out;
+		client_update_events(c, idx);
+	}
+}
+
+/* ---- the bus ---- */
+
+static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame *frame, size_t size, int own)
+{
+	struct client *c = &hub.clients[idx];
+	uint8_t msg[sizeof(struct ucan_rxhdr) + CANFD_MTU];
+	size_t len = 0;
+
+	if (c->header_mode) {
+		struct ucan_rxhdr hdr = { .ifindex = ifc->info.ifindex, .flags = own ? UCAN_RX_OWN : 0 };
+		memcpy(msg, &hdr, sizeof(hdr));
+		len = sizeof(hdr);
+	}
+	memcpy(msg + len, frame, size);
+	len += size;
+
+	switch (client_send(idx, msg, len, 0)) {
+	case SENT:
+	case QUEUED:
+		c->rx_frames++;
+		c->rx_bytes += frame->len;
+		ifc->stats.rx_deliveries++;
+		break;
+	case DROPPED:
+		c->rx_drops++;
+		ifc->stats.rx_drops++;
+		break;
+	case CLOSED:
+		break;
+	}
+}
+
+/* A frame has been transmitted on ifc: account for it and hand it to every reader. */
+static void bus_transmit(struct iface *ifc, uint32_t sender, uint32_t sender_gen, int loopback,
+			 const struct canfd_frame *frame, size_t size)
+{
+	unsigned bits = can_frame_bits(frame, size == CANFD_MTU, (enum ucan_stuffing)ifc->info.stuffing);
+	ifc->stats.frames++;
+	ifc->stats.bytes += frame->len;
+	ifc->stats.bits += bits;
+	ifc->window_bits += bits;
+	if (sender < hub.nclients_alloc && hub.clients[sender].fd >= 0 &&
+	    hub.clients[sender].generation == sender_gen)
+		hub.clients[sender].tx_frames++;
+	/* vcan without echo loops frames back only when the sender asked for loopback;
+	 * with loopback off nobody on this host sees the frame, the sender included */
+	if (!loopback)
+		return;
+	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
+		struct client *c = &hub.clients[i];
+		if (c->fd < 0 || !c->bound)
+			continue;
+		if (c->opts.ifindex != 0 && c->opts.ifindex != ifc->info.ifindex)
+			continue;
+		int own = (i == sender && c->generation == sender_gen);
+		if (own && !c->opts.recv_own)
+			continue;
+		if (size == CANFD_MTU && !c->opts.fd_frames)
+			continue;
+		if (!can_raw_accepts(frame->can_id, c->filters, c->opts.nfilters, c->opts.err_mask,
+				     c->opts.join_filters))
+			continue;
+		deliver_to(i, ifc, frame, size, own);
+	}
+}
+
+/* Bitrate interfaces: pick the next frame by arbitration among the oldest
+ * pending frame of each sender (each node's controller sends in order). */
+static int arbitrate(struct iface *ifc)
+{
+	int best = -1;
+	hub.arb_epoch++;
+	for (uint32_t i = 0; i < ifc->npending; i++) {
+		struct pending_frame *p = &ifc->pending[i];
+		if (p->client < hub.nclients_alloc) {
+			struct client *c = &hub.clients[p->client];
+			if (c->arb_epoch == hub.arb_epoch)
+				continue; /* not the head of its sender's queue */
+			c->arb_epoch = hub.arb_epoch;
+		}
+		if (best < 0 || p->key < ifc->pending[best].key)
+			best = (int)i;
+	}
+	return best;
+}
+
+static void wire_start(struct iface *ifc, const struct timespec *start)
+{
+	ifc->on_wire = arbitrate(ifc);
+	if (ifc->on_wire < 0)
+		return;
+	struct pending_frame *p = &ifc->pending[ifc->on_wire];
+	unsigned bits = can_frame_bits(&p->frame, p->size == CANFD_MTU, (enum ucan_stuffing)ifc->info.stuffing);
+	ifc->wire_end = *start;
+	ts_add_ns(&ifc->wire_end, (uint64_t)bits * 1000000000u / ifc->info.bitrate);
+	struct itimerspec its = { .it_value = ifc->wire_end };
+	timerfd_settime(ifc->timerfd, TFD_TIMER_ABSTIME, &its, NULL);
+}
+
+static void unpause_senders(void)
+{
+	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
+		struct client *c = &hub.clients[i];
+		if (c->fd >= 0 && c->paused) {
+			c->paused = 0;
+			client_update_events(c, i);
+		}
+	}
+}
+
+static void wire_timer(struct iface *ifc)
+{
+	uint64_t expirations;
+	struct timespec now;
+	if (read(ifc->timerfd, &expirations, sizeof(expirations)) < 0 && errno == EAGAIN)
+		return;
+	clock_gettime(CLOCK_MONOTONIC, &now);
+	/* catch up if the hub was late: frames follow each other back to back */
+	while (ifc->on_wire >= 0 && ts_before_eq(&ifc->wire_end, &now)) {
+		struct pending_frame p = ifc->pending[ifc->on_wire];
+		memmove(&ifc->pending[ifc->on_wire], &ifc->pending[ifc->on_wire + 1],
+			(ifc->npending - (uint32_t)ifc->on_wire - 1) * sizeof(p));
+		ifc->npending--;
+		ifc->on_wire = -1;
+		bus_transmit(ifc, p.client, p.generation, p.loopback, &p.frame, p.size);
+		struct timespec end = ifc->wire_end;
+		if (ifc->npending > 0)
+			wire_start(ifc, &end);
+	}
+	if (ifc->npending < TX_PENDING_SOFT_LIMIT / 2)
+		unpause_senders();
+}
+
+static int queue_for_wire(struct iface *ifc, uint32_t idx, const struct canfd_frame *frame, size_t size)
+{
+	struct client *c = &hub.clients[idx];
+	if (ifc->npending == ifc->pending_cap) {
+		uint32_t cap = ifc->pending_cap ? ifc->pending_cap * 2 : TX_PENDING_SOFT_LIMIT * 2;
+		struct pending_frame *p = realloc(ifc->pending, cap * sizeof(*p));
+		if (!p)
+			return -1;
+		ifc->pending = p;
+		ifc->pending_cap = cap;
+	}
+	struct pending_frame *p = &ifc->pending[ifc->npending++];
+	memset(p, 0, sizeof(*p));
+	p->client = idx;
+	p->generation = c->generation;
+	p->key = can_arbitration_key(frame->can_id);
+	p->loopback = c->opts.loopback;
+	p->size = (uint8_t)size;
+	memcpy(&p->frame, frame, size);
+	if (ifc->on_wire < 0) {
+		struct timespec now;
+		clock_gettime(CLOCK_MONOTONIC, &now);
+		wire_start(ifc, &now);
+	}
+	/* like a full TX queue: the sender waits (backpressure), nobody loses frames */
+	if (ifc->npending >= TX_PENDING_SOFT_LIMIT && !c->paused) {
+		c->paused = 1;
+		client_update_events(c, idx);
+	}
+	return 0;
+}
+
+/* ---- client messages ---- */
+
+static void apply_sockopts(uint32_t idx, const uint8_t *msg, size_t len)
+{
+	struct client *c = &hub.clients[idx];
+	struct ucan_sockopts opts;
+	memcpy(&opts, msg, sizeof(opts));
+	struct can_filter *filters = NULL;
+	if (opts.nfilters) {
+		filters = malloc(opts.nfilters * sizeof(*filters));
+		if (!filters) {
+			client_close(idx, "out of memory");
+			return;
+		}
+		memcpy(filters, msg + sizeof(opts), len - sizeof(opts));
+	}
+	free(c->filters);
+	c->filters = filters;
+	c->opts = opts;
+	uint32_t limit = hub.default_queue;
+	if (opts.rcvbuf / CANFD_MTU > limit)
+		limit = opts.rcvbuf / CANFD_MTU;
+	c->queue_limit = limit;
+}
+
+static int needs_header(const struct client *c)
+{
+	return c->opts.ifindex == 0 || c->opts.recv_own;
+}
+
+static void handle_stats(uint32_t idx)
+{
+	uint32_t nclients = 0;
+	for (uint32_t i = 0; i < hub.nclients_alloc && nclients < UCAN_STATS_MAX_CLIENTS; i++)
+		nclients += hub.clients[i].fd >= 0;
+	size_t size = sizeof(struct ucan_stats) + nclients * sizeof(struct ucan_clientstats);
+	struct ucan_stats *st = calloc(1, size);
+	if (!st) {
+		client_close(idx, "out of memory");
+		return;
+	}
+	struct timespec now;
+	clock_gettime(CLOCK_MONOTONIC, &now);
+	st->type = UCAN_MSG_STATS;
+	st->nifs = hub.nifs;
+	st->uptime_ms = (uint64_t)(now.tv_sec - hub.start.tv_sec) * 1000u +
+			(uint64_t)((now.tv_nsec - hub.start.tv_nsec) / 1000000);
+	for (unsigned i = 0; i < hub.nifs; i++) {
+		st->ifs[i] = hub.ifaces[i].info;
+		st->ifstats[i] = hub.ifaces[i].stats;
+	}
+	uint32_t n = 0;
+	for (uint32_t i = 0; i < hub.nclients_alloc && n < nclients; i++) {
+		struct client *c = &hub.clients[i];
+		if (c->fd < 0)
+			continue;
+		struct ucan_clientstats *cs = &st->clients[n++];
+		memcpy(cs->cookie, c->cookie, sizeof(cs->cookie));
+		cs->pid = c->pid;
+		cs->ifindex = c->opts.ifindex;
+		cs->bound = (uint32_t)c->bound;
+		cs->queued = c->queue_len;
+		cs->tx_frames = c->tx_frames;
+		cs->rx_frames = c->rx_frames;
+		cs->rx_bytes = c->rx_bytes;
+		cs->rx_drops = c->rx_drops;
+	}
+	st->nclients = n;
+	if (send(hub.clients[idx].fd, st, size, MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
+		client_close(idx, "stats reply failed");
+	free(st);
+}
+
+static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused);
+
+/* Settings of the connection named by a cookie: lets a program that inherited
+ * an emulated socket across exec pick it up where its parent left it. */
+static void handle_getopt(uint32_t idx, const uint8_t *msg)
+{
+	struct ucan_barrier query;
+	uint8_t reply[sizeof(struct ucan_sockopts) + UCAN_MAX_FILTERS * sizeof(struct can_filter)];
+	struct ucan_sockopts opts;
+	size_t len = 0;
+
+	memcpy(&query, msg, sizeof(query));
+	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
+		struct client *c = &hub.clients[i];
+		if (i == idx || c->fd < 0 || strcmp(c->cookie, query.cookie) != 0)
+			continue;
+		opts = c->opts;
+		opts.type = UCAN_MSG_GETOPT;
+		opts.bound = (uint8_t)c->bound;
+		opts.header_mode = (uint8_t)c->header_mode;
+		memcpy(reply + sizeof(opts), c->filters, c->opts.nfilters * sizeof(struct can_filter));
+		len = sizeof(opts) + c->opts.nfilters * sizeof(struct can_filter);
+		break;
+	}
+	if (len == 0) {
+		client_send_ctl(idx, UCAN_MSG_ACK, ENOENT);
+		return;
+	}
+	memcpy(reply, &opts, sizeof(opts));
+	if (send(hub.clients[idx].fd, reply, len, MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
+		client_close(idx, "getopt reply failed");
+}
+
+static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
+{
+	struct client *c = &hub.clients[idx];
+	int type = ucan_msg_validate(msg, len, hub.ifinfos, hub.nifs);
+	if (type < 0) {
+		hub.proto_errors++;
+		client_close(idx, ucan_msg_strerror(type));
+		return;
+	}
+	switch (type) {
+	case UCAN_MSG_BIND:
+		if (c->bound) {
+			hub.proto_errors++;
+			client_close(idx, "second BIND");
+			return;
+		}
+		apply_sockopts(idx, msg, len);
+		if (hub.clients[idx].fd < 0)
+			return;
+		c->bound = 1;
+		c->header_mode = needs_header(c);
+		client_send_ctl(idx, UCAN_MSG_ACK, 0);
+		break;
+	case UCAN_MSG_SETOPT:
+		apply_sockopts(idx, msg, len);
+		if (hub.clients[idx].fd < 0)
+			return;
+		if (c->bound && !c->header_mode && needs_header(c)) {
+			c->header_mode = 1;
+			client_send_ctl(idx, UCAN_MSG_HEADER_MODE, 0);
+		}
+		break;
+	case UCAN_MSG_FRAME: {
+		struct ucan_txhdr hdr;
+		struct canfd_frame frame;
+		size_t size = len - sizeof(hdr);
+		memcpy(&hdr, msg, sizeof(hdr));
+		memset(&frame, 0, sizeof(frame));
+		memcpy(&frame, msg + sizeof(hdr), size);
+		struct iface *ifc = find_iface(hdr.ifindex);
+		if (ifc->info.bitrate) {
+			if (queue_for_wire(ifc, idx, &frame, size) < 0)
+				ifc->stats.tx_rejects++;
+		} else {
+			bus_transmit(ifc, idx, c->generation, c->opts.loopback, &frame, size);
+		}
+		break;
+	}
+	case UCAN_MSG_IFLIST: {
+		struct ucan_iflist list = { .type = UCAN_MSG_IFLIST, .count = hub.nifs };
+		memcpy(list.ifs, hub.ifinfos, hub.nifs * sizeof(hub.ifinfos[0]));
+		if (send(c->fd, &list, sizeof(list), MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
+			client_close(idx, "iflist reply failed");
+		break;
+	}
+	case UCAN_MSG_BARRIER: {
+		struct ucan_barrier barrier;
+		memcpy(&barrier, msg, sizeof(barrier));
+		for (uint32_t i = 0; i < hub.nclients_alloc; i++)
+			if (i != idx && hub.clients[i].fd >= 0 && strcmp(hub.clients[i].cookie, barrier.cookie) == 0)
+				drain_client(i, UINT32_MAX, 1);
+		client_send_ctl(idx, UCAN_MSG_ACK, 0);
+		break;
+	}
+	case UCAN_MSG_STATS:
+		handle_stats(idx);
+		break;
+	case UCAN_MSG_GETOPT:
+		handle_getopt(idx, msg);
+		break;
+	case UCAN_MSG_RESET_STATS:
+		for (unsigned i = 0; i < hub.nifs; i++)
+			memset(&hub.ifaces[i].stats, 0, sizeof(hub.ifaces[i].stats));
+		for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
+			struct client *cl = &hub.clients[i];
+			cl->tx_frames = cl->rx_frames = cl->rx_bytes = cl->rx_drops = 0;
+		}
+		client_send_ctl(idx, UCAN_MSG_ACK, 0);
+		break;
+	}
+}
+
+/* even_if_paused: a sender that hung up cannot be slowed down any more; read
+ * what it wrote before it went, rather than losing it. */
+static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
+{
+	static uint8_t buf[MAX_MSG];
+	for (unsigned n = 0; n < max_msgs; n++) {
+		struct client *c = &hub.clients[idx];
+		if (c->fd < 0 || (c->paused && !even_if_paused))
+			return;
+		ssize_t len = recv(c->fd, buf, sizeof(buf), MSG_DONTWAIT | MSG_TRUNC);
+		if (len < 0) {
+			if (errno != EAGAIN && errno != EINTR)
+				client_close(idx, NULL);
+			return;
+		}
+		if (len == 0) {
+			client_close(idx, NULL);
+			return;
+		}
+		if ((size_t)len > sizeof(buf)) {
+			hub.proto_errors++;
+			client_close(idx, "message too long");
+			return;
+		}
+		handle_message(idx, buf, (size_t)len);
+	}
+}
+
+/* ---- startup ---- */
+
+static int make_dir(const char *dir)
+{
+	if (mkdir(dir, 0777) < 0 && errno != EEXIST) {
+		logmsg("cannot create %s: %s", dir, strerror(errno));
+		return -1;
+	}
+	return 0;
+}
+
+static int listen_socket(void)
+{
+	char lock_path[sizeof(hub.sock_path)];
+	struct sockaddr_un addr = { .sun_family = AF_UNIX };
+
+	if (snprintf(hub.sock_path, sizeof(hub.sock_path), "%s/%s", hub.dir, UCAN_SOCK_NAME) >=
+		    (int)sizeof(hub.sock_path) ||
+	    snprintf(lock_path, sizeof(lock_path), "%s/%s", hub.dir, UCAN_LOCK_NAME) >= (int)sizeof(lock_path)) {
+		logmsg("socket directory path too long: %s", hub.dir);
+		return -1;
+	}
+	if (make_dir(hub.dir) < 0)
+		return -1;
+	/* the lock, held for the hub's lifetime, tells a live hub from a stale socket file */
+	int lock_fd = open(lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+	if (lock_fd < 0) {
+		logmsg("cannot open %s: %s", lock_path, strerror(errno));
+		return -1;
+	}
+	if (flock(lock_fd, LOCK_EX | LOCK_NB) < 0) {
+		logmsg("another hub is already serving %s", hub.sock_path);
+		return -1;
+	}
+	if (unlink(hub.sock_path) == 0)
+		logmsg("replaced stale socket %s", hub.sock_path);
+	hub.listen_fd = socket(AF_UNIX, SOCK_SEQPACKET | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+	if (hub.listen_fd < 0) {
+		logmsg("socket: %s", strerror(errno));
+		return -1;
+	}
+	strcpy(addr.sun_path, hub.sock_path);
+	mode_t old = umask(0);
+	int rc = bind(hub.listen_fd, (struct sockaddr *)&addr, sizeof(addr));
+	umask(old);
+	if (rc < 0 || listen(hub.listen_fd, SOMAXCONN) < 0) {
+		logmsg("cannot listen on %s: %s", hub.sock_path, strerror(errno));
+		return -1;
+	}
+	return 0;
+}
+
+static void stats_tick(void)
+{
+	uint64_t expirations;
+	if (read(hub.stats_timer_fd, &expirations, sizeof(expirations)) < 0)
+		return;
+	for (unsigned i = 0; i < hub.nifs; i++) {
+		struct iface *ifc = &hub.ifaces[i];
+		ifc->stats.bits_per_s = ifc->window_bits / (expirations ? expirations : 1);
+		ifc->stats.load_permille =
+			ifc->info.bitrate ? (uint32_t)(ifc->stats.bits_per_s * 1000u / ifc->info.bitrate) : 0;
+		ifc->window_bits = 0;
+	}
+}
+
+int main(int argc, char **argv)
+{
+	int opt, ready_fd = -1;
+	char *end;
+
+	hub.dir = getenv(UCAN_DIR_ENV);
+	if (!hub.dir || !*hub.dir)
+		hub.dir = UCAN_DEFAULT_DIR;
+	while ((opt = getopt(argc, argv, "d:q:r:vh")) != -1) {
+		switch (opt) {
+		case 'd':
+			hub.dir = optarg;
+			break;
+		case 'q': {
+			unsigned long q = strtoul(optarg, &end, 10);
+			if (*end || q < 1 || q > 10000000ul) {
+				logmsg("-q '%s' is not 1..10000000 frames", optarg);
+				return 2;
+			}
+			hub.default_queue = (uint32_t)q;
+			break;
+		}
+		case 'r':
+			ready_fd = (int)strtol(optarg, &end, 10);
+			if (*end || ready_fd < 0) {
+				logmsg("-r '%s' is not a file descriptor", optarg);
+				return 2;
+			}
+			break;
+		case 'v':
+			hub.verbose = 1;
+			break;
+		default:
+			usage();
+			return opt == 'h' ? 0 : 2;
+		}
+	}
+	for (int i = optind; i < argc; i++)
+		if (parse_iface(argv[i]) < 0)
+			return 2;
+	if (hub.nifs == 0 && parse_iface("vcan0") < 0)
+		return 2;
+	for (unsigned i = 0; i < hub.nifs; i++)
+		hub.ifinfos[i] = hub.ifaces[i].info;
+
+	struct sigaction sa = { .sa_handler = on_signal };
+	sigaction(SIGINT, &sa, NULL);
+	sigaction(SIGTERM, &sa, NULL);
+	signal(SIGPIPE, SIG_IGN);
+	clock_gettime(CLOCK_MONOTONIC, &hub.start);
+
+	if (listen_socket() < 0)
+		return 1;
+	hub.epoll_fd = epoll_create1(EPOLL_CLOEXEC);
+	hub.stats_timer_fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+	struct itimerspec second = { .it_interval = { 1, 0 }, .it_value = { 1, 0 } };
+	if (hub.epoll_fd < 0 || hub.stats_timer_fd < 0 ||
+	    timerfd_settime(hub.stats_timer_fd, 0, &second, NULL) < 0 ||
+	    epoll_set(hub.listen_fd, EPOLLIN, TAG_LISTEN, EPOLL_CTL_ADD) < 0 ||
+	    epoll_set(hub.stats_timer_fd, EPOLLIN, TAG_STATS_TIMER, EPOLL_CTL_ADD) < 0) {
+		logmsg("epoll/timerfd setup: %s", strerror(errno));
+		return 1;
+	}
+	for (unsigned i = 0; i < hub.nifs; i++) {
+		struct iface *ifc = &hub.ifaces[i];
+		if (!ifc->info.bitrate)
+			continue;
+		ifc->timerfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+		if (ifc->timerfd < 0 || epoll_set(ifc->timerfd, EPOLLIN, TAG_IFACE_TIMER_BASE + i, EPOLL_CTL_ADD) < 0) {
+			logmsg("timerfd: %s", strerror(errno));
+			return 1;
+		}
+	}
+	for (unsigned i = 0; i < hub.nifs; i++) {
+		const struct ucan_ifinfo *in = &hub.ifaces[i].info;
+		static const char *const stuffing[] = { "worst", "exact", "none" };
+		if (in->bitrate)
+			logmsg("%s index %u mtu %u bitrate %u stuffing %s", in->name, in->ifindex, in->mtu,
+			       in->bitrate, stuffing[in->stuffing]);
+		else
+			logmsg("%s index %u mtu %u unthrottled", in->name, in->ifindex, in->mtu);
+	}
+	logmsg("listening on %s", hub.sock_path);
+	if (ready_fd >= 0) {
+		if (write(ready_fd, "ready\n", 6) < 0)
+			logmsg("readiness fd %d: %s", ready_fd, strerror(errno));
+		close(ready_fd);
+	}
+
+	struct epoll_event events[64];
+	while (!hub.stop) {
+		int n = epoll_wait(hub.epoll_fd, events, 64, -1);
+		if (n < 0) {
+			if (errno == EINTR)
+				continue;
+			logmsg("epoll_wait: %s", strerror(errno));
+			return 1;
+		}
+		for (int i = 0; i < n; i++) {
+			uint64_t tag = events[i].data.u64;
+			uint32_t slot = (uint32_t)tag, generation = (uint32_t)(tag >> 32);
+			if (tag == TAG_LISTEN) {
+				accept_clients();
+			} else if (tag == TAG_STATS_TIMER) {
+				stats_tick();
+			} else if (tag >= TAG_IFACE_TIMER_BASE && tag < TAG_STATS_TIMER) {
+				wire_timer(&hub.ifaces[tag - TAG_IFACE_TIMER_BASE]);
+			} else if (slot < hub.nclients_alloc && hub.clients[slot].fd >= 0 &&
+				   hub.clients[slot].generation == generation) {
+				uint32_t ev = events[i].events;
+				if (ev & EPOLLOUT)
+					client_flush(slot);
+				if (hub.clients[slot].fd >= 0 && (ev & (EPOLLIN | EPOLLHUP | EPOLLERR)))
+					drain_client(slot, MSGS_PER_WAKEUP, !!(ev & (EPOLLHUP | EPOLLERR)));
+			}
+		}
+	}
+	logmsg("stopping (%" PRIu64 " protocol errors)", hub.proto_errors);
+	unlink(hub.sock_path);
+	return 0;
+}

@@ -1,0 +1,1149 @@
+/* libucan-preload.so - makes unmodified, dynamically linked SocketCAN programs
+ * use the ucan-hub bus: LD_PRELOAD=libucan-preload.so candump vcan0
+ *
+ * socket(PF_CAN, SOCK_RAW, CAN_RAW) returns an AF_UNIX SOCK_SEQPACKET socket
+ * that connects to the hub at bind (or first sendto). poll/select/epoll,
+ * O_NONBLOCK, SO_TIMESTAMP(NS) and SO_RCVTIMEO stay native: they work on the
+ * unix socket as they would on a CAN socket. The calls that see CAN addresses,
+ * options or frame layout are intercepted; every call on any other fd goes
+ * straight to libc after one table lookup.
+ *
+ * Not emulated (documented in docs/userspace-bus.md): CAN_BCM, ISO-TP, J1939,
+ * netlink (ip link), SIOCGSTAMP, rebinding a bound socket, programs that are
+ * static or issue raw syscalls. */
+#define _GNU_SOURCE
+#include <dirent.h>
+#include <dlfcn.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <net/if.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <sys/uio.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "ucan_proto.h"
+
+#define HUB_REPLY_TIMEOUT_MS 5000
+#define IFLIST_REFRESH_NS 1000000000ll /* re-ask the hub about unknown names at most once a second */
+#define FD_CHUNK_BITS 10
+#define FD_CHUNKS 1024 /* tracks fds below 1M */
+#define QUARANTINE 64  /* freed sockets kept alive a while for threads still using them */
+
+#define PUBLIC __attribute__((visibility("default")))
+
+struct csock {
+	atomic_int refs; /* fds sharing this socket (dup) */
+	pthread_mutex_t lock;
+	int connected, bound;
+	atomic_int header_mode;
+	char cookie[UCAN_COOKIE_MAX];
+	struct ucan_sockopts opts;
+	struct can_filter filters[UCAN_MAX_FILTERS];
+};
+
+/* ---- real libc functions ---- */
+
+#define REAL_DECL(ret, name, ...)                                                                                      \
+	static ret (*real_##name)(__VA_ARGS__);                                                                        \
+	static ret (*get_##name(void))(__VA_ARGS__)                                                                    \
+	{                                                                                                              \
+		if (!real_##name)                                                                                      \
+			real_##name = (ret(*)(__VA_ARGS__))dlsym(RTLD_NEXT, #name);                                    \
+		return real_##name;                                                                                    \
+	}
+
+REAL_DECL(int, socket, int, int, int)
+REAL_DECL(int, bind, int, const struct sockaddr *, socklen_t)
+REAL_DECL(int, connect, int, const struct sockaddr *, socklen_t)
+REAL_DECL(int, close, int)
+REAL_DECL(int, close_range, unsigned, unsigned, int)
+REAL_DECL(int, setsockopt, int, int, int, const void *, socklen_t)
+REAL_DECL(int, getsockopt, int, int, int, void *, socklen_t *)
+REAL_DECL(int, getsockname, int, struct sockaddr *, socklen_t *)
+REAL_DECL(int, getpeername, int, struct sockaddr *, socklen_t *)
+REAL_DECL(int, ioctl, int, unsigned long, void *)
+REAL_DECL(unsigned, if_nametoindex, const char *)
+REAL_DECL(char *, if_indextoname, unsigned, char *)
+REAL_DECL(ssize_t, recvmsg, int, struct msghdr *, int)
+REAL_DECL(ssize_t, recvfrom, int, void *, size_t, int, struct sockaddr *, socklen_t *)
+REAL_DECL(ssize_t, recv, int, void *, size_t, int)
+REAL_DECL(ssize_t, read, int, void *, size_t)
+REAL_DECL(ssize_t, readv, int, const struct iovec *, int)
+REAL_DECL(int, recvmmsg, int, struct mmsghdr *, unsigned, int, struct timespec *)
+REAL_DECL(ssize_t, sendmsg, int, const struct msghdr *, int)
+REAL_DECL(ssize_t, sendto, int, const void *, size_t, int, const struct sockaddr *, socklen_t)
+REAL_DECL(ssize_t, send, int, const void *, size_t, int)
+REAL_DECL(ssize_t, write, int, const void *, size_t)
+REAL_DECL(ssize_t, writev, int, const struct iovec *, int)
+REAL_DECL(int, sendmmsg, int, struct mmsghdr *, unsigned, int)
+REAL_DECL(int, dup, int)
+REAL_DECL(int, dup2, int, int)
+REAL_DECL(int, dup3, int, int, int)
+REAL_DECL(int, fcntl, int, int, void *)
+REAL_DECL(int, fcntl64, int, int, void *)
+
+/* ---- fd table ---- */
+
+static _Atomic(struct csock *) *fd_chunks[FD_CHUNKS];
+static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
+static struct csock *quarantine[QUARANTINE];
+static unsigned quarantine_next;
+
+static struct csock *lookup(int fd)
+{
+	if (fd < 0 || (unsigned)fd >= (FD_CHUNKS << FD_CHUNK_BITS))
+		return NULL;
+	_Atomic(struct csock *) *chunk = atomic_load_explicit(
+		(_Atomic(_Atomic(struct csock *) *) *)&fd_chunks[fd >> FD_CHUNK_BITS], memory_order_acquire);
+	if (!chunk)
+		return NULL;
+	return atomic_load_explicit(&chunk[fd & ((1 << FD_CHUNK_BITS) - 1)], memory_order_acquire);
+}
+
+static void release(struct csock *cs)
+{
+	if (atomic_fetch_sub(&cs->refs, 1) != 1)
+		return;
+	/* another thread may still be inside a call on this socket: free later */
+	pthread_mutex_lock(&table_lock);
+	struct csock *old = quarantine[quarantine_next];
+	quarantine[quarantine_next] = cs;
+	quarantine_next = (quarantine_next + 1) % QUARANTINE;
+	pthread_mutex_unlock(&table_lock);
+	if (old) {
+		pthread_mutex_destroy(&old->lock);
+		free(old);
+	}
+}
+
+/* Installs cs at fd (NULL to untrack) and drops whatever was there. */
+static int track(int fd, struct csock *cs)
+{
+	if (fd < 0 || (unsigned)fd >= (FD_CHUNKS << FD_CHUNK_BITS)) {
+		if (cs) {
+			errno = EMFILE;
+			return -1;
+		}
+		return 0;
+	}
+	pthread_mutex_lock(&table_lock);
+	_Atomic(struct csock *) *chunk = (void *)fd_chunks[fd >> FD_CHUNK_BITS];
+	if (!chunk) {
+		if (!cs) {
+			pthread_mutex_unlock(&table_lock);
+			return 0;
+		}
+		chunk = calloc(1u << FD_CHUNK_BITS, sizeof(*chunk));
+		if (!chunk) {
+			pthread_mutex_unlock(&table_lock);
+			errno = ENOMEM;
+			return -1;
+		}
+		atomic_store_explicit((_Atomic(_Atomic(struct csock *) *) *)&fd_chunks[fd >> FD_CHUNK_BITS], chunk,
+				      memory_order_release);
+	}
+	if (cs)
+		atomic_fetch_add(&cs->refs, 1);
+	struct csock *old = atomic_exchange(&chunk[fd & ((1 << FD_CHUNK_BITS) - 1)], cs);
+	pthread_mutex_unlock(&table_lock);
+	if (old)
+		release(old);
+	return 0;
+}
+
+/* ---- talking to the hub ---- */
+
+static const char *hub_dir(void)
+{
+	const char *dir = getenv(UCAN_DIR_ENV);
+	return dir && *dir ? dir : UCAN_DEFAULT_DIR;
+}
+
+static int hub_addr(struct sockaddr_un *addr)
+{
+	memset(addr, 0, sizeof(*addr));
+	addr->sun_family = AF_UNIX;
+	if (snprintf(addr->sun_path, sizeof(addr->sun_path), "%s/%s", hub_dir(), UCAN_SOCK_NAME) >=
+	    (int)sizeof(addr->sun_path)) {
+		errno = ENAMETOOLONG;
+		return -1;
+	}
+	return 0;
+}
+
+static atomic_int hub_complained;
+
+static void complain_hub_down(const char *path, int err)
+{
+	/* one line per outage, not one per call */
+	if (atomic_exchange(&hub_complained, 1) == 0)
+		fprintf(stderr, "ucan: cannot reach CAN hub at %s: %s\n", path, strerror(err));
+}
+
+/* Connects fd (blocking for the duration) to the hub. */
+static int hub_connect(int fd)
+{
+	struct sockaddr_un addr;
+	if (hub_addr(&addr) < 0)
+		return -1;
+	int flags = get_fcntl()(fd, F_GETFL, NULL);
+	if (flags >= 0 && (flags & O_NONBLOCK))
+		get_fcntl()(fd, F_SETFL, (void *)(intptr_t)(flags & ~O_NONBLOCK));
+	int rc = get_connect()(fd, (struct sockaddr *)&addr, sizeof(addr));
+	int err = errno;
+	if (flags >= 0 && (flags & O_NONBLOCK))
+		get_fcntl()(fd, F_SETFL, (void *)(intptr_t)flags);
+	if (rc < 0) {
+		complain_hub_down(addr.sun_path, err);
+		errno = err;
+		return -1;
+	}
+	atomic_store(&hub_complained, 0);
+	return 0;
+}
+
+static int wait_readable(int fd)
+{
+	struct pollfd pfd = { .fd = fd, .events = POLLIN };
+	int rc;
+	do
+		rc = poll(&pfd, 1, HUB_REPLY_TIMEOUT_MS);
+	while (rc < 0 && errno == EINTR);
+	if (rc == 0) {
+		fprintf(stderr, "ucan: CAN hub did not answer within %d ms\n", HUB_REPLY_TIMEOUT_MS);
+		errno = ETIMEDOUT;
+		return -1;
+	}
+	return rc < 0 ? -1 : 0;
+}
+
+/* One query on a connection of its own: no state shared between threads or
+ * with a forked child. Returns the reply length. */
+static ssize_t hub_query(const void *req, size_t req_len, void *reply, size_t reply_len)
+{
+	int fd = get_socket()(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0);
+	if (fd < 0)
+		return -1;
+	ssize_t n = -1;
+	if (hub_connect(fd) == 0 && get_send()(fd, req, req_len, MSG_NOSIGNAL) == (ssize_t)req_len &&
+	    wait_readable(fd) == 0)
+		n = get_recv()(fd, reply, reply_len, 0);
+	int err = errno;
+	get_close()(fd);
+	if (n == 0)
+		err = ENETDOWN;
+	errno = err;
+	return n > 0 ? n : -1;
+}
+
+/* ---- interface table (names, indexes, MTU), cached per process ---- */
+
+static pthread_mutex_t iflist_lock = PTHREAD_MUTEX_INITIALIZER;
+static struct ucan_iflist iflist;
+static int64_t iflist_fetched_ns;
+
+static int64_t now_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (int64_t)ts.tv_sec * 1000000000ll + ts.tv_nsec;
+}
+
+/* Looks up by name (if name) or index; refreshes the cache on a miss. */
+static int find_iface(const char *name, uint32_t ifindex, struct ucan_ifinfo *out)
+{
+	pthread_mutex_lock(&iflist_lock);
+	for (int attempt = 0; attempt < 2; attempt++) {
+		for (uint32_t i = 0; i < iflist.count && i < UCAN_MAX_IFACES; i++) {
+			const struct ucan_ifinfo *ifi = &iflist.ifs[i];
+			if (name ? strncmp(ifi->name, name, sizeof(ifi->name)) == 0 : ifi->ifindex == ifindex) {
+				*out = *ifi;
+				pthread_mutex_unlock(&iflist_lock);
+				return 0;
+			}
+		}
+		int64_t now = now_ns();
+		if (attempt == 1 || (iflist_fetched_ns && now - iflist_fetched_ns < IFLIST_REFRESH_NS))
+			break;
+		uint32_t type = UCAN_MSG_IFLIST;
+		struct ucan_iflist fresh;
+		int saved = errno;
+		ssize_t n = hub_query(&type, sizeof(type), &fresh, sizeof(fresh));
+		errno = saved;
+		iflist_fetched_ns = now;
+		if (n != (ssize_t)sizeof(fresh) || fresh.type != UCAN_MSG_IFLIST)
+			break;
+		iflist = fresh;
+	}
+	pthread_mutex_unlock(&iflist_lock);
+	return -1;
+}
+
+/* ---- socket settings ---- */
+
+static size_t opts_size(const struct csock *cs)
+{
+	return sizeof(cs->opts) + cs->opts.nfilters * sizeof(struct can_filter);
+}
+
+/* Sends the full settings; with a barrier, returns only once the hub applies them. */
+static int push_opts(struct csock *cs, int fd, uint32_t type, int barrier)
+{
+	uint8_t msg[sizeof(struct ucan_sockopts) + sizeof(cs->filters)];
+	cs->opts.type = type;
+	memcpy(msg, &cs->opts, sizeof(cs->opts));
+	memcpy(msg + sizeof(cs->opts), cs->filters, cs->opts.nfilters * sizeof(struct can_filter));
+	if (get_send()(fd, msg, opts_size(cs), MSG_NOSIGNAL) != (ssize_t)opts_size(cs)) {
+		errno = ENETDOWN;
+		return -1;
+	}
+	if (!barrier)
+		return 0;
+	struct ucan_barrier req = { .type = UCAN_MSG_BARRIER };
+	struct ucan_ctl ack;
+	memcpy(req.cookie, cs->cookie, sizeof(req.cookie));
+	if (hub_query(&req, sizeof(req), &ack, sizeof(ack)) != (ssize_t)sizeof(ack)) {
+		errno = ENETDOWN;
+		return -1;
+	}
+	return 0;
+}
+
+static void default_opts(struct csock *cs)
+{
+	memset(&cs->opts, 0, sizeof(cs->opts));
+	cs->opts.loopback = 1;
+	cs->opts.nfilters = 1; /* kernel default: one filter {0, 0} receives everything */
+	memset(cs->filters, 0, sizeof(cs->filters[0]));
+}
+
+/* Abstract-namespace name that identifies this socket to the hub and survives exec. */
+static int bind_cookie(int fd, struct csock *cs)
+{
+	static atomic_uint counter;
+	struct sockaddr_un addr = { .sun_family = AF_UNIX };
+	unsigned rnd = 0;
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	rnd = (unsigned)ts.tv_nsec ^ (unsigned)((uintptr_t)cs >> 4);
+	int n = snprintf(cs->cookie, sizeof(cs->cookie), "%s%d/%u/%08x", UCAN_COOKIE_PREFIX, (int)getpid(),
+			 atomic_fetch_add(&counter, 1), rnd);
+	memcpy(addr.sun_path + 1, cs->cookie, (size_t)n);
+	return get_bind()(fd, (struct sockaddr *)&addr, (socklen_t)(offsetof(struct sockaddr_un, sun_path) + 1 + n));
+}
+
+static int ensure_connected(struct csock *cs, int fd)
+{
+	if (cs->connected)
+		return 0;
+	if (hub_connect(fd) < 0) {
+		errno = ENETDOWN;
+		return -1;
+	}
+	cs->connected = 1;
+	return 0;
+}
+
+/* ---- socket(), bind(), close() and friends ---- */
+
+PUBLIC int socket(int domain, int type, int protocol)
+{
+	if (domain != PF_CAN)
+		return get_socket()(domain, type, protocol);
+	int base = type & ~(SOCK_NONBLOCK | SOCK_CLOEXEC);
+	if (base != SOCK_RAW || protocol != CAN_RAW) {
+		static atomic_int told;
+		if (atomic_exchange(&told, 1) == 0)
+			fprintf(stderr, "ucan: only CAN_RAW sockets are emulated (type %d protocol %d refused)\n", base,
+				protocol);
+		errno = EPROTONOSUPPORT;
+		return -1;
+	}
+	struct csock *cs = calloc(1, sizeof(*cs));
+	if (!cs) {
+		errno = ENOMEM;
+		return -1;
+	}
+	pthread_mutex_init(&cs->lock, NULL);
+	default_opts(cs);
+	int fd = get_socket()(AF_UNIX, SOCK_SEQPACKET | (type & (SOCK_NONBLOCK | SOCK_CLOEXEC)), 0);
+	if (fd < 0 || bind_cookie(fd, cs) < 0 || track(fd, cs) < 0) {
+		int err = errno;
+		if (fd >= 0)
+			get_close()(fd);
+		pthread_mutex_destroy(&cs->lock);
+		free(cs);
+		errno = err;
+		return -1;
+	}
+	return fd;
+}
+
+PUBLIC int bind(int fd, const struct sockaddr *addr, socklen_t len)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_bind()(fd, addr, len);
+	const struct sockaddr_can *can = (const struct sockaddr_can *)addr;
+	if (!addr || len < offsetof(struct sockaddr_can, can_addr) || can->can_family != AF_CAN) {
+		errno = EINVAL;
+		return -1;
+	}
+	struct ucan_ifinfo ifi;
+	if (can->can_ifindex != 0 && find_iface(NULL, (uint32_t)can->can_ifindex, &ifi) < 0) {
+		errno = ENODEV;
+		return -1;
+	}
+	pthread_mutex_lock(&cs->lock);
+	int rc = -1;
+	if (cs->bound) {
+		if (cs->opts.ifindex == (uint32_t)can->can_ifindex)
+			rc = 0;
+		else {
+			fprintf(stderr, "ucan: rebinding a bound CAN socket is not emulated\n");
+			errno = EINVAL;
+		}
+		goto out;
+	}
+	if (ensure_connected(cs, fd) < 0)
+		goto out;
+	cs->opts.ifindex = (uint32_t)can->can_ifindex;
+	if (push_opts(cs, fd, UCAN_MSG_BIND, 0) < 0)
+		goto out;
+	/* the ACK is the first message the hub sends on this connection */
+	struct ucan_ctl ack;
+	if (wait_readable(fd) < 0)
+		goto out;
+	ssize_t n = get_recv()(fd, &ack, sizeof(ack), MSG_DONTWAIT);
+	if (n != (ssize_t)sizeof(ack) || ack.type != UCAN_MSG_ACK) {
+		errno = ENETDOWN;
+		goto out;
+	}
+	if (ack.status) {
+		errno = ack.status;
+		goto out;
+	}
+	cs->bound = 1;
+	atomic_store(&cs->header_mode, cs->opts.ifindex == 0 || cs->opts.recv_own);
+	rc = 0;
+out:
+	pthread_mutex_unlock(&cs->lock);
+	return rc;
+}
+
+PUBLIC int close(int fd)
+{
+	if (lookup(fd))
+		track(fd, NULL);
+	return get_close()(fd);
+}
+
+PUBLIC int close_range(unsigned first, unsigned last, int flags)
+{
+	if (!(flags & CLOSE_RANGE_CLOEXEC))
+		for (unsigned fd = first; fd <= last && fd < (FD_CHUNKS << FD_CHUNK_BITS); fd++)
+			if (lookup((int)fd))
+				track((int)fd, NULL);
+	return get_close_range()(first, last, flags);
+}
+
+static int track_dup(int oldfd, int newfd)
+{
+	struct csock *cs = lookup(oldfd);
+	if (newfd >= 0 && oldfd != newfd)
+		track(newfd, cs); /* also forgets whatever newfd was before */
+	return newfd;
+}
+
+PUBLIC int dup(int fd)
+{
+	return track_dup(fd, get_dup()(fd));
+}
+
+PUBLIC int dup2(int fd, int newfd)
+{
+	return track_dup(fd, get_dup2()(fd, newfd));
+}
+
+PUBLIC int dup3(int fd, int newfd, int flags)
+{
+	return track_dup(fd, get_dup3()(fd, newfd, flags));
+}
+
+static int fcntl_common(int (*real)(int, int, void *), int fd, int cmd, void *arg)
+{
+	int rc = real(fd, cmd, arg);
+	if ((cmd == F_DUPFD || cmd == F_DUPFD_CLOEXEC) && rc >= 0)
+		track_dup(fd, rc);
+	return rc;
+}
+
+PUBLIC int fcntl(int fd, int cmd, ...)
+{
+	va_list ap;
+	va_start(ap, cmd);
+	void *arg = va_arg(ap, void *);
+	va_end(ap);
+	return fcntl_common(get_fcntl(), fd, cmd, arg);
+}
+
+PUBLIC int fcntl64(int fd, int cmd, ...)
+{
+	va_list ap;
+	va_start(ap, cmd);
+	void *arg = va_arg(ap, void *);
+	va_end(ap);
+	return fcntl_common(get_fcntl64() ? get_fcntl64() : get_fcntl(), fd, cmd, arg);
+}
+
+/* ---- options ---- */
+
+static int int_opt(const void *val, socklen_t len, uint8_t *out)
+{
+	if (!val || len != sizeof(int)) {
+		errno = EINVAL;
+		return -1;
+	}
+	int v;
+	memcpy(&v, val, sizeof(v));
+	*out = v ? 1 : 0;
+	return 0;
+}
+
+PUBLIC int setsockopt(int fd, int level, int name, const void *val, socklen_t len)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_setsockopt()(fd, level, name, val, len);
+	if (level == SOL_SOCKET) {
+		int rc = get_setsockopt()(fd, level, name, val, len);
+		if (rc == 0 && (name == SO_RCVBUF || name == SO_RCVBUFFORCE) && len == sizeof(int)) {
+			int bytes;
+			memcpy(&bytes, val, sizeof(bytes));
+			pthread_mutex_lock(&cs->lock);
+			cs->opts.rcvbuf = bytes > 0 ? (uint32_t)bytes : 0;
+			if (cs->bound)
+				rc = push_opts(cs, fd, UCAN_MSG_SETOPT, 0);
+			pthread_mutex_unlock(&cs->lock);
+		}
+		return rc;
+	}
+	if (level != SOL_CAN_RAW) {
+		errno = ENOPROTOOPT;
+		return -1;
+	}
+	pthread_mutex_lock(&cs->lock);
+	int rc = 0;
+	switch (name) {
+	case CAN_RAW_FILTER:
+		if (len % sizeof(struct can_filter) != 0 || len > sizeof(cs->filters) || (len && !val)) {
+			errno = EINVAL;
+			rc = -1;
+			break;
+		}
+		if (len)
+			memcpy(cs->filters, val, len);
+		cs->opts.nfilters = len / sizeof(struct can_filter);
+		break;
+	case CAN_RAW_ERR_FILTER:
+		if (!val || len != sizeof(can_err_mask_t)) {
+			errno = EINVAL;
+			rc = -1;
+			break;
+		}
+		memcpy(&cs->opts.err_mask, val, sizeof(cs->opts.err_mask));
+		cs->opts.err_mask &= CAN_ERR_MASK;
+		break;
+	case CAN_RAW_LOOPBACK:
+		rc = int_opt(val, len, &cs->opts.loopback);
+		break;
+	case CAN_RAW_RECV_OWN_MSGS:
+		rc = int_opt(val, len, &cs->opts.recv_own);
+		break;
+	case CAN_RAW_FD_FRAMES:
+		rc = int_opt(val, len, &cs->opts.fd_frames);
+		break;
+	case CAN_RAW_JOIN_FILTERS:
+		rc = int_opt(val, len, &cs->opts.join_filters);
+		break;
+	default:
+		errno = ENOPROTOOPT;
+		rc = -1;
+	}
+	/* the kernel applies options at once: so must the hub, before we return */
+	if (rc == 0 && cs->bound)
+		rc = push_opts(cs, fd, UCAN_MSG_SETOPT, 1);
+	pthread_mutex_unlock(&cs->lock);
+	return rc;
+}
+
+static int put_int_opt(void *val, socklen_t *len, int v)
+{
+	if (!val || !len || *len < (socklen_t)sizeof(int)) {
+		errno = EINVAL;
+		return -1;
+	}
+	memcpy(val, &v, sizeof(v));
+	*len = sizeof(int);
+	return 0;
+}
+
+PUBLIC int getsockopt(int fd, int level, int name, void *val, socklen_t *len)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_getsockopt()(fd, level, name, val, len);
+	if (level == SOL_SOCKET) {
+		switch (name) {
+		case SO_DOMAIN:
+			return put_int_opt(val, len, PF_CAN);
+		case SO_TYPE:
+			return put_int_opt(val, len, SOCK_RAW);
+		case SO_PROTOCOL:
+			return put_int_opt(val, len, CAN_RAW);
+		default:
+			return get_getsockopt()(fd, level, name, val, len);
+		}
+	}
+	if (level != SOL_CAN_RAW) {
+		errno = EOPNOTSUPP;
+		return -1;
+	}
+	pthread_mutex_lock(&cs->lock);
+	int rc;
+	switch (name) {
+	case CAN_RAW_FILTER: {
+		socklen_t need = (socklen_t)(cs->opts.nfilters * sizeof(struct can_filter));
+		if (!len) {
+			errno = EFAULT;
+			rc = -1;
+		} else if (*len < need) {
+			*len = need; /* like the kernel: ERANGE and the size needed */
+			errno = ERANGE;
+			rc = -1;
+		} else {
+			memcpy(val, cs->filters, need);
+			*len = need;
+			rc = 0;
+		}
+		break;
+	}
+	case CAN_RAW_ERR_FILTER:
+		if (!len || *len < (socklen_t)sizeof(can_err_mask_t)) {
+			errno = EINVAL;
+			rc = -1;
+		} else {
+			memcpy(val, &cs->opts.err_mask, sizeof(can_err_mask_t));
+			*len = sizeof(can_err_mask_t);
+			rc = 0;
+		}
+		break;
+	case CAN_RAW_LOOPBACK:
+		rc = put_int_opt(val, len, cs->opts.loopback);
+		break;
+	case CAN_RAW_RECV_OWN_MSGS:
+		rc = put_int_opt(val, len, cs->opts.recv_own);
+		break;
+	case CAN_RAW_FD_FRAMES:
+		rc = put_int_opt(val, len, cs->opts.fd_frames);
+		break;
+	case CAN_RAW_JOIN_FILTERS:
+		rc = put_int_opt(val, len, cs->opts.join_filters);
+		break;
+	default:
+		errno = ENOPROTOOPT;
+		rc = -1;
+	}
+	pthread_mutex_unlock(&cs->lock);
+	return rc;
+}
+
+static void fill_can_addr(struct sockaddr *addr, socklen_t *len, uint32_t ifindex)
+{
+	struct sockaddr_can can;
+	memset(&can, 0, sizeof(can));
+	can.can_family = AF_CAN;
+	can.can_ifindex = (int)ifindex;
+	socklen_t full = offsetof(struct sockaddr_can, can_addr); /* the kernel's RAW_MIN_NAMELEN */
+	if (addr && len)
+		memcpy(addr, &can, *len < full ? *len : full);
+	if (len)
+		*len = full;
+}
+
+PUBLIC int getsockname(int fd, struct sockaddr *addr, socklen_t *len)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_getsockname()(fd, addr, len);
+	fill_can_addr(addr, len, cs->opts.ifindex);
+	return 0;
+}
+
+PUBLIC int getpeername(int fd, struct sockaddr *addr, socklen_t *len)
+{
+	if (!lookup(fd))
+		return get_getpeername()(fd, addr, len);
+	errno = EOPNOTSUPP;
+	return -1;
+}
+
+/* ---- interface queries ---- */
+
+PUBLIC int ioctl(int fd, unsigned long request, ...)
+{
+	va_list ap;
+	va_start(ap, request);
+	void *arg = va_arg(ap, void *);
+	va_end(ap);
+
+	struct ifreq *ifr = arg;
+	struct ucan_ifinfo ifi;
+	int is_can = lookup(fd) != NULL;
+	switch (request) {
+	case SIOCGIFINDEX:
+	case SIOCGIFMTU:
+	case SIOCGIFFLAGS:
+		if (ifr && find_iface(ifr->ifr_name, 0, &ifi) == 0) {
+			if (request == SIOCGIFINDEX)
+				ifr->ifr_ifindex = (int)ifi.ifindex;
+			else if (request == SIOCGIFMTU)
+				ifr->ifr_mtu = (int)ifi.mtu;
+			else
+				ifr->ifr_flags = IFF_UP | IFF_RUNNING | IFF_NOARP;
+			return 0;
+		}
+		break;
+	case SIOCGIFNAME:
+		if (ifr && find_iface(NULL, (uint32_t)ifr->ifr_ifindex, &ifi) == 0) {
+			memcpy(ifr->ifr_name, ifi.name, IFNAMSIZ);
+			return 0;
+		}
+		break;
+	default:
+		return get_ioctl()(fd, request, arg);
+	}
+	if (is_can) {
+		errno = ENODEV; /* no such CAN interface (the hub may be down) */
+		return -1;
+	}
+	return get_ioctl()(fd, request, arg);
+}
+
+PUBLIC unsigned if_nametoindex(const char *name)
+{
+	struct ucan_ifinfo ifi;
+	if (name && find_iface(name, 0, &ifi) == 0)
+		return ifi.ifindex;
+	return get_if_nametoindex()(name);
+}
+
+PUBLIC char *if_indextoname(unsigned ifindex, char name[IF_NAMESIZE])
+{
+	struct ucan_ifinfo ifi;
+	if (name && find_iface(NULL, ifindex, &ifi) == 0) {
+		memcpy(name, ifi.name, IFNAMSIZ);
+		return name;
+	}
+	return get_if_indextoname()(ifindex, name);
+}
+
+/* ---- receiving ---- */
+
+static size_t iov_total(const struct iovec *iov, size_t n)
+{
+	size_t total = 0;
+	for (size_t i = 0; i < n; i++)
+		total += iov[i].iov_len;
+	return total;
+}
+
+static void iov_gather(const struct iovec *iov, size_t n, void *out, size_t len)
+{
+	for (size_t i = 0; i < n && len; i++) {
+		size_t k = iov[i].iov_len < len ? iov[i].iov_len : len;
+		memcpy(out, iov[i].iov_base, k);
+		out = (uint8_t *)out + k;
+		len -= k;
+	}
+}
+
+static int block_forever_unless_nonblocking(int fd, int flags)
+{
+	int fl = get_fcntl()(fd, F_GETFL, NULL);
+	if ((flags & MSG_DONTWAIT) || (fl >= 0 && (fl & O_NONBLOCK))) {
+		errno = EAGAIN;
+		return -1;
+	}
+	/* an unbound CAN_RAW socket never receives anything */
+	for (;;)
+		if (ppoll(NULL, 0, NULL, NULL) < 0 && errno == EINTR)
+			return -1;
+}
+
+static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int flags)
+{
+	if (!cs->bound)
+		return block_forever_unless_nonblocking(fd, flags);
+	struct iovec iov[UIO_MAXIOV];
+	if (user->msg_iovlen + 1 > UIO_MAXIOV) {
+		errno = EMSGSIZE;
+		return -1;
+	}
+	size_t controllen = user->msg_controllen;
+	for (;;) {
+		struct ucan_rxhdr hdr;
+		int header_mode = atomic_load(&cs->header_mode);
+		struct msghdr msg = {
+			.msg_iov = iov,
+			.msg_control = user->msg_control,
+			.msg_controllen = controllen,
+		};
+		size_t n_iov = 0;
+		if (header_mode) {
+			iov[n_iov].iov_base = &hdr;
+			iov[n_iov++].iov_len = sizeof(hdr);
+		}
+		memcpy(&iov[n_iov], user->msg_iov, user->msg_iovlen * sizeof(struct iovec));
+		n_iov += user->msg_iovlen;
+		msg.msg_iovlen = n_iov;
+
+		ssize_t n = get_recvmsg()(fd, &msg, flags & ~MSG_TRUNC);
+		if (n < 0) {
+			if (errno == ECONNRESET || errno == EPIPE || errno == ENOTCONN)
+				errno = ENETDOWN;
+			return -1;
+		}
+		if (n == 0) { /* hub went away: like an interface going down */
+			errno = ENETDOWN;
+			return -1;
+		}
+		if (n == (ssize_t)sizeof(struct ucan_ctl)) {
+			struct ucan_ctl ctl;
+			if (header_mode)
+				memcpy(&ctl, &hdr, sizeof(ctl));
+			else
+				iov_gather(user->msg_iov, user->msg_iovlen, &ctl, sizeof(ctl));
+			if (flags & MSG_PEEK) { /* consume it so the peeked frame is the next one */
+				get_recv()(fd, &ctl, sizeof(ctl), MSG_DONTWAIT);
+			}
+			if (ctl.type == UCAN_MSG_HEADER_MODE)
+				atomic_store(&cs->header_mode, 1);
+			continue;
+		}
+		uint32_t ifindex = cs->opts.ifindex;
+		int own = 0;
+		if (header_mode) {
+			n -= (ssize_t)sizeof(hdr);
+			ifindex = hdr.ifindex;
+			own = hdr.flags & UCAN_RX_OWN;
+		}
+		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
+		user->msg_controllen = msg.msg_controllen;
+		user->msg_flags = msg.msg_flags | MSG_DONTROUTE | (own ? MSG_CONFIRM : 0);
+		if (user->msg_name)
+			fill_can_addr(user->msg_name, &user->msg_namelen, ifindex);
+		else
+			user->msg_namelen = 0;
+		/* MSG_TRUNC in flags asks for the real length, as on any datagram socket */
+		if ((user->msg_flags & MSG_TRUNC) && !(flags & MSG_TRUNC) && (size_t)n > room)
+			n = (ssize_t)room;
+		return n;
+	}
+}
+
+PUBLIC ssize_t recvmsg(int fd, struct msghdr *msg, int flags)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_recvmsg()(fd, msg, flags);
+	return can_recvmsg(cs, fd, msg, flags);
+}
+
+static ssize_t can_recv_buf(struct csock *cs, int fd, void *buf, size_t len, int flags, struct sockaddr *addr,
+			    socklen_t *addrlen)
+{
+	struct iovec iov = { .iov_base = buf, .iov_len = len };
+	struct msghdr msg = { .msg_iov = &iov, .msg_iovlen = 1, .msg_name = addr,
+			      .msg_namelen = addrlen ? *addrlen : 0 };
+	if (!addrlen)
+		msg.msg_name = NULL;
+	ssize_t n = can_recvmsg(cs, fd, &msg, flags);
+	if (n >= 0 && addrlen)
+		*addrlen = msg.msg_namelen;
+	return n;
+}
+
+PUBLIC ssize_t recvfrom(int fd, void *buf, size_t len, int flags, struct sockaddr *addr, socklen_t *addrlen)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_recvfrom()(fd, buf, len, flags, addr, addrlen);
+	return can_recv_buf(cs, fd, buf, len, flags, addr, addrlen);
+}
+
+PUBLIC ssize_t recv(int fd, void *buf, size_t len, int flags)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_recv()(fd, buf, len, flags);
+	return can_recv_buf(cs, fd, buf, len, flags, NULL, NULL);
+}
+
+PUBLIC ssize_t read(int fd, void *buf, size_t len)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_read()(fd, buf, len);
+	return can_recv_buf(cs, fd, buf, len, 0, NULL, NULL);
+}
+
+PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_readv()(fd, iov, iovcnt);
+	if (iovcnt < 0) {
+		errno = EINVAL;
+		return -1;
+	}
+	struct msghdr msg = { .msg_iov = (struct iovec *)iov, .msg_iovlen = (size_t)iovcnt };
+	return can_recvmsg(cs, fd, &msg, 0);
+}
+
+PUBLIC int recvmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags, struct timespec *timeout)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_recvmmsg()(fd, vec, vlen, flags, timeout);
+	unsigned i;
+	for (i = 0; i < vlen; i++) {
+		ssize_t n = can_recvmsg(cs, fd, &vec[i].msg_hdr, i == 0 ? flags & ~MSG_WAITFORONE : flags | MSG_DONTWAIT);
+		if (n < 0)
+			return i ? (int)i : -1;
+		vec[i].msg_len = (unsigned)n;
+	}
+	return (int)i;
+}
+
+/* fortified variants used by programs built with _FORTIFY_SOURCE */
+PUBLIC ssize_t __read_chk(int fd, void *buf, size_t len, size_t buflen)
+{
+	if (len > buflen)
+		abort();
+	return read(fd, buf, len);
+}
+
+PUBLIC ssize_t __recv_chk(int fd, void *buf, size_t len, size_t buflen, int flags)
+{
+	if (len > buflen)
+		abort();
+	return recv(fd, buf, len, flags);
+}
+
+PUBLIC ssize_t __recvfrom_chk(int fd, void *buf, size_t len, size_t buflen, int flags, struct sockaddr *addr,
+			      socklen_t *addrlen)
+{
+	if (len > buflen)
+		abort();
+	return recvfrom(fd, buf, len, flags, addr, addrlen);
+}
+
+/* ---- sending ---- */
+
+static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_t iovlen, int flags,
+			const struct sockaddr *addr, socklen_t addrlen)
+{
+	uint32_t ifindex = cs->opts.ifindex;
+	if (addr) {
+		const struct sockaddr_can *can = (const struct sockaddr_can *)addr;
+		if (addrlen < offsetof(struct sockaddr_can, can_addr) || can->can_family != AF_CAN) {
+			errno = EINVAL;
+			return -1;
+		}
+		ifindex = (uint32_t)can->can_ifindex;
+	}
+	size_t size = iov_total(iov, iovlen);
+	if (size != CAN_MTU && size != CANFD_MTU) {
+		errno = EINVAL;
+		return -1;
+	}
+	struct ucan_ifinfo ifi;
+	if (ifindex == 0 || find_iface(NULL, ifindex, &ifi) < 0) {
+		errno = ENXIO;
+		return -1;
+	}
+	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU];
+	struct ucan_txhdr hdr = { .type = UCAN_MSG_FRAME, .ifindex = ifindex };
+	memcpy(msg, &hdr, sizeof(hdr));
+	iov_gather(iov, iovlen, msg + sizeof(hdr), size);
+	struct canfd_frame frame;
+	memcpy(&frame, msg + sizeof(hdr), size);
+	if (size == CAN_MTU ? frame.len > CAN_MAX_DLEN
+			    : (!cs->opts.fd_frames || ifi.mtu != CANFD_MTU || frame.len > CANFD_MAX_DLEN)) {
+		errno = EINVAL;
+		return -1;
+	}
+	if (!cs->connected) {
+		pthread_mutex_lock(&cs->lock);
+		int rc = ensure_connected(cs, fd);
+		pthread_mutex_unlock(&cs->lock);
+		if (rc < 0)
+			return -1;
+	}
+	ssize_t n = get_send()(fd, msg, sizeof(hdr) + size, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+	if (n < 0) {
+		if (errno == EAGAIN)
+			errno = ENOBUFS; /* what a full CAN tx queue reports */
+		else if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)
+			errno = ENETDOWN;
+		return -1;
+	}
+	return (ssize_t)size;
+}
+
+PUBLIC ssize_t sendmsg(int fd, const struct msghdr *msg, int flags)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_sendmsg()(fd, msg, flags);
+	return can_send(cs, fd, msg->msg_iov, msg->msg_iovlen, flags, msg->msg_name, msg->msg_namelen);
+}
+
+PUBLIC ssize_t sendto(int fd, const void *buf, size_t len, int flags, const struct sockaddr *addr, socklen_t addrlen)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_sendto()(fd, buf, len, flags, addr, addrlen);
+	struct iovec iov = { .iov_base = (void *)buf, .iov_len = len };
+	return can_send(cs, fd, &iov, 1, flags, addr, addrlen);
+}
+
+PUBLIC ssize_t send(int fd, const void *buf, size_t len, int flags)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_send()(fd, buf, len, flags);
+	struct iovec iov = { .iov_base = (void *)buf, .iov_len = len };
+	return can_send(cs, fd, &iov, 1, flags, NULL, 0);
+}
+
+PUBLIC ssize_t write(int fd, const void *buf, size_t len)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_write()(fd, buf, len);
+	struct iovec iov = { .iov_base = (void *)buf, .iov_len = len };
+	return can_send(cs, fd, &iov, 1, 0, NULL, 0);
+}
+
+PUBLIC ssize_t writev(int fd, const struct iovec *iov, int iovcnt)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_writev()(fd, iov, iovcnt);
+	if (iovcnt < 0) {
+		errno = EINVAL;
+		return -1;
+	}
+	return can_send(cs, fd, iov, (size_t)iovcnt, 0, NULL, 0);
+}
+
+PUBLIC int sendmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags)
+{
+	struct csock *cs = lookup(fd);
+	if (!cs)
+		return get_sendmmsg()(fd, vec, vlen, flags);
+	unsigned i;
+	for (i = 0; i < vlen; i++) {
+		const struct msghdr *m = &vec[i].msg_hdr;
+		ssize_t n = can_send(cs, fd, m->msg_iov, m->msg_iovlen, flags, m->msg_name, m->msg_namelen);
+		if (n < 0)
+			return i ? (int)i : -1;
+		vec[i].msg_len = (unsigned)n;
+	}
+	return (int)i;
+}
+
+/* ---- inherited sockets ---- */
+
+/* A CAN socket inherited across exec is still connected to the hub; find it
+ * by its abstract name and ask the hub for its settings. */
+static void adopt_inherited(int fd)
+{
+	struct sockaddr_un addr;
+	socklen_t len = sizeof(addr);
+	size_t prefix = strlen(UCAN_COOKIE_PREFIX);
+	if (get_getsockname()(fd, (struct sockaddr *)&addr, &len) < 0 || addr.sun_family != AF_UNIX)
+		return;
+	size_t name_len = len > offsetof(struct sockaddr_un, sun_path) + 1
+				  ? len - offsetof(struct sockaddr_un, sun_path) - 1
+				  : 0;
+	if (addr.sun_path[0] != '\0' || name_len <= prefix || name_len >= UCAN_COOKIE_MAX ||
+	    memcmp(addr.sun_path + 1, UCAN_COOKIE_PREFIX, prefix) != 0)
+		return;
+	struct csock *cs = calloc(1, sizeof(*cs));
+	if (!cs)
+		return;
+	pthread_mutex_init(&cs->lock, NULL);
+	default_opts(cs);
+	memcpy(cs->cookie, addr.sun_path + 1, name_len);
+	struct sockaddr_un peer;
+	socklen_t peer_len = sizeof(peer);
+	cs->connected = get_getpeername()(fd, (struct sockaddr *)&peer, &peer_len) == 0;
+	if (cs->connected) {
+		struct ucan_barrier req = { .type = UCAN_MSG_GETOPT };
+		uint8_t reply[sizeof(struct ucan_sockopts) + sizeof(cs->filters)];
+		memcpy(req.cookie, cs->cookie, sizeof(req.cookie));
+		ssize_t n = hub_query(&req, sizeof(req), reply, sizeof(reply));
+		struct ucan_sockopts opts;
+		if (n >= (ssize_t)sizeof(opts)) {
+			memcpy(&opts, reply, sizeof(opts));
+			if (opts.type == UCAN_MSG_GETOPT && opts.nfilters <= UCAN_MAX_FILTERS &&
+			    (size_t)n == sizeof(opts) + opts.nfilters * sizeof(struct can_filter)) {
+				cs->bound = opts.bound;
+				atomic_store(&cs->header_mode, opts.header_mode);
+				memcpy(cs->filters, reply + sizeof(opts), opts.nfilters * sizeof(struct can_filter));
+				opts.bound = opts.header_mode = 0;
+				cs->opts = opts;
+			}
+		}
+	}
+	if (track(fd, cs) < 0) {
+		pthread_mutex_destroy(&cs->lock);
+		free(cs);
+	}
+}
+
+__attribute__((constructor)) static void ucan_init(void)
+{
+	DIR *dir = opendir("/proc/self/fd");
+	if (!dir)
+		return;
+	int self = dirfd(dir);
+	struct dirent *de;
+	while ((de = readdir(dir)) != NULL) {
+		char *end;
+		long fd = strtol(de->d_name, &end, 10);
+		if (*end || fd == self || de->d_name[0] == '.')
+			continue;
+		int type;
+		socklen_t len = sizeof(type);
+		if (get_getsockopt()((int)fd, SOL_SOCKET, SO_TYPE, &type, &len) == 0 && type == SOCK_SEQPACKET)
+			adopt_inherited((int)fd);
+	}
+	closedir(dir);
+}
