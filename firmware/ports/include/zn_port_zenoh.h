@@ -1,0 +1,60 @@
+/* zn_port_zenoh.h - contract of the Zenoh port: the few Zenoh operations
+ * zenoh-node uses. Linux: ports/linux/zenoh_rust (the official zenoh crate);
+ * ESP32: ports/esp32/zenoh_pico.c; tests: ports/mock/zenoh_mock.c.
+ * All functions return 0 on success, a negative value on failure. Callbacks
+ * run on the port's threads and must not block for long. */
+#ifndef ZN_PORT_ZENOH_H
+#define ZN_PORT_ZENOH_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+typedef struct zn_session zn_session_t;
+typedef struct zn_publisher zn_publisher_t;
+typedef struct zn_subscriber zn_subscriber_t;
+typedef struct zn_token zn_token_t;
+typedef struct zn_queryable zn_queryable_t;
+
+typedef enum { ZN_MODE_CLIENT = 0, ZN_MODE_PEER = 1, ZN_MODE_ROUTER = 2 } zn_mode_t;
+
+typedef struct {
+	zn_mode_t mode;
+	const char *connect;	 /* comma-separated endpoints, may be empty */
+	const char *listen;	 /* comma-separated endpoints, may be empty */
+	const char *config_file; /* optional JSON5 file applied first (TLS, auth, ...) */
+} zn_session_config_t;
+
+typedef enum { ZN_CONGESTION_DROP = 0, ZN_CONGESTION_BLOCK = 1 } zn_congestion_t;
+
+typedef struct {
+	uint8_t priority; /* 1 (real time) .. 7 (background), Zenoh's scale */
+	zn_congestion_t congestion;
+	uint8_t express; /* 1 = send at once, never batched by Zenoh */
+} zn_qos_t;
+
+typedef void (*zn_sample_cb)(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
+			     void *ctx);
+/* Writes the reply into buf (at most cap bytes) and returns its length. */
+typedef size_t (*zn_query_cb)(char *buf, size_t cap, void *ctx);
+
+/* Opens a session. With connect endpoints and mode client it does not wait for
+ * the router: the port keeps retrying in the background. Multicast scouting is
+ * always off; endpoints are explicit. */
+int zn_open(const zn_session_config_t *config, zn_session_t **out);
+int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
+int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);
+int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
+int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out);
+int zn_declare_queryable(zn_session_t *s, const char *key, zn_query_cb cb, void *ctx, zn_queryable_t **out);
+/* Number of routers this session is connected to right now (for reconnect counting). */
+int zn_router_count(zn_session_t *s);
+/* The session's Zenoh id as hex, for logs. */
+int zn_session_id(zn_session_t *s, char *buf, size_t cap);
+
+void zn_undeclare_publisher(zn_publisher_t *pub);
+void zn_undeclare_subscriber(zn_subscriber_t *sub);
+void zn_undeclare_token(zn_token_t *token);
+void zn_undeclare_queryable(zn_queryable_t *q);
+void zn_close(zn_session_t *s);
+
+#endif

@@ -1,0 +1,134 @@
+/* can_socketcan.c - CAN port over Linux SocketCAN (kernel vcan/can, or the
+ * userspace bus through libucan-preload.so). One CAN_RAW socket per bus for
+ * both directions: the bridge never receives the commands it transmits, as a
+ * real controller does not. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <net/if.h>
+#include <poll.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <sys/time.h>
+#include <unistd.h>
+#include <linux/can.h>
+#include <linux/can/raw.h>
+
+#include "zn_port_can.h"
+#include "zn_port_os.h"
+
+struct zn_can {
+	int fd;
+	char name[IFNAMSIZ];
+};
+
+esp_err_t zn_can_open(const char *name, zn_can_t **out)
+{
+	struct ifreq ifr;
+	struct sockaddr_can addr = { .can_family = AF_CAN };
+	zn_can_t *can = calloc(1, sizeof(*can));
+	if (!can)
+		return ESP_ERR_NO_MEM;
+	if (strlen(name) >= sizeof(can->name)) {
+		free(can);
+		return ESP_ERR_INVALID_ARG;
+	}
+	strcpy(can->name, name);
+	can->fd = socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+	if (can->fd < 0) {
+		zn_log("E", "%s: socket(PF_CAN): %s", name, strerror(errno));
+		free(can);
+		return ESP_FAIL;
+	}
+	memset(&ifr, 0, sizeof(ifr));
+	strcpy(ifr.ifr_name, name);
+	int on = 1;
+	if (ioctl(can->fd, SIOCGIFINDEX, &ifr) < 0) {
+		zn_log("E", "%s: no such CAN interface: %s", name, strerror(errno));
+		goto fail;
+	}
+	addr.can_ifindex = ifr.ifr_ifindex;
+	/* kernel receive timestamps: latency is measured from the moment the frame was on the bus */
+	if (setsockopt(can->fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on)) < 0 ||
+	    bind(can->fd, (struct sockaddr *)&addr, sizeof(addr)) < 0) {
+		zn_log("E", "%s: bind: %s", name, strerror(errno));
+		goto fail;
+	}
+	*out = can;
+	return ESP_OK;
+fail:
+	close(can->fd);
+	free(can);
+	return ESP_FAIL;
+}
+
+esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
+{
+	struct can_frame frame;
+	char control[CMSG_SPACE(sizeof(struct timespec))];
+	struct iovec iov = { .iov_base = &frame, .iov_len = sizeof(frame) };
+	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = control };
+	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
+
+	for (;;) {
+		int rc = poll(&pfd, 1, timeout_ms);
+		if (rc == 0)
+			return ESP_ERR_TIMEOUT;
+		if (rc < 0)
+			return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+		mh.msg_controllen = sizeof(control);
+		ssize_t n = recvmsg(can->fd, &mh, MSG_DONTWAIT);
+		if (n < 0)
+			return errno == EAGAIN || errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+		if (n != sizeof(frame) || (frame.can_id & CAN_ERR_FLAG))
+			continue; /* error frames and anything unexpected are not bridged */
+		*rx_time_ns = zn_realtime_ns();
+		for (struct cmsghdr *c = CMSG_FIRSTHDR(&mh); c; c = CMSG_NXTHDR(&mh, c))
+			if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+				struct timespec ts;
+				memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+				*rx_time_ns = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+			}
+		memset(msg, 0, sizeof(*msg));
+		msg->extd = !!(frame.can_id & CAN_EFF_FLAG);
+		msg->rtr = !!(frame.can_id & CAN_RTR_FLAG);
+		msg->identifier = frame.can_id & (msg->extd ? CAN_EFF_MASK : CAN_SFF_MASK);
+		msg->data_length_code = frame.len > CAN_MAX_DLEN ? CAN_MAX_DLEN : frame.len;
+		if (!msg->rtr)
+			memcpy(msg->data, frame.data, msg->data_length_code);
+		return ESP_OK;
+	}
+}
+
+esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
+{
+	struct can_frame frame;
+	memset(&frame, 0, sizeof(frame));
+	frame.can_id = msg->identifier | (msg->extd ? CAN_EFF_FLAG : 0) | (msg->rtr ? CAN_RTR_FLAG : 0);
+	frame.len = msg->data_length_code;
+	if (!msg->rtr)
+		memcpy(frame.data, msg->data, msg->data_length_code);
+	int64_t deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000;
+	for (;;) {
+		ssize_t n = send(can->fd, &frame, sizeof(frame), MSG_DONTWAIT);
+		if (n == sizeof(frame))
+			return ESP_OK;
+		if (n < 0 && errno != ENOBUFS && errno != EAGAIN)
+			return ESP_FAIL;
+		/* tx queue full: wait for room, bounded */
+		int left_ms = (int)((deadline - zn_monotonic_ns()) / 1000000);
+		if (left_ms <= 0)
+			return ESP_ERR_TIMEOUT;
+		struct pollfd pfd = { .fd = can->fd, .events = POLLOUT };
+		poll(&pfd, 1, left_ms);
+	}
+}
+
+void zn_can_close(zn_can_t *can)
+{
+	if (!can)
+		return;
+	close(can->fd);
+	free(can);
+}

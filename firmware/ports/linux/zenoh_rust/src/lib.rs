@@ -1,0 +1,360 @@
+//! Zenoh port of zenoh-node for Linux: implements the C contract of
+//! `firmware/ports/include/zn_port_zenoh.h` over the official `zenoh` crate.
+//! Handles are boxed Rust objects behind opaque C pointers; every function
+//! returns 0 on success and a negative value on failure, never panics across
+//! the FFI boundary (panic = "abort" in the release profile as a backstop).
+
+use std::ffi::{c_char, c_int, c_void, CStr};
+use std::ptr;
+use std::slice;
+
+use zenoh::bytes::ZBytes;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::query::Queryable;
+use zenoh::{Config, Session, Wait};
+
+const ERR: c_int = -1;
+
+pub struct ZnSession(Session);
+pub struct ZnPublisher(Publisher<'static>);
+pub struct ZnSubscriber(Subscriber<()>);
+pub struct ZnToken(LivelinessToken);
+pub struct ZnQueryable(Queryable<()>);
+
+#[repr(C)]
+pub struct ZnSessionConfig {
+    mode: c_int,
+    connect: *const c_char,
+    listen: *const c_char,
+    config_file: *const c_char,
+}
+
+#[repr(C)]
+pub struct ZnQos {
+    priority: u8,
+    congestion: c_int,
+    express: u8,
+}
+
+type SampleCb = extern "C" fn(*const u8, usize, *const u8, usize, *mut c_void);
+type QueryCb = extern "C" fn(*mut c_char, usize, *mut c_void) -> usize;
+
+/// The C side's context pointer; the C code synchronises its own state.
+#[derive(Clone, Copy)]
+struct Ctx(*mut c_void);
+unsafe impl Send for Ctx {}
+unsafe impl Sync for Ctx {}
+
+const STATS_REPLY_MAX: usize = 16384;
+const OPEN_RETRY_MIN: std::time::Duration = std::time::Duration::from_millis(250);
+const OPEN_RETRY_MAX: std::time::Duration = std::time::Duration::from_millis(4000);
+
+fn c_str<'a>(p: *const c_char) -> Option<&'a str> {
+    if p.is_null() {
+        return None;
+    }
+    unsafe { CStr::from_ptr(p) }.to_str().ok()
+}
+
+fn endpoints_json(list: &str) -> String {
+    let items: Vec<String> = list
+        .split(',')
+        .map(str::trim)
+        .filter(|e| !e.is_empty())
+        .map(|e| format!("{e:?}"))
+        .collect();
+    format!("[{}]", items.join(","))
+}
+
+fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
+    let mut config = match c_str(cfg.config_file) {
+        Some(path) if !path.is_empty() => Config::from_file(path).map_err(|e| format!("{path}: {e}"))?,
+        _ => Config::default(),
+    };
+    let mode = match cfg.mode {
+        0 => "client",
+        1 => "peer",
+        2 => "router",
+        m => return Err(format!("mode {m} is not 0, 1 or 2")),
+    };
+    let mut set = |key: &str, value: String| {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| format!("{key} = {value}: {e}"))
+    };
+    set("mode", format!("{mode:?}"))?;
+    // Network safety: no multicast discovery, ever; endpoints are explicit.
+    set("scouting/multicast/enabled", "false".into())?;
+    if let Some(connect) = c_str(cfg.connect).filter(|s| !s.trim().is_empty()) {
+        set("connect/endpoints", endpoints_json(connect))?;
+    }
+    if let Some(listen) = c_str(cfg.listen).filter(|s| !s.trim().is_empty()) {
+        set("listen/endpoints", endpoints_json(listen))?;
+    }
+    // One connection attempt per open: zn_open retries with its own logged
+    // backoff, so a bridge started before its router waits for it, never exits.
+    set("connect/timeout_ms", "0".into())?;
+    set("connect/exit_on_failure", "false".into())?;
+    // (retry is optional in the schema: set it as a whole object)
+    set(
+        "connect/retry",
+        "{period_init_ms: 250, period_max_ms: 2000, period_increase_factor: 2}".into(),
+    )?;
+    Ok(config)
+}
+
+#[no_mangle]
+pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession) -> c_int {
+    if cfg.is_null() || out.is_null() {
+        return ERR;
+    }
+    let _ = zenoh::try_init_log_from_env();
+    let config = match build_config(unsafe { &*cfg }) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("zenoh-node: invalid Zenoh configuration: {e}");
+            return ERR;
+        }
+    };
+    let mut backoff = OPEN_RETRY_MIN;
+    loop {
+        match zenoh::open(config.clone()).wait() {
+            Ok(session) => {
+                unsafe { *out = Box::into_raw(Box::new(ZnSession(session))) };
+                return 0;
+            }
+            // only a client needs its router to open; anything else is a real error
+            Err(e) if unsafe { (*cfg).mode } == 0 => {
+                eprintln!("zenoh-node: router not reachable ({e}); retrying in {} ms", backoff.as_millis());
+                std::thread::sleep(backoff);
+                backoff = (backoff * 2).min(OPEN_RETRY_MAX);
+            }
+            Err(e) => {
+                eprintln!("zenoh-node: cannot open Zenoh session: {e}");
+                return ERR;
+            }
+        }
+    }
+}
+
+fn priority(p: u8) -> Priority {
+    match p {
+        1 => Priority::RealTime,
+        2 => Priority::InteractiveHigh,
+        3 => Priority::InteractiveLow,
+        4 => Priority::DataHigh,
+        6 => Priority::DataLow,
+        7 => Priority::Background,
+        _ => Priority::Data,
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_declare_publisher(
+    s: *mut ZnSession,
+    key: *const c_char,
+    qos: *const ZnQos,
+    out: *mut *mut ZnPublisher,
+) -> c_int {
+    let (Some(s), Some(key), false, false) = (unsafe { s.as_ref() }, c_str(key), qos.is_null(), out.is_null())
+    else {
+        return ERR;
+    };
+    let qos = unsafe { &*qos };
+    let congestion = if qos.congestion == 1 { CongestionControl::Block } else { CongestionControl::Drop };
+    match s
+        .0
+        .declare_publisher(key.to_owned())
+        .congestion_control(congestion)
+        .priority(priority(qos.priority))
+        .express(qos.express != 0)
+        .wait()
+    {
+        Ok(p) => {
+            unsafe { *out = Box::into_raw(Box::new(ZnPublisher(p))) };
+            0
+        }
+        Err(e) => {
+            eprintln!("zenoh-node: declare publisher {key}: {e}");
+            ERR
+        }
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_put(
+    p: *mut ZnPublisher,
+    payload: *const u8,
+    len: usize,
+    attachment: *const u8,
+    attachment_len: usize,
+) -> c_int {
+    let Some(p) = (unsafe { p.as_ref() }) else { return ERR };
+    if payload.is_null() && len > 0 {
+        return ERR;
+    }
+    let data = if len == 0 { Vec::new() } else { unsafe { slice::from_raw_parts(payload, len) }.to_vec() };
+    let mut put = p.0.put(data);
+    if !attachment.is_null() && attachment_len > 0 {
+        let att = unsafe { slice::from_raw_parts(attachment, attachment_len) }.to_vec();
+        put = put.attachment(ZBytes::from(att));
+    }
+    match put.wait() {
+        Ok(()) => 0,
+        Err(_) => ERR,
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_declare_subscriber(
+    s: *mut ZnSession,
+    key: *const c_char,
+    cb: Option<SampleCb>,
+    ctx: *mut c_void,
+    out: *mut *mut ZnSubscriber,
+) -> c_int {
+    let (Some(s), Some(key), Some(cb), false) = (unsafe { s.as_ref() }, c_str(key), cb, out.is_null()) else {
+        return ERR;
+    };
+    let ctx = Ctx(ctx);
+    let result = s
+        .0
+        .declare_subscriber(key.to_owned())
+        .callback(move |sample| {
+            let ctx = ctx;
+            let payload = sample.payload().to_bytes();
+            match sample.attachment() {
+                Some(att) => {
+                    let att = att.to_bytes();
+                    cb(payload.as_ptr(), payload.len(), att.as_ptr(), att.len(), ctx.0)
+                }
+                None => cb(payload.as_ptr(), payload.len(), ptr::null(), 0, ctx.0),
+            }
+        })
+        .wait();
+    match result {
+        Ok(sub) => {
+            unsafe { *out = Box::into_raw(Box::new(ZnSubscriber(sub))) };
+            0
+        }
+        Err(e) => {
+            eprintln!("zenoh-node: declare subscriber {key}: {e}");
+            ERR
+        }
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_declare_token(s: *mut ZnSession, key: *const c_char, out: *mut *mut ZnToken) -> c_int {
+    let (Some(s), Some(key), false) = (unsafe { s.as_ref() }, c_str(key), out.is_null()) else {
+        return ERR;
+    };
+    match s.0.liveliness().declare_token(key.to_owned()).wait() {
+        Ok(t) => {
+            unsafe { *out = Box::into_raw(Box::new(ZnToken(t))) };
+            0
+        }
+        Err(e) => {
+            eprintln!("zenoh-node: declare liveliness token {key}: {e}");
+            ERR
+        }
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_declare_queryable(
+    s: *mut ZnSession,
+    key: *const c_char,
+    cb: Option<QueryCb>,
+    ctx: *mut c_void,
+    out: *mut *mut ZnQueryable,
+) -> c_int {
+    let (Some(s), Some(key), Some(cb), false) = (unsafe { s.as_ref() }, c_str(key), cb, out.is_null()) else {
+        return ERR;
+    };
+    let ctx = Ctx(ctx);
+    let result = s
+        .0
+        .declare_queryable(key.to_owned())
+        .callback(move |query| {
+            let ctx = ctx;
+            let mut buf = vec![0u8; STATS_REPLY_MAX];
+            let n = cb(buf.as_mut_ptr() as *mut c_char, buf.len(), ctx.0).min(buf.len());
+            buf.truncate(n);
+            let _ = query.reply(query.key_expr().clone(), buf).wait();
+        })
+        .wait();
+    match result {
+        Ok(q) => {
+            unsafe { *out = Box::into_raw(Box::new(ZnQueryable(q))) };
+            0
+        }
+        Err(e) => {
+            eprintln!("zenoh-node: declare queryable {key}: {e}");
+            ERR
+        }
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_router_count(s: *mut ZnSession) -> c_int {
+    let Some(s) = (unsafe { s.as_ref() }) else { return ERR };
+    s.0.info().routers_zid().wait().count() as c_int
+}
+
+#[no_mangle]
+pub extern "C" fn zn_session_id(s: *mut ZnSession, buf: *mut c_char, cap: usize) -> c_int {
+    let Some(s) = (unsafe { s.as_ref() }) else { return ERR };
+    if buf.is_null() || cap == 0 {
+        return ERR;
+    }
+    let zid = s.0.zid().to_string();
+    let n = zid.len().min(cap - 1);
+    unsafe {
+        ptr::copy_nonoverlapping(zid.as_ptr(), buf as *mut u8, n);
+        *buf.add(n) = 0;
+    }
+    0
+}
+
+#[no_mangle]
+pub extern "C" fn zn_undeclare_publisher(p: *mut ZnPublisher) {
+    if !p.is_null() {
+        let p = unsafe { Box::from_raw(p) };
+        let _ = p.0.undeclare().wait();
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_undeclare_subscriber(sub: *mut ZnSubscriber) {
+    if !sub.is_null() {
+        let sub = unsafe { Box::from_raw(sub) };
+        let _ = sub.0.undeclare().wait();
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_undeclare_token(t: *mut ZnToken) {
+    if !t.is_null() {
+        let t = unsafe { Box::from_raw(t) };
+        let _ = t.0.undeclare().wait();
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_undeclare_queryable(q: *mut ZnQueryable) {
+    if !q.is_null() {
+        let q = unsafe { Box::from_raw(q) };
+        let _ = q.0.undeclare().wait();
+    }
+}
+
+#[no_mangle]
+pub extern "C" fn zn_close(s: *mut ZnSession) {
+    if !s.is_null() {
+        let s = unsafe { Box::from_raw(s) };
+        let _ = s.0.close().wait();
+    }
+}

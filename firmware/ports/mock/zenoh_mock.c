@@ -1,0 +1,265 @@
+/* zenoh_mock.c - recording Zenoh port: puts are stored, samples can be
+ * delivered to subscribers, tokens and queryables are looked up by key. */
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "zn_mock.h"
+#include "zn_port_zenoh.h"
+
+#define MOCK_DECLS 64
+
+struct zn_session {
+	int open;
+};
+struct zn_publisher {
+	char key[256];
+};
+struct zn_subscriber {
+	char key[256];
+	zn_sample_cb cb;
+	void *ctx;
+};
+struct zn_token {
+	char key[256];
+};
+struct zn_queryable {
+	char key[256];
+	zn_query_cb cb;
+	void *ctx;
+};
+
+static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t put_made = PTHREAD_COND_INITIALIZER;
+static struct mock_put *puts_log;
+static size_t nputs;
+static struct zn_subscriber *subs[MOCK_DECLS];
+static struct zn_token *tokens[MOCK_DECLS];
+static struct zn_queryable *queryables[MOCK_DECLS];
+
+void mock_can_reset(void);
+
+void mock_reset(void)
+{
+	pthread_mutex_lock(&lock);
+	nputs = 0;
+	if (!puts_log)
+		puts_log = calloc(MOCK_MAX_PUTS, sizeof(*puts_log));
+	memset(subs, 0, sizeof(subs));
+	memset(tokens, 0, sizeof(tokens));
+	memset(queryables, 0, sizeof(queryables));
+	pthread_mutex_unlock(&lock);
+	mock_can_reset();
+}
+
+static void add(void **table, void *item)
+{
+	for (int i = 0; i < MOCK_DECLS; i++)
+		if (!table[i]) {
+			table[i] = item;
+			return;
+		}
+}
+
+static void drop(void **table, void *item)
+{
+	for (int i = 0; i < MOCK_DECLS; i++)
+		if (table[i] == item)
+			table[i] = NULL;
+}
+
+int zn_open(const zn_session_config_t *config, zn_session_t **out)
+{
+	(void)config;
+	*out = calloc(1, sizeof(**out));
+	return 0;
+}
+
+int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out)
+{
+	(void)s;
+	(void)qos;
+	*out = calloc(1, sizeof(**out));
+	strncpy((*out)->key, key, sizeof((*out)->key) - 1);
+	return 0;
+}
+
+int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len)
+{
+	if (len > MOCK_PAYLOAD_MAX || attachment_len > MOCK_ATTACHMENT_MAX)
+		return -1;
+	pthread_mutex_lock(&lock);
+	if (nputs < MOCK_MAX_PUTS) {
+		struct mock_put *p = &puts_log[nputs++];
+		memcpy(p->key, pub->key, sizeof(p->key));
+		memcpy(p->payload, payload, len);
+		p->len = len;
+		if (attachment)
+			memcpy(p->attachment, attachment, attachment_len);
+		p->attachment_len = attachment_len;
+	}
+	pthread_cond_broadcast(&put_made);
+	pthread_mutex_unlock(&lock);
+	return 0;
+}
+
+int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out)
+{
+	(void)s;
+	zn_subscriber_t *sub = calloc(1, sizeof(*sub));
+	strncpy(sub->key, key, sizeof(sub->key) - 1);
+	sub->cb = cb;
+	sub->ctx = ctx;
+	pthread_mutex_lock(&lock);
+	add((void **)subs, sub);
+	pthread_mutex_unlock(&lock);
+	*out = sub;
+	return 0;
+}
+
+int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out)
+{
+	(void)s;
+	zn_token_t *t = calloc(1, sizeof(*t));
+	strncpy(t->key, key, sizeof(t->key) - 1);
+	pthread_mutex_lock(&lock);
+	add((void **)tokens, t);
+	pthread_mutex_unlock(&lock);
+	*out = t;
+	return 0;
+}
+
+int zn_declare_queryable(zn_session_t *s, const char *key, zn_query_cb cb, void *ctx, zn_queryable_t **out)
+{
+	(void)s;
+	zn_queryable_t *q = calloc(1, sizeof(*q));
+	strncpy(q->key, key, sizeof(q->key) - 1);
+	q->cb = cb;
+	q->ctx = ctx;
+	pthread_mutex_lock(&lock);
+	add((void **)queryables, q);
+	pthread_mutex_unlock(&lock);
+	*out = q;
+	return 0;
+}
+
+int zn_router_count(zn_session_t *s)
+{
+	(void)s;
+	return 1;
+}
+
+int zn_session_id(zn_session_t *s, char *buf, size_t cap)
+{
+	(void)s;
+	strncpy(buf, "mock", cap);
+	return 0;
+}
+
+void zn_undeclare_publisher(zn_publisher_t *pub)
+{
+	free(pub);
+}
+
+void zn_undeclare_subscriber(zn_subscriber_t *sub)
+{
+	pthread_mutex_lock(&lock);
+	drop((void **)subs, sub);
+	pthread_mutex_unlock(&lock);
+	free(sub);
+}
+
+void zn_undeclare_token(zn_token_t *token)
+{
+	pthread_mutex_lock(&lock);
+	drop((void **)tokens, token);
+	pthread_mutex_unlock(&lock);
+	free(token);
+}
+
+void zn_undeclare_queryable(zn_queryable_t *q)
+{
+	pthread_mutex_lock(&lock);
+	drop((void **)queryables, q);
+	pthread_mutex_unlock(&lock);
+	free(q);
+}
+
+void zn_close(zn_session_t *s)
+{
+	free(s);
+}
+
+size_t mock_zenoh_put_count(void)
+{
+	pthread_mutex_lock(&lock);
+	size_t n = nputs;
+	pthread_mutex_unlock(&lock);
+	return n;
+}
+
+const struct mock_put *mock_zenoh_put(size_t i)
+{
+	return i < mock_zenoh_put_count() ? &puts_log[i] : NULL;
+}
+
+size_t mock_zenoh_wait_puts(size_t n, int timeout_ms)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	ts.tv_sec += timeout_ms / 1000;
+	ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000;
+	if (ts.tv_nsec >= 1000000000) {
+		ts.tv_sec++;
+		ts.tv_nsec -= 1000000000;
+	}
+	pthread_mutex_lock(&lock);
+	while (nputs < n && pthread_cond_timedwait(&put_made, &lock, &ts) == 0)
+		;
+	size_t got = nputs;
+	pthread_mutex_unlock(&lock);
+	return got;
+}
+
+int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		       size_t attachment_len)
+{
+	zn_sample_cb cb = NULL;
+	void *ctx = NULL;
+	pthread_mutex_lock(&lock);
+	for (int i = 0; i < MOCK_DECLS; i++)
+		if (subs[i] && strcmp(subs[i]->key, key) == 0) {
+			cb = subs[i]->cb;
+			ctx = subs[i]->ctx;
+		}
+	pthread_mutex_unlock(&lock);
+	if (!cb)
+		return -1;
+	cb(payload, len, attachment, attachment_len, ctx);
+	return 0;
+}
+
+int mock_zenoh_has_token(const char *key)
+{
+	int found = 0;
+	pthread_mutex_lock(&lock);
+	for (int i = 0; i < MOCK_DECLS; i++)
+		found |= tokens[i] && strcmp(tokens[i]->key, key) == 0;
+	pthread_mutex_unlock(&lock);
+	return found;
+}
+
+size_t mock_zenoh_query(const char *key, char *buf, size_t cap)
+{
+	zn_query_cb cb = NULL;
+	void *ctx = NULL;
+	pthread_mutex_lock(&lock);
+	for (int i = 0; i < MOCK_DECLS; i++)
+		if (queryables[i] && strcmp(queryables[i]->key, key) == 0) {
+			cb = queryables[i]->cb;
+			ctx = queryables[i]->ctx;
+		}
+	pthread_mutex_unlock(&lock);
+	return cb ? cb(buf, cap, ctx) : 0;
+}

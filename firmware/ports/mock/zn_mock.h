@@ -1,0 +1,41 @@
+/* zn_mock.h - test doubles for the CAN and Zenoh ports: in-memory buses and a
+ * recording Zenoh, so unit tests run the component without I/O. */
+#ifndef ZN_MOCK_H
+#define ZN_MOCK_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "driver/can.h"
+
+#define MOCK_MAX_PUTS 4096
+#define MOCK_PAYLOAD_MAX 16384
+#define MOCK_ATTACHMENT_MAX 8300
+
+struct mock_put {
+	char key[256];
+	uint8_t payload[MOCK_PAYLOAD_MAX];
+	size_t len;
+	uint8_t attachment[MOCK_ATTACHMENT_MAX];
+	size_t attachment_len;
+};
+
+void mock_reset(void);
+
+/* CAN */
+void mock_can_inject(const char *bus, const can_message_t *msg, int64_t rx_time_ns);
+size_t mock_can_tx_count(const char *bus);
+can_message_t mock_can_tx(const char *bus, size_t i);
+
+/* Zenoh */
+size_t mock_zenoh_put_count(void);
+const struct mock_put *mock_zenoh_put(size_t i);
+/* Waits until at least n puts were made; returns the count (explicit readiness, no sleeps). */
+size_t mock_zenoh_wait_puts(size_t n, int timeout_ms);
+/* Delivers a sample to the subscriber on key, as the network would. */
+int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		       size_t attachment_len);
+int mock_zenoh_has_token(const char *key);
+size_t mock_zenoh_query(const char *key, char *buf, size_t cap);
+
+#endif

@@ -1,0 +1,100 @@
+/* test_config.c - configuration from Kconfig defaults, environment and flags:
+ * precedence, every option reachable, one clear line for each bad value. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "zn_config_parse.h"
+
+static int parse(zenoh_node_config_t *cfg, char *err, const char *const *args)
+{
+	char *argv[32];
+	int argc = 0;
+	argv[argc++] = "zenoh-node";
+	for (; *args; args++)
+		argv[argc++] = (char *)*args;
+	argv[argc] = NULL;
+	return zn_config_from_env_and_args(cfg, argc, argv, err, 256);
+}
+
+static void clear_env(void)
+{
+	const char *vars[] = { "ZENOH_NODE_ENABLED", "ZENOH_ROUTER_ADDRESS", "ZENOH_NODE_MODE", "ZENOH_PUBLISH_PERIOD_MS",
+			       "ZENOH_NODE_CAN", "ZENOH_KEY_PREFIX", "ZENOH_RX_CONGESTION", "ZENOH_NODE_ALLOW_IDS" };
+	for (size_t i = 0; i < sizeof(vars) / sizeof(vars[0]); i++)
+		unsetenv(vars[i]);
+}
+
+static void test_defaults_are_linux_safe(void)
+{
+	zenoh_node_config_t cfg;
+	char err[256];
+	const char *none[] = { NULL };
+	clear_env();
+	CHECK(parse(&cfg, err, none) == ZN_CONFIG_OK);
+	/* never a vehicle network address on the bench */
+	CHECK(strcmp(cfg.router_address, "tcp/127.0.0.1:7447") == 0);
+	CHECK(cfg.mode == ZN_MODE_CLIENT && cfg.publish_period_ms == 100 && cfg.enabled);
+	CHECK(strcmp(cfg.key_prefix, "vehicle/can") == 0 && cfg.bus_count == 1 && !strcmp(cfg.buses[0], "vcan0"));
+}
+
+static void test_precedence(void)
+{
+	zenoh_node_config_t cfg;
+	char err[256];
+	clear_env();
+	setenv("ZENOH_PUBLISH_PERIOD_MS", "5", 1);
+	setenv("ZENOH_NODE_MODE", "peer", 1);
+	setenv("ZENOH_ROUTER_ADDRESS", "tcp/127.0.0.1:7000", 1);
+	const char *args[] = { "--publish-period-ms", "0", "--can", "vcan0,vcan1", "--rx-congestion", "drop",
+			       "--allow-ids", "100-1FF,e:18DA0000-18DAFFFF", "--mode=router", NULL };
+	CHECK(parse(&cfg, err, args) == ZN_CONFIG_OK);
+	CHECK(cfg.publish_period_ms == 0); /* flag beats environment */
+	CHECK(cfg.mode == ZN_MODE_ROUTER);
+	CHECK(strcmp(cfg.router_address, "tcp/127.0.0.1:7000") == 0); /* environment beats default */
+	CHECK(cfg.bus_count == 2 && !strcmp(cfg.buses[1], "vcan1"));
+	CHECK(cfg.rx_qos.congestion == ZN_CONGESTION_DROP);
+	CHECK(cfg.allow_count == 2 && cfg.allow[1].extended && cfg.allow[1].first == 0x18DA0000);
+	clear_env();
+}
+
+static void expect_error(const char *const *args, const char *fragment)
+{
+	zenoh_node_config_t cfg;
+	char err[256] = "";
+	int rc = parse(&cfg, err, args);
+	CHECK(rc == ZN_CONFIG_ERROR);
+	if (!strstr(err, fragment)) {
+		fprintf(stderr, "error '%s' does not mention '%s'\n", err, fragment);
+		check_failures++;
+	}
+}
+
+static void test_errors(void)
+{
+	clear_env();
+	expect_error((const char *[]){ "--publish-period-ms", "fast", NULL }, "--publish-period-ms='fast'");
+	expect_error((const char *[]){ "--publish-period-ms", "-5", NULL }, "not a whole number");
+	expect_error((const char *[]){ "--mode", "server", NULL }, "--mode='server' is not client, peer or router");
+	expect_error((const char *[]){ "--rx-congestion", "maybe", NULL }, "block or drop");
+	expect_error((const char *[]){ "--allow-ids", "1G0", NULL }, "id range '1G0'");
+	expect_error((const char *[]){ "--allow-ids", "200-100", NULL }, "0x200-0x100");
+	expect_error((const char *[]){ "--bogus", NULL }, "unknown or incomplete option '--bogus'");
+	expect_error((const char *[]){ "stray", NULL }, "unexpected argument 'stray'");
+	expect_error((const char *[]){ "--batch-max-frames", "5000", NULL }, "batch max 5000");
+	expect_error((const char *[]){ "--rx-priority", "9", NULL }, "priority 9");
+	setenv("ZENOH_NODE_ENABLED", "perhaps", 1);
+	expect_error((const char *[]){ NULL }, "ZENOH_NODE_ENABLED='perhaps'");
+	clear_env();
+	zenoh_node_config_t cfg;
+	char err[256];
+	CHECK(parse(&cfg, err, (const char *[]){ "--help", NULL }) == ZN_CONFIG_HELP);
+}
+
+int main(void)
+{
+	test_defaults_are_linux_safe();
+	test_precedence();
+	test_errors();
+	CHECK_DONE("test_config");
+}

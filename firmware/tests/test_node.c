@@ -1,0 +1,262 @@
+/* test_node.c - zenoh-node on mock ports: both directions, batching,
+ * filters, refusals by reason, stats, liveliness token, flush on stop. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "zenoh_node.h"
+#include "zenoh_serialize.h"
+#include "zn_mock.h"
+
+#define WAIT_MS 5000
+
+static can_message_t frame(uint32_t id, int extd, int rtr, uint8_t dlc, uint8_t fill)
+{
+	can_message_t m;
+	memset(&m, 0, sizeof(m));
+	m.identifier = id;
+	m.extd = (uint32_t)extd;
+	m.rtr = (uint32_t)rtr;
+	m.data_length_code = dlc;
+	if (!rtr)
+		memset(m.data, fill, dlc);
+	return m;
+}
+
+static uint64_t le64(const uint8_t *p)
+{
+	uint64_t v = 0;
+	for (int i = 7; i >= 0; i--)
+		v = v << 8 | p[i];
+	return v;
+}
+
+static zenoh_node_config_t base_config(uint32_t period_ms)
+{
+	zenoh_node_config_t cfg;
+	zenoh_node_default_config(&cfg);
+	cfg.publish_period_ms = period_ms;
+	cfg.rx_queue_frames = 1024;
+	return cfg;
+}
+
+static int stats_has(const char *needle)
+{
+	char buf[8192];
+	size_t n = mock_zenoh_query("vehicle/can/bridges/zenoh-node/stats", buf, sizeof(buf));
+	if (n == 0 || !strstr(buf, needle)) {
+		fprintf(stderr, "stats lack '%s': %.*s\n", needle, (int)n, buf);
+		return 0;
+	}
+	return 1;
+}
+
+static void test_immediate_mode(void)
+{
+	mock_reset();
+	zenoh_node_config_t cfg = base_config(0);
+	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	CHECK(mock_zenoh_has_token("vehicle/can/bridges/zenoh-node/vcan0/client"));
+	can_message_t in[3] = { frame(0x123, 0, 0, 2, 0xAB), frame(0x18DAF110, 1, 0, 8, 0x11), frame(0x7FF, 0, 1, 4, 0) };
+	for (int i = 0; i < 3; i++)
+		mock_can_inject("vcan0", &in[i], 1000 + i);
+	CHECK(mock_zenoh_wait_puts(3, WAIT_MS) == 3);
+	for (size_t i = 0; i < 3; i++) {
+		const struct mock_put *p = mock_zenoh_put(i);
+		uint8_t expect[16];
+		CHECK(strcmp(p->key, "vehicle/can/rx") == 0);
+		CHECK(zenoh_serialize_can_msg(&in[i], expect, 16) == 16);
+		CHECK(p->len == 16 && memcmp(p->payload, expect, 16) == 0);
+		CHECK(p->attachment_len == ZN_ATTACHMENT_HEADER + 8);
+		CHECK(p->attachment[0] == ZN_ATTACHMENT_VERSION && p->attachment[2] == 1 && p->attachment[3] == 0);
+		CHECK(le64(p->attachment + 4) == i);
+		CHECK(le64(p->attachment + 12) == 1000 + i);
+	}
+	CHECK(stats_has("\"published_frames\": 3"));
+	zenoh_node_stop();
+	CHECK(!mock_zenoh_has_token("vehicle/can/bridges/zenoh-node/vcan0/client"));
+}
+
+static void test_filters(void)
+{
+	mock_reset();
+	zenoh_node_config_t cfg = base_config(0);
+	cfg.allow[0] = (zn_id_range_t){ 0x100, 0x1FF, false };
+	cfg.allow[1] = (zn_id_range_t){ 0x18DA0000, 0x18DAFFFF, true };
+	cfg.allow_count = 2;
+	cfg.deny[0] = (zn_id_range_t){ 0x150, 0x150, false };
+	cfg.deny_count = 1;
+	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	uint32_t ids[] = { 0x050, 0x100, 0x150, 0x1FF, 0x200 };
+	for (size_t i = 0; i < 5; i++) {
+		can_message_t m = frame(ids[i], 0, 0, 1, 1);
+		mock_can_inject("vcan0", &m, 1);
+	}
+	can_message_t ext_in = frame(0x18DA0001, 1, 0, 1, 1), ext_out = frame(0x100, 1, 0, 1, 1);
+	mock_can_inject("vcan0", &ext_out, 1); /* a 29-bit 0x100 is not the 11-bit 0x100 */
+	mock_can_inject("vcan0", &ext_in, 1);
+	CHECK(mock_zenoh_wait_puts(3, WAIT_MS) == 3);
+	CHECK(mock_zenoh_put(0)->payload[0] == 0x00 && mock_zenoh_put(0)->payload[1] == 0x01);
+	CHECK(mock_zenoh_put(1)->payload[0] == 0xFF);
+	CHECK(mock_zenoh_put(2)->payload[3] == 0x18);
+	CHECK(stats_has("\"filtered\": 4"));
+	zenoh_node_stop();
+}
+
+static void test_batching(void)
+{
+	mock_reset();
+	zenoh_node_config_t cfg = base_config(20);
+	cfg.batch_max_frames = 4;
+	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	for (int i = 0; i < 10; i++) {
+		can_message_t m = frame((uint32_t)i, 0, 0, 1, (uint8_t)i);
+		mock_can_inject("vcan0", &m, 500 + i);
+	}
+	size_t frames = 0, puts = 0;
+	while (frames < 10 && mock_zenoh_wait_puts(puts + 1, WAIT_MS) > puts) {
+		const struct mock_put *p = mock_zenoh_put(puts++);
+		size_t n = p->len / 16;
+		CHECK(p->len % 16 == 0 && n >= 1 && n <= 4);
+		CHECK(p->attachment_len == ZN_ATTACHMENT_HEADER + 8 * n);
+		CHECK(p->attachment[2] == n);
+		CHECK(le64(p->attachment + 4) == frames); /* sequence continues across samples */
+		for (size_t k = 0; k < n; k++) {
+			CHECK(p->payload[16 * k] == frames + k);
+			CHECK(le64(p->attachment + 12 + 8 * k) == 500 + frames + k);
+		}
+		frames += n;
+	}
+	CHECK(frames == 10);
+	zenoh_node_stop();
+}
+
+static void test_flush_on_stop(void)
+{
+	mock_reset();
+	zenoh_node_config_t cfg = base_config(60000); /* a period that never ends during the test */
+	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	for (int i = 0; i < 3; i++) {
+		can_message_t m = frame(0x10, 0, 0, 0, 0);
+		mock_can_inject("vcan0", &m, 1);
+	}
+	/* the reader has taken them once they are counted */
+	for (int tries = 0; tries < 5000; tries++) {
+		char buf[8192];
+		size_t n = mock_zenoh_query("vehicle/can/bridges/zenoh-node/stats", buf, sizeof(buf));
+		if (n && strstr(buf, "\"can_rx_frames\": 3"))
+			break;
+		mock_zenoh_wait_puts(1, 1);
+	}
+	CHECK(mock_zenoh_put_count() == 0);
+	zenoh_node_stop();
+	CHECK(mock_zenoh_put_count() == 1 && mock_zenoh_put(0)->len == 48);
+}
+
+static void deliver(const uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
+{
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", payload, len, att, att_len) == 0);
+}
+
+static void test_commands(void)
+{
+	mock_reset();
+	zenoh_node_config_t cfg = base_config(0);
+	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	uint8_t wire[64];
+	can_message_t a = frame(0x321, 0, 0, 3, 0x42), b = frame(0x1ABCDE, 1, 1, 2, 0);
+	zenoh_serialize_can_msg(&a, wire, 16);
+	zenoh_serialize_can_msg(&b, wire + 16, 16);
+	deliver(wire, 16, NULL, 0);
+	deliver(wire, 32, NULL, 0);
+	CHECK(mock_can_tx_count("vcan0") == 3);
+	can_message_t got = mock_can_tx("vcan0", 2);
+	CHECK(got.identifier == 0x1ABCDE && got.extd && got.rtr && got.data_length_code == 2);
+
+	uint8_t bad[16];
+	memcpy(bad, wire, 16);
+	bad[4] = 9;
+	deliver(bad, 16, NULL, 0);	 /* dlc */
+	deliver(wire, 17, NULL, 0);	 /* length */
+	deliver(wire, 0, NULL, 0);	 /* length */
+	memcpy(bad, wire, 16);
+	bad[6] = 1;
+	deliver(bad, 16, NULL, 0); /* reserved */
+	memcpy(bad, wire + 16, 16);
+	bad[8] = 1;
+	deliver(bad, 16, NULL, 0); /* remote with data */
+	uint8_t valid_then_bad[32];
+	memcpy(valid_then_bad, wire, 16);
+	memcpy(valid_then_bad + 16, wire, 16);
+	valid_then_bad[16 + 5] = 0x80;
+	deliver(valid_then_bad, 32, NULL, 0); /* flags: the valid first frame is not sent either */
+	uint8_t garbage_att[5] = { 1, 2, 3, 4, 5 };
+	deliver(wire, 16, garbage_att, sizeof(garbage_att)); /* attachment */
+	uint8_t good_att[ZN_ATTACHMENT_HEADER + 8] = { ZN_ATTACHMENT_VERSION, 0, 1, 0 };
+	deliver(wire, 16, good_att, sizeof(good_att)); /* a well-formed attachment is fine */
+	CHECK(mock_can_tx_count("vcan0") == 4);
+	CHECK(stats_has("\"dlc\": 1"));
+	CHECK(stats_has("\"length\": 2"));
+	CHECK(stats_has("\"reserved\": 1"));
+	CHECK(stats_has("\"remote_data\": 1"));
+	CHECK(stats_has("\"flags\": 1"));
+	CHECK(stats_has("\"attachment\": 1"));
+	CHECK(stats_has("\"tx_frames\": 4"));
+	CHECK(stats_has("\"tx_samples\": 10"));
+	zenoh_node_stop();
+}
+
+static void test_multi_bus_keys(void)
+{
+	mock_reset();
+	zenoh_node_config_t cfg = base_config(0);
+	strcpy(cfg.buses[0], "can0");
+	strcpy(cfg.buses[1], "can1");
+	cfg.bus_count = 2;
+	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	can_message_t m = frame(0x1, 0, 0, 0, 0);
+	mock_can_inject("can1", &m, 1);
+	CHECK(mock_zenoh_wait_puts(1, WAIT_MS) == 1);
+	CHECK(strcmp(mock_zenoh_put(0)->key, "vehicle/can/can1/rx") == 0);
+	uint8_t wire[16];
+	zenoh_serialize_can_msg(&m, wire, 16);
+	CHECK(mock_zenoh_deliver("vehicle/can/can0/tx", wire, 16, NULL, 0) == 0);
+	CHECK(mock_can_tx_count("can0") == 1 && mock_can_tx_count("can1") == 0);
+	CHECK(mock_zenoh_has_token("vehicle/can/bridges/zenoh-node/can1/client"));
+	zenoh_node_stop();
+}
+
+static void test_config_checks(void)
+{
+	char err[256];
+	zenoh_node_config_t cfg = base_config(0);
+	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) == ESP_OK);
+	cfg.mode = (zn_mode_t)3;
+	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "mode 3"));
+	cfg = base_config(0);
+	strcpy(cfg.key_prefix, "vehicle/*");
+	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "key prefix"));
+	cfg = base_config(0);
+	cfg.allow[0] = (zn_id_range_t){ 0x100, 0x800, false };
+	cfg.allow_count = 1;
+	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "0x100-0x800"));
+	cfg = base_config(0);
+	strcpy(cfg.buses[1], "vcan0");
+	cfg.bus_count = 2;
+	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "twice"));
+	cfg = base_config(0);
+	cfg.router_address[0] = '\0';
+	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "router"));
+}
+
+int main(void)
+{
+	test_immediate_mode();
+	test_filters();
+	test_batching();
+	test_flush_on_stop();
+	test_commands();
+	test_multi_bus_keys();
+	test_config_checks();
+	CHECK_DONE("test_node");
+}
