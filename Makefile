@@ -2,27 +2,58 @@
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
-BUILD      ?= build
-PYTHON     ?= python3
-UCAN_BUILD := $(BUILD)/ucan
-PYTEST     := $(PYTHON) -m pytest
+BUILD          ?= build
+PYTHON         ?= python3
+PYTEST         := $(PYTHON) -m pytest
+# Rust and zenohd builds outlive `make clean` and fresh clones: they take minutes.
+CACHE          ?= $(HOME)/.cache/canbench
+ZENOHD_VERSION := 1.10.2
+ZENOHD         ?= $(firstword $(shell command -v zenohd 2>/dev/null) $(CACHE)/zenohd-$(ZENOHD_VERSION)/bin/zenohd)
+CARGO_TARGET   ?= $(CACHE)/cargo-target
+FUZZ_SECONDS   ?= 30
+export ZENOHD
 
-.PHONY: help ucan ucan-asan check check-ucan check-bus fuzz-ucan bench-bus test clean
+UCAN_BUILD     := $(BUILD)/ucan
+FW_BUILD       := $(BUILD)/firmware
+FW_ASAN_BUILD  := $(BUILD)/firmware-asan
+CMAKE_GEN      := -G Ninja
+# The ASan bridge runs under the (never sanitized) preload library.
+ASAN_ENV       := ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1
+
+.PHONY: help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
+        check-python check-bridge fuzz fuzz-ucan fuzz-firmware bench-bus test clean
 
 help:
-	@echo "make test     run the bench's scenarios against the bridge (the main job)"
-	@echo "make check    the project's own tests (unit, bus conformance, fuzz, integration)"
-	@echo "make ucan     build the userspace CAN bus (hub, preload library, ucanctl)"
+	@echo "make test       run the bench's scenarios against the bridge (the main job)"
+	@echo "make check      the project's own tests (unit, bus conformance, bridge integration, fuzz)"
+	@echo "make ucan       build the userspace CAN bus (hub, preload library, ucanctl)"
+	@echo "make firmware   build zenoh-node for Linux (C component + Rust Zenoh port)"
+	@echo "make zenohd     install zenohd $(ZENOHD_VERSION) from crates.io into $(CACHE)"
+	@echo "make fuzz       bounded libFuzzer runs (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
 	@echo "make bench-bus  userspace bus throughput/latency benchmark (not part of check)"
-	@echo "make clean    remove build/"
+	@echo "make clean      remove $(BUILD)/ (not the cache in $(CACHE))"
 
 ucan:
-	cmake -S ucan -B $(UCAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake -S ucan -B $(UCAN_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 	ninja -C $(UCAN_BUILD)
 
 ucan-asan:
-	cmake -S ucan -B $(BUILD)/ucan-asan -G Ninja -DCMAKE_BUILD_TYPE=Debug -DUCAN_SANITIZE=ON >/dev/null
+	cmake -S ucan -B $(BUILD)/ucan-asan $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DUCAN_SANITIZE=ON >/dev/null
 	ninja -C $(BUILD)/ucan-asan
+
+firmware:
+	cmake -S firmware -B $(FW_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DZN_RUST_TARGET_DIR=$(CARGO_TARGET) >/dev/null
+	ninja -C $(FW_BUILD)
+
+firmware-asan:
+	cmake -S firmware -B $(FW_ASAN_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DZN_SANITIZE=ON -DZN_RUST_TARGET_DIR=$(CARGO_TARGET) >/dev/null
+	ninja -C $(FW_ASAN_BUILD)
+
+$(CACHE)/zenohd-$(ZENOHD_VERSION)/bin/zenohd:
+	cargo install zenohd --version $(ZENOHD_VERSION) --locked --root $(CACHE)/zenohd-$(ZENOHD_VERSION)
+
+zenohd: $(ZENOHD)
+	@$(ZENOHD) --version
 
 check-ucan: ucan ucan-asan
 	ctest --test-dir $(UCAN_BUILD) --output-on-failure
@@ -31,17 +62,36 @@ check-ucan: ucan ucan-asan
 # The conformance suite against the release hub, then against the ASan/UBSan hub
 # (the preload library is never sanitized: it lives inside arbitrary programs).
 check-bus: ucan ucan-asan
-	UCAN_BUILD=$(UCAN_BUILD) $(PYTEST) -q tests/bus
+	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) $(PYTEST) -q tests/bus
 	UCAN_BUILD=$(CURDIR)/$(BUILD)/ucan-asan $(PYTEST) -q tests/bus
 
-FUZZ_SECONDS ?= 30
+check-firmware: firmware firmware-asan
+	ctest --test-dir $(FW_BUILD) --output-on-failure
+	ctest --test-dir $(FW_ASAN_BUILD) --output-on-failure
+
+check-python:
+	$(PYTEST) -q -m unit tests/unit
+
+# The bridge with zenohd on the host bus: release build, then ASan/UBSan build.
+check-bridge: ucan firmware firmware-asan zenohd
+	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
+	$(ASAN_ENV) UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_ASAN_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
+
 fuzz-ucan:
-	cmake -S ucan -B $(BUILD)/ucan-fuzz -G Ninja -DCMAKE_C_COMPILER=clang -DUCAN_FUZZ=ON >/dev/null
+	cmake -S ucan -B $(BUILD)/ucan-fuzz $(CMAKE_GEN) -DCMAKE_C_COMPILER=clang -DUCAN_FUZZ=ON >/dev/null
 	ninja -C $(BUILD)/ucan-fuzz fuzz_hub_msg
 	mkdir -p $(BUILD)/ucan-fuzz/corpus
 	$(BUILD)/ucan-fuzz/fuzz_hub_msg -max_total_time=$(FUZZ_SECONDS) -max_len=4200 $(BUILD)/ucan-fuzz/corpus
 
-check: check-ucan check-bus fuzz-ucan
+fuzz-firmware:
+	cmake -S firmware -B $(BUILD)/firmware-fuzz $(CMAKE_GEN) -DCMAKE_C_COMPILER=clang -DZN_FUZZ=ON -DZN_BUILD_BRIDGE=OFF >/dev/null
+	ninja -C $(BUILD)/firmware-fuzz fuzz_decode
+	mkdir -p $(BUILD)/firmware-fuzz/corpus
+	$(BUILD)/firmware-fuzz/fuzz_decode -max_total_time=$(FUZZ_SECONDS) -max_len=1100 $(BUILD)/firmware-fuzz/corpus
+
+fuzz: fuzz-ucan fuzz-firmware
+
+check: check-python check-ucan check-firmware check-bus check-bridge fuzz
 	@echo "make check: all project tests passed"
 
 bench-bus: ucan

@@ -46,8 +46,10 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out);
 int zn_declare_queryable(zn_session_t *s, const char *key, zn_query_cb cb, void *ctx, zn_queryable_t **out);
-/* Number of routers this session is connected to right now (for reconnect counting). */
-int zn_router_count(zn_session_t *s);
+/* Routers this session is connected to right now: returns their number and
+ * writes their Zenoh ids, sorted and comma separated, into ids. A restarted
+ * router has a new id, so a restart faster than any poll is still seen. */
+int zn_routers(zn_session_t *s, char *ids, size_t cap);
 /* The session's Zenoh id as hex, for logs. */
 int zn_session_id(zn_session_t *s, char *buf, size_t cap);
 

@@ -89,7 +89,8 @@ static struct {
 	int running;
 	int64_t start_ns;
 	uint64_t reconnects;
-	int connected;
+	int connected, ever_connected;
+	char router_ids[512]; /* routers at the last poll; written by init, then by the monitor only */
 } node;
 
 static const char *const mode_names[] = { "client", "peer", "router" };
@@ -470,29 +471,35 @@ static size_t on_stats_query(char *buf, size_t cap, void *ctx)
 	return zenoh_node_stats_json(buf, cap);
 }
 
+/* Counts reconnections: the router set going away and coming back, or
+ * changing identity in between two polls (a router restarted quickly). */
 static void monitor_thread(void *arg)
 {
 	(void)arg;
-	int ever_connected = 0, announced_wait = 0;
+	char ids[512];
+	int announced_wait = 0;
 	while (!stop_wait(MONITOR_PERIOD_MS)) {
-		int routers = zn_router_count(node.session);
-		int connected = routers > 0;
-		if (node.cfg.mode != ZN_MODE_CLIENT)
-			connected = 1; /* peers and routers are reachable without a router */
-		if (connected && !READ(node.connected)) {
-			if (ever_connected) {
+		int routers = zn_routers(node.session, ids, sizeof(ids));
+		int connected = routers > 0 || node.cfg.mode != ZN_MODE_CLIENT; /* peers need no router */
+		int was_connected = READ(node.connected);
+		int replaced = routers > 0 && node.router_ids[0] && strcmp(ids, node.router_ids) != 0;
+		if (connected && (!was_connected || replaced)) {
+			if (node.ever_connected) {
 				COUNT(node.reconnects);
-				zn_log("I", "reconnected to the Zenoh router (%d)", routers);
+				zn_log("I", "reconnected to the Zenoh router %s%s", ids, replaced ? " (new router id)" : "");
 			} else {
-				zn_log("I", "connected (%s mode)", mode_names[node.cfg.mode]);
+				zn_log("I", "connected (%s mode)%s%s", mode_names[node.cfg.mode], routers ? ", router " : "",
+				       routers ? ids : "");
 			}
-			ever_connected = 1;
-		} else if (!connected && READ(node.connected)) {
+			node.ever_connected = 1;
+		} else if (!connected && was_connected) {
 			zn_log("W", "lost the Zenoh router; retrying %s", node.cfg.router_address);
-		} else if (!connected && !ever_connected && !announced_wait) {
+		} else if (!connected && !node.ever_connected && !announced_wait) {
 			zn_log("I", "waiting for the Zenoh router at %s (retrying)", node.cfg.router_address);
 			announced_wait = 1;
 		}
+		if (routers > 0)
+			snprintf(node.router_ids, sizeof(node.router_ids), "%s", ids);
 		__atomic_store_n(&node.connected, connected, __ATOMIC_RELAXED);
 	}
 }
@@ -557,6 +564,12 @@ esp_err_t zenoh_node_init(const zenoh_node_config_t *cfg)
 		zn_log("E", "cannot open the Zenoh session");
 		return ESP_FAIL;
 	}
+	/* the routers we start with: a replacement seen by the first poll is a reconnect */
+	int routers = zn_routers(node.session, node.router_ids, sizeof(node.router_ids));
+	node.connected = node.ever_connected = routers > 0 || cfg->mode != ZN_MODE_CLIENT;
+	if (node.ever_connected)
+		zn_log("I", "connected (%s mode)%s%s", mode_names[cfg->mode], routers > 0 ? ", router " : "",
+		       routers > 0 ? node.router_ids : "");
 	for (size_t i = 0; i < cfg->bus_count; i++)
 		ZN_TRY(init_bus(&node.buses[i], i));
 	snprintf(node.stats_key, sizeof(node.stats_key), "%s/bridges/%s/stats", cfg->key_prefix, cfg->node_name);

@@ -299,9 +299,24 @@ pub extern "C" fn zn_declare_queryable(
 }
 
 #[no_mangle]
-pub extern "C" fn zn_router_count(s: *mut ZnSession) -> c_int {
+pub extern "C" fn zn_routers(s: *mut ZnSession, ids: *mut c_char, cap: usize) -> c_int {
     let Some(s) = (unsafe { s.as_ref() }) else { return ERR };
-    s.0.info().routers_zid().wait().count() as c_int
+    let mut zids: Vec<String> = s.0.info().routers_zid().wait().map(|z| z.to_string()).collect();
+    zids.sort();
+    copy_c_string(&zids.join(","), ids, cap);
+    zids.len() as c_int
+}
+
+/// Writes text into a C buffer of cap bytes, truncated and NUL-terminated.
+fn copy_c_string(text: &str, buf: *mut c_char, cap: usize) {
+    if buf.is_null() || cap == 0 {
+        return;
+    }
+    let n = text.len().min(cap - 1);
+    unsafe {
+        ptr::copy_nonoverlapping(text.as_ptr(), buf as *mut u8, n);
+        *buf.add(n) = 0;
+    }
 }
 
 #[no_mangle]
@@ -310,12 +325,7 @@ pub extern "C" fn zn_session_id(s: *mut ZnSession, buf: *mut c_char, cap: usize)
     if buf.is_null() || cap == 0 {
         return ERR;
     }
-    let zid = s.0.zid().to_string();
-    let n = zid.len().min(cap - 1);
-    unsafe {
-        ptr::copy_nonoverlapping(zid.as_ptr(), buf as *mut u8, n);
-        *buf.add(n) = 0;
-    }
+    copy_c_string(&s.0.zid().to_string(), buf, cap);
     0
 }
 

@@ -1,6 +1,7 @@
-"""Fixtures for the bus conformance suite: one CAN bus per test, kernel vcan
-where the kernel has it, else the userspace hub; tools run as subprocesses so
-the preload library applies to them exactly as it would to a user's program."""
+"""Shared fixtures: one CAN bus per test (kernel vcan where the kernel has it,
+else the userspace hub), a zenohd router on a free loopback port, and the
+bridge. Tools run as subprocesses so the preload library applies to them
+exactly as it would to a user's program."""
 from __future__ import annotations
 
 import json
@@ -15,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 BUILD = Path(os.environ.get("UCAN_BUILD", REPO / "build" / "ucan"))
-HELPER = Path(__file__).with_name("pycan_helper.py")
+HELPER = Path(__file__).parent / "bus" / "pycan_helper.py"
 READY_TIMEOUT_S = 10.0
 
 
@@ -149,3 +150,125 @@ def pytest_collection_modifyitems(config, items):
 def require_userspace(bus: Bus, why: str) -> None:
     if bus.mode != "userspace":
         pytest.skip(f"userspace hub only: {why}")
+
+
+# -- Zenoh router and bridge ------------------------------------------------------
+
+ZENOHD_VERSION = "1.10.2"
+BRIDGE = Path(os.environ.get("ZN_BRIDGE", REPO / "build" / "firmware" / "zenoh-node"))
+
+
+def find_zenohd() -> str | None:
+    candidates = [os.environ.get("ZENOHD"), shutil.which("zenohd"),
+                  str(Path.home() / ".cache" / "canbench" / f"zenohd-{ZENOHD_VERSION}" / "bin" / "zenohd"),
+                  f"/opt/zenohd-{ZENOHD_VERSION}/bin/zenohd"]
+    return next((c for c in candidates if c and os.access(c, os.X_OK)), None)
+
+
+def free_port() -> int:
+    import socket as pysocket
+    with pysocket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def port_open(port: int) -> bool:
+    import socket as pysocket
+    with pysocket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+class Router:
+    """zenohd on a loopback port; multicast scouting off (network safety)."""
+
+    def __init__(self, workdir: Path):
+        self.binary = find_zenohd()
+        if not self.binary:
+            pytest.skip(f"zenohd {ZENOHD_VERSION} not found (make zenohd, or set ZENOHD)")
+        self.port = free_port()
+        self.endpoint = f"tcp/127.0.0.1:{self.port}"
+        self.log = workdir / f"zenohd-{self.port}.log"
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> None:
+        with open(self.log, "ab") as log:
+            self.proc = subprocess.Popen([self.binary, "--no-multicast-scouting", "-l", self.endpoint],
+                                         stdout=log, stderr=log)
+        wait_for(lambda: port_open(self.port) or self.proc.poll() is not None, f"zenohd on {self.endpoint}")
+        assert self.proc.poll() is None, self.log.read_text()
+
+    def stop(self, sig: int = signal.SIGTERM) -> None:
+        if self.proc and self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            self.proc.wait(timeout=10)
+
+
+def zenoh_session(endpoint: str):
+    import zenoh
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+class Bridge:
+    """The zenoh-node executable on a bus, talking to a router."""
+
+    def __init__(self, bus: Bus, router: Router):
+        if not BRIDGE.exists():
+            pytest.skip(f"bridge not built: {BRIDGE} (make firmware)")
+        self.bus, self.router = bus, router
+        self.log = bus.workdir / "bridge.log"
+        self.proc: subprocess.Popen | None = None
+
+    def start(self, *args: str) -> subprocess.Popen:
+        with open(self.log, "ab") as log:
+            self.proc = subprocess.Popen([str(BRIDGE), "--router", self.router.endpoint, *args],
+                                         stdout=log, stderr=log, env=self.bus.env)
+        return self.proc
+
+    def wait_ready(self, session, prefix: str = "vehicle/can") -> list[str]:
+        """Readiness is the bridge's liveliness token, declared once it forwards both ways."""
+        def tokens():
+            assert self.proc is None or self.proc.poll() is None, self.log.read_text()
+            return [str(r.ok.key_expr) for r in session.liveliness().get(f"{prefix}/bridges/**") if r.ok]
+        return wait_for(tokens, "the bridge's liveliness token", timeout=30)
+
+    def try_stats(self, session, prefix: str = "vehicle/can", name: str = "zenoh-node") -> dict | None:
+        """The bridge's stats queryable, or None while it is unreachable (e.g. reconnecting)."""
+        replies = [r for r in session.get(f"{prefix}/bridges/{name}/stats") if r.ok]
+        assert len(replies) <= 1, replies
+        return json.loads(bytes(replies[0].ok.payload.to_bytes())) if replies else None
+
+    def stats(self, session, prefix: str = "vehicle/can", name: str = "zenoh-node") -> dict:
+        stats = self.try_stats(session, prefix, name)
+        assert stats is not None, "no reply from the bridge's stats queryable"
+        return stats
+
+    def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
+        assert self.proc is not None
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        rc = self.proc.wait(timeout=20)
+        return rc, self.log.read_text()
+
+
+@pytest.fixture
+def router(bus):
+    r = Router(bus.workdir)
+    r.start()
+    yield r
+    r.stop()
+    if r.log.exists():
+        print(f"--- {r.log} ---\n{r.log.read_text()[-4000:]}")
+
+
+@pytest.fixture
+def bridge(bus, router):
+    b = Bridge(bus, router)
+    yield b
+    if b.proc and b.proc.poll() is None:
+        b.stop(signal.SIGKILL)
+    if b.log.exists():
+        print(f"--- {b.log} ---\n{b.log.read_text()[-4000:]}")
