@@ -39,6 +39,8 @@
 #define MSGS_PER_WAKEUP 256	 /* fairness between senders */
 #define TX_PENDING_SOFT_LIMIT 256 /* bitrate interfaces: pause senders above this */
 #define MAX_MSG 8192		 /* BIND with 512 filters is 4120 bytes */
+#define RECV_BATCH 64		 /* messages read per recvmmsg */
+#define FLUSH_BATCH 64		 /* messages written per sendmmsg */
 #define TAG_LISTEN UINT64_MAX
 #define TAG_STATS_TIMER (UINT64_MAX - 1)
 #define TAG_IFACE_TIMER_BASE (UINT64_MAX - 1 - UCAN_MAX_IFACES)
@@ -53,7 +55,7 @@ struct client {
 	uint32_t generation;
 	pid_t pid;
 	char cookie[UCAN_COOKIE_MAX];
-	int bound, header_mode, epollout, paused;
+	int bound, header_mode, epollout, paused, dirty;
 	struct ucan_sockopts opts;
 	struct can_filter *filters;
 	struct outmsg *queue; /* ring, grown on demand up to queue_limit */
@@ -91,6 +93,8 @@ static struct {
 	struct client *clients;
 	uint32_t nclients_alloc;
 	uint32_t arb_epoch;
+	uint32_t *dirty; /* clients with queued messages to flush this round */
+	uint32_t ndirty;
 	struct timespec start;
 	uint64_t proto_errors;
 	volatile sig_atomic_t stop;
@@ -267,6 +271,10 @@ static uint32_t client_alloc(void)
 	struct client *clients = realloc(hub.clients, grown * sizeof(*clients));
 	if (!clients)
 		return UINT32_MAX;
+	uint32_t *dirty = realloc(hub.dirty, grown * sizeof(*dirty));
+	if (!dirty)
+		return UINT32_MAX;
+	hub.dirty = dirty;
 	hub.clients = clients;
 	for (uint32_t i = old; i < grown; i++) {
 		memset(&clients[i], 0, sizeof(clients[i]));
@@ -319,12 +327,6 @@ static void accept_clients(void)
 	}
 }
 
-static int client_send_raw(struct client *c, const void *buf, size_t len)
-{
-	ssize_t n = send(c->fd, buf, len, MSG_DONTWAIT | MSG_NOSIGNAL);
-	return n == (ssize_t)len ? 0 : -1;
-}
-
 static int client_queue_grow(struct client *c, uint32_t cap)
 {
 	struct outmsg *q = malloc(cap * sizeof(*q));
@@ -339,22 +341,15 @@ static int client_queue_grow(struct client *c, uint32_t cap)
 	return 0;
 }
 
-enum send_result { SENT, QUEUED, DROPPED, CLOSED };
+enum send_result { QUEUED, DROPPED };
 
-/* Send now if nothing is queued before this message, else queue it behind.
- * force: queue past the reader's limit (control messages must never be lost,
- * or the client would lose track of the stream). */
+/* Queues a message for a client; queues are flushed once per event-loop
+ * round with sendmmsg (flush_dirty), so a burst costs one syscall per reader
+ * instead of one per frame. force: queue past the reader's limit (control
+ * messages must never be lost, or the client would lose track of the stream). */
 static enum send_result client_send(uint32_t idx, const void *msg, size_t len, int force)
 {
 	struct client *c = &hub.clients[idx];
-	if (c->queue_len == 0) {
-		if (client_send_raw(c, msg, len) == 0)
-			return SENT;
-		if (errno != EAGAIN && errno != ENOBUFS) {
-			client_close(idx, NULL);
-			return CLOSED;
-		}
-	}
 	if (c->queue_len >= c->queue_limit && !force)
 		return DROPPED;
 	if (c->queue_len == c->queue_cap) {
@@ -367,9 +362,9 @@ static enum send_result client_send(uint32_t idx, const void *msg, size_t len, i
 	struct outmsg *m = &c->queue[(c->queue_head + c->queue_len++) % c->queue_cap];
 	m->len = (uint8_t)len;
 	memcpy(m->data, msg, len);
-	if (!c->epollout) {
-		c->epollout = 1;
-		client_update_events(c, idx);
+	if (!c->dirty) {
+		c->dirty = 1;
+		hub.dirty[hub.ndirty++] = idx;
 	}
 	return QUEUED;
 }
@@ -384,22 +379,47 @@ static void client_send_ctl(uint32_t idx, uint32_t type, int status)
 static void client_flush(uint32_t idx)
 {
 	struct client *c = &hub.clients[idx];
-	while (c->queue_len > 0) {
-		struct outmsg *m = &c->queue[c->queue_head];
-		if (client_send_raw(c, m->data, m->len) < 0) {
+	struct mmsghdr msgs[FLUSH_BATCH];
+	struct iovec iovs[FLUSH_BATCH];
+	while (c->fd >= 0 && c->queue_len > 0) {
+		unsigned n = 0;
+		for (; n < FLUSH_BATCH && n < c->queue_len; n++) {
+			struct outmsg *m = &c->queue[(c->queue_head + n) % c->queue_cap];
+			iovs[n] = (struct iovec){ .iov_base = m->data, .iov_len = m->len };
+			msgs[n] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iovs[n], .msg_iovlen = 1 } };
+		}
+		int sent = sendmmsg(c->fd, msgs, n, MSG_DONTWAIT | MSG_NOSIGNAL);
+		if (sent < 0) {
 			if (errno == EAGAIN || errno == ENOBUFS)
 				break;
 			client_close(idx, NULL);
 			return;
 		}
-		c->queue_head = (c->queue_head + 1) % c->queue_cap;
-		c->queue_len--;
+		c->queue_head = (c->queue_head + (uint32_t)sent) % c->queue_cap;
+		c->queue_len -= (uint32_t)sent;
+		if ((unsigned)sent < n)
+			break; /* socket full: wait for EPOLLOUT */
 	}
+	if (c->fd < 0)
+		return;
 	int want_out = c->queue_len > 0;
 	if (want_out != c->epollout) {
 		c->epollout = want_out;
 		client_update_events(c, idx);
 	}
+}
+
+static void flush_dirty(void)
+{
+	for (uint32_t i = 0; i < hub.ndirty; i++) {
+		uint32_t idx = hub.dirty[i];
+		if (idx < hub.nclients_alloc && hub.clients[idx].dirty) {
+			hub.clients[idx].dirty = 0;
+			if (hub.clients[idx].fd >= 0)
+				client_flush(idx);
+		}
+	}
+	hub.ndirty = 0;
 }
 
 /* ---- the bus ---- */
@@ -418,19 +438,13 @@ static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame
 	memcpy(msg + len, frame, size);
 	len += size;
 
-	switch (client_send(idx, msg, len, 0)) {
-	case SENT:
-	case QUEUED:
+	if (client_send(idx, msg, len, 0) == QUEUED) {
 		c->rx_frames++;
 		c->rx_bytes += frame->len;
 		ifc->stats.rx_deliveries++;
-		break;
-	case DROPPED:
+	} else {
 		c->rx_drops++;
 		ifc->stats.rx_drops++;
-		break;
-	case CLOSED:
-		break;
 	}
 }
 
@@ -759,27 +773,45 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
  * what it wrote before it went, rather than losing it. */
 static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
 {
-	static uint8_t buf[MAX_MSG];
-	for (unsigned n = 0; n < max_msgs; n++) {
+	static uint8_t bufs[RECV_BATCH][MAX_MSG];
+	struct mmsghdr msgs[RECV_BATCH];
+	struct iovec iovs[RECV_BATCH];
+	unsigned done = 0;
+	while (done < max_msgs) {
 		struct client *c = &hub.clients[idx];
 		if (c->fd < 0 || (c->paused && !even_if_paused))
 			return;
-		ssize_t len = recv(c->fd, buf, sizeof(buf), MSG_DONTWAIT | MSG_TRUNC);
-		if (len < 0) {
+		unsigned want = max_msgs - done < RECV_BATCH ? max_msgs - done : RECV_BATCH;
+		for (unsigned i = 0; i < want; i++) {
+			iovs[i] = (struct iovec){ .iov_base = bufs[i], .iov_len = MAX_MSG };
+			msgs[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iovs[i], .msg_iovlen = 1 } };
+		}
+		int n = recvmmsg(c->fd, msgs, want, MSG_DONTWAIT, NULL);
+		if (n < 0) {
 			if (errno != EAGAIN && errno != EINTR)
 				client_close(idx, NULL);
 			return;
 		}
-		if (len == 0) {
+		if (n == 0) {
 			client_close(idx, NULL);
 			return;
 		}
-		if ((size_t)len > sizeof(buf)) {
-			hub.proto_errors++;
-			client_close(idx, "message too long");
-			return;
+		/* messages already read are handled even if a frame pauses the sender */
+		for (int i = 0; i < n && hub.clients[idx].fd >= 0; i++) {
+			if (msgs[i].msg_len == 0) { /* peer closed after its last message */
+				client_close(idx, NULL);
+				return;
+			}
+			if (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) {
+				hub.proto_errors++;
+				client_close(idx, "message too long");
+				return;
+			}
+			handle_message(idx, bufs[i], msgs[i].msg_len);
 		}
-		handle_message(idx, buf, (size_t)len);
+		done += (unsigned)n;
+		if ((unsigned)n < want)
+			return; /* drained */
 	}
 }
 
@@ -965,6 +997,7 @@ int main(int argc, char **argv)
 					drain_client(slot, MSGS_PER_WAKEUP, !!(ev & (EPOLLHUP | EPOLLERR)));
 			}
 		}
+		flush_dirty();
 	}
 	logmsg("stopping (%" PRIu64 " protocol errors)", hub.proto_errors);
 	unlink(hub.sock_path);

@@ -1,0 +1,116 @@
+#!/usr/bin/env python3
+"""Userspace CAN bus benchmark (make bench-bus): throughput to several readers
+and one-hop latency, each next to a baseline measured in the same run.
+
+- throughput: cangen paced at N frames/ms into the hub, 3 candump readers
+  writing to files; reports frames received per reader (lossless or not).
+- latency: hop_latency over the hub vs over a plain unix socketpair (the floor
+  of any userspace bus), p50/p90/p99/max and the ratio hub/floor.
+
+Writes reports/bench/bus-<timestamp>.json and prints a markdown table.
+Loopback only; every load is bounded in frames and time."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+READERS = 3
+THROUGHPUT_FRAMES = 200_000
+THROUGHPUT_RATES_PER_MS = (50, 100, 150)
+LATENCY_FRAMES = 20_000
+LATENCY_RATES = (1_000, 10_000)
+
+
+def start_hub(build: Path, workdir: Path) -> tuple[subprocess.Popen, dict]:
+    env = dict(os.environ, UCAN_DIR=str(workdir), LD_PRELOAD=str(build / "libucan-preload.so"))
+    read_fd, write_fd = os.pipe()
+    hub = subprocess.Popen([str(build / "ucan-hub"), "-d", str(workdir), "-r", str(write_fd), "vcan0"],
+                           pass_fds=(write_fd,), stderr=subprocess.DEVNULL, env={**env, "LD_PRELOAD": ""})
+    os.close(write_fd)
+    with os.fdopen(read_fd) as ready:
+        if ready.readline().strip() != "ready":
+            sys.exit("ucan-hub did not start")
+    return hub, env
+
+
+def bound_readers(build: Path, workdir: Path) -> int:
+    out = subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "stats", "-j"], capture_output=True, text=True)
+    return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
+
+
+def throughput(build: Path, workdir: Path, env: dict, per_ms: int) -> dict:
+    files = [workdir / f"reader{i}.log" for i in range(READERS)]
+    readers = [subprocess.Popen(["candump", "-L", "vcan0"], stdout=open(f, "w"), env=env) for f in files]
+    deadline = time.monotonic() + 10
+    while bound_readers(build, workdir) < READERS and time.monotonic() < deadline:
+        time.sleep(0.01)  # polling the hub's own readiness count, bounded
+    start = time.monotonic()
+    subprocess.run(["cangen", "vcan0", "-I", "123", "-L", "8", "-D", "i", "-g", "1", "-c", str(per_ms),
+                    "-n", str(THROUGHPUT_FRAMES), "-p", "100"], env=env, check=True, timeout=120)
+    elapsed = time.monotonic() - start
+    stats = json.loads(subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "stats", "-j"],
+                                      capture_output=True, text=True, check=True).stdout)
+    for r in readers:
+        r.send_signal(signal.SIGINT)
+        r.wait(timeout=30)
+    received = [sum(1 for line in open(f) if line.startswith("(")) for f in files]
+    subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "reset"], check=True)
+    return {"offered_per_s": per_ms * 1000, "achieved_per_s": round(THROUGHPUT_FRAMES / elapsed),
+            "frames": THROUGHPUT_FRAMES, "received": received, "lossless": all(n == THROUGHPUT_FRAMES for n in received),
+            "hub_drops": stats["interfaces"][0]["rx_drops"]}
+
+
+def latency(build: Path, env: dict, mode: str, rate: int) -> dict:
+    out = subprocess.run([str(build / "hop_latency"), mode, "vcan0" if mode == "can" else "-", str(LATENCY_FRAMES),
+                          str(rate)], capture_output=True, text=True, env=env if mode == "can" else None, timeout=120)
+    return {"mode": mode, "rate": rate, **json.loads(out.stdout)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--build", type=Path, default=REPO / "build" / "ucan")
+    ap.add_argument("--out", type=Path, default=REPO / "reports" / "bench")
+    args = ap.parse_args()
+    build = args.build.resolve()
+    workdir = Path(tempfile.mkdtemp(prefix="ucan-bench-", dir="/tmp"))
+    hub, env = start_hub(build, workdir)
+    try:
+        results = {
+            "machine": {"cpus": os.cpu_count(), "kernel": os.uname().release},
+            "throughput": [throughput(build, workdir, env, r) for r in THROUGHPUT_RATES_PER_MS],
+            "latency": [],
+        }
+        for rate in LATENCY_RATES:
+            hub_lat, floor = latency(build, env, "can", rate), latency(build, env, "socketpair", rate)
+            results["latency"] += [hub_lat, floor]
+            hub_lat["p50_ratio_to_socketpair"] = round(hub_lat["p50_us"] / max(floor["p50_us"], 0.01), 1)
+    finally:
+        hub.terminate()
+        hub.wait()
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / f"bus-{time.strftime('%Y%m%d-%H%M%S')}.json"
+    path.write_text(json.dumps(results, indent=2))
+    print("| offered frames/s | achieved | received per reader (of %d) | lossless |" % THROUGHPUT_FRAMES)
+    print("|---|---|---|---|")
+    for t in results["throughput"]:
+        print(f"| {t['offered_per_s']} | {t['achieved_per_s']} | {', '.join(map(str, t['received']))} | "
+              f"{'yes' if t['lossless'] else 'no'} |")
+    print("\n| path | frames/s | p50 µs | p90 µs | p99 µs | max µs | p50 vs socketpair |")
+    print("|---|---|---|---|---|---|---|")
+    for lat in results["latency"]:
+        print(f"| {'hub' if lat['mode'] == 'can' else 'socketpair'} | {lat['rate']} | {lat['p50_us']} | "
+              f"{lat['p90_us']} | {lat['p99_us']} | {lat['max_us']} | {lat.get('p50_ratio_to_socketpair', '')} |")
+    print(f"\nwritten: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
