@@ -1,0 +1,111 @@
+"""canbench command line.
+
+  canbench validate SCENARIO...            check scenario files and their traces
+  canbench compose-ecus SCENARIO           compose override with one service per ECU
+  canbench ecu --scenario S --name N ...   run one emulated ECU (inside its container)
+  canbench gen-trace --seconds 2 --out F   write a synthetic powertrain trace
+
+Errors are one line (file:line where it applies); --debug shows the traceback.
+Exit codes: 0 ok, 1 run failure, 2 bad input."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import yaml
+
+from . import ecu, scenario, tracegen
+from .errors import BenchError
+from .trace import read_trace
+
+
+def cmd_validate(args) -> int:
+    for path in args.scenarios:
+        sc = scenario.load(path)
+        for e in sc.ecus:
+            if e.trace:
+                read_trace(e.trace, None)
+        print(f"{path}: ok ({len(sc.ecus)} ECUs on {', '.join(sc.bus_names)})")
+    return 0
+
+
+def compose_ecus(sc: scenario.Scenario, scenario_in_container: str) -> dict:
+    services = {}
+    for e in sc.ecus:
+        services[f"ecu-{e.name}"] = {
+            "image": "canbench/ecu:${BENCH_TAG:-latest}",
+            "network_mode": "service:bus",
+            "depends_on": {"bus": {"condition": "service_healthy"}, "router": {"condition": "service_healthy"}},
+            "environment": ["BENCH_CAN_MODE", "RUN_ID"],
+            "user": "${BENCH_UID:-0}:${BENCH_GID:-0}",
+            "volumes": ["canbus:/run/ucan", "./reports:/reports", "./scenarios:/scenarios:ro"],
+            "command": ["canbench", "ecu", "--scenario", scenario_in_container, "--name", e.name,
+                        "--run-id", "${RUN_ID}", "--run-dir", "/reports/${RUN_ID}", "--router", "tcp/router:7447"],
+        }
+    return {"services": services}
+
+
+def cmd_compose_ecus(args) -> int:
+    sc = scenario.load(args.scenario)
+    yaml.safe_dump(compose_ecus(sc, args.container_path or str(args.scenario)), sys.stdout, sort_keys=False)
+    return 0
+
+
+def cmd_ecu(args) -> int:
+    sc = scenario.load(args.scenario)
+    run_dir = Path(args.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    summary = ecu.run(sc, args.name, args.run_id, run_dir, args.router, args.timeout)
+    print(f"ecu {args.name}: sent {summary['sent']} frames, send-time error p50 "
+          f"{summary['fidelity_ms']['p50']} ms p99 {summary['fidelity_ms']['p99']} ms")
+    return 0
+
+
+def cmd_gen_trace(args) -> int:
+    frames = tracegen.generate(args.seconds)
+    tracegen.write(args.out, frames)
+    print(f"{args.out}: {len(frames)} frames over {args.seconds} s")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="canbench", description=__doc__.split("\n")[0])
+    ap.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    p = sub.add_parser("validate", help="check scenario files and their traces")
+    p.add_argument("scenarios", nargs="+", type=Path)
+    p.set_defaults(func=cmd_validate)
+    p = sub.add_parser("compose-ecus", help="compose override with one service per ECU")
+    p.add_argument("scenario", type=Path)
+    p.add_argument("--container-path", help="the scenario's path inside the containers")
+    p.set_defaults(func=cmd_compose_ecus)
+    p = sub.add_parser("ecu", help="run one emulated ECU")
+    p.add_argument("--scenario", type=Path, required=True)
+    p.add_argument("--name", required=True)
+    p.add_argument("--run-id", required=True)
+    p.add_argument("--run-dir", required=True)
+    p.add_argument("--router", default="tcp/router:7447")
+    p.add_argument("--timeout", type=float, default=120, help="seconds to wait for the capture to be ready")
+    p.set_defaults(func=cmd_ecu)
+    p = sub.add_parser("gen-trace", help="write a synthetic powertrain trace (candump -L)")
+    p.add_argument("--seconds", type=float, default=2.0)
+    p.add_argument("--out", type=Path, required=True)
+    p.set_defaults(func=cmd_gen_trace)
+    args = ap.parse_args(argv)
+    try:
+        return args.func(args)
+    except BenchError as e:
+        if args.debug:
+            raise
+        print(f"canbench: {e}", file=sys.stderr)
+        return e.exit_code
+    except (TimeoutError, OSError) as e:
+        if args.debug:
+            raise
+        print(f"canbench: {e}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,32 @@
+"""The bench's exceptions: one base, a few specific children. Messages carry
+the file:line (or log path) a user needs next."""
+from __future__ import annotations
+
+
+class BenchError(Exception):
+    """Base of every error the bench reports as one line (exit code 2 for input errors)."""
+
+    exit_code = 1
+
+
+class InputError(BenchError):
+    """A scenario, trace or option the bench cannot use; always names file:line."""
+
+    exit_code = 2
+
+    def __init__(self, path: str, line: int | None, message: str):
+        where = f"{path}:{line}" if line else str(path)
+        super().__init__(f"{where}: {message}")
+        self.path, self.line = path, line
+
+
+class ScenarioError(InputError):
+    """The scenario file is malformed or inconsistent."""
+
+
+class TraceError(InputError):
+    """A CAN trace is malformed, empty, unordered or names an unknown interface."""
+
+
+class RunError(BenchError):
+    """The bench itself failed while running (a container, the router, a timeout)."""

@@ -1,0 +1,178 @@
+"""The oracle: matches what went onto the CAN bus with what came out on Zenoh
+and computes loss, duplicates, corruption (which bytes), reordering (global
+and per id), latency and per-id cycle times. Correct first: every frame is
+accounted for, and each failure names the frames and where they came from.
+
+Matching is by content and order, independent of the bridge's own sequence
+numbers (a broken bridge must not be able to hide its faults): for each key
+(id, flags, dlc, data) the n-th Zenoh frame with that key is the n-th CAN
+frame with that key. Frames left on the CAN side are lost; Zenoh frames with
+a key the CAN side had are duplicates; Zenoh frames with a key it never had
+are paired with the lost frame at the same place in the stream, if that one
+has the same id and length (corrupted), else counted as unexpected."""
+from __future__ import annotations
+
+import re
+from collections import defaultdict, deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import wire
+
+CANDUMP = re.compile(r"^\((\d+)\.(\d+)\)\s+(\S+)\s+([0-9A-Fa-f]+)#(R\d?|[0-9A-Fa-f]*)")
+
+
+@dataclass(frozen=True)
+class Observed:
+    frame: wire.Frame
+    t_ns: int          # CAN: bus timestamp; Zenoh: receive time
+    index: int         # position in its stream
+    line: int = 0      # CAN: line in the capture file
+    key: str = ""      # Zenoh: key expression of the sample
+    seq: int = -1      # Zenoh: bridge sequence number
+    bridge_rx_ns: int = 0  # Zenoh: CAN receive time the bridge put in the attachment
+
+
+def read_candump(path: Path, interface: str | None = None) -> list[Observed]:
+    out = []
+    for lineno, line in enumerate(open(path), 1):
+        m = CANDUMP.match(line)
+        if not m or (interface and m[3] != interface):
+            continue
+        sec, frac, _, ident, body = m.groups()
+        t_ns = int(sec) * 1_000_000_000 + int(frac.ljust(9, "0")[:9])
+        extended = len(ident) == 8
+        if body.startswith("R"):
+            frame = wire.Frame(int(ident, 16), int(body[1:] or 0), b"", extended, True)
+        else:
+            data = bytes.fromhex(body)
+            frame = wire.Frame(int(ident, 16), len(data), data, extended)
+        out.append(Observed(frame, t_ns, len(out), line=lineno))
+    return out
+
+
+def zenoh_frames(samples, key: str) -> tuple[list[Observed], list[str]]:
+    """Frames of the samples on key, in arrival order; and problems (bad payloads, other keys)."""
+    out, problems = [], []
+    for t_ns, sample_key, payload, att in samples:
+        if sample_key != key:
+            continue
+        try:
+            frames = wire.decode_batch(payload)
+            meta = wire.decode_attachment(att) if att is not None else None
+        except wire.WireError as e:
+            problems.append(f"undecodable sample on {sample_key} at {t_ns}: {e}")
+            continue
+        for i, f in enumerate(frames):
+            out.append(Observed(f, t_ns, len(out), key=sample_key,
+                                seq=meta.first_seq + i if meta else -1,
+                                bridge_rx_ns=meta.rx_times_ns[i] if meta and i < meta.count else 0))
+    return out, problems
+
+
+def _key(f: wire.Frame) -> tuple:
+    return (f.can_id, f.extended, f.remote, f.dlc, f.data)
+
+
+def percentile(values: list[float], q: float) -> float | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
+
+
+def latency_stats(values_ms: list[float]) -> dict:
+    return {"count": len(values_ms), "p50_ms": percentile(values_ms, 0.5), "p90_ms": percentile(values_ms, 0.9),
+            "p99_ms": percentile(values_ms, 0.99), "max_ms": max(values_ms) if values_ms else None}
+
+
+@dataclass
+class Comparison:
+    sent: int = 0
+    received: int = 0
+    matched: list[tuple[Observed, Observed]] = field(default_factory=list)
+    lost: list[Observed] = field(default_factory=list)
+    duplicates: list[Observed] = field(default_factory=list)
+    corrupted: list[tuple[Observed, Observed, list[int]]] = field(default_factory=list)
+    unexpected: list[Observed] = field(default_factory=list)
+    reordered: list[tuple[Observed, Observed]] = field(default_factory=list)  # (frame, frame it overtook)
+    reordered_per_id: int = 0
+    latency_ms: list[float] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        return {
+            "sent": self.sent, "received": self.received, "matched": len(self.matched), "lost": len(self.lost),
+            "duplicates": len(self.duplicates), "corrupted": len(self.corrupted),
+            "unexpected": len(self.unexpected), "reordered": len(self.reordered),
+            "reordered_per_id": self.reordered_per_id, "latency": latency_stats(self.latency_ms),
+        }
+
+
+def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
+    """sent: CAN frames in bus order; received: Zenoh frames in arrival order."""
+    c = Comparison(sent=len(sent), received=len(received))
+    waiting: dict[tuple, deque[Observed]] = defaultdict(deque)
+    for s in sent:
+        waiting[_key(s.frame)].append(s)
+    seen_keys = set(waiting)
+    match_of: dict[int, Observed] = {}  # sent index -> received
+    leftovers: list[Observed] = []
+    for r in received:
+        queue = waiting.get(_key(r.frame))
+        if queue:
+            s = queue.popleft()
+            match_of[s.index] = r
+            c.matched.append((s, r))
+        elif _key(r.frame) in seen_keys:
+            c.duplicates.append(r)
+        else:
+            leftovers.append(r)
+    lost = [s for s in sent if s.index not in match_of]
+    # corruption: an unknown frame where a lost frame of the same id and length was due
+    lost_by_id: dict[tuple, deque[Observed]] = defaultdict(deque)
+    for s in lost:
+        lost_by_id[(s.frame.can_id, s.frame.extended, s.frame.dlc)].append(s)
+    corrupted_sent = set()
+    for r in leftovers:
+        candidates = lost_by_id.get((r.frame.can_id, r.frame.extended, r.frame.dlc))
+        if candidates:
+            s = candidates.popleft()
+            corrupted_sent.add(s.index)
+            diff = [i for i, (a, b) in enumerate(zip(s.frame.data, r.frame.data)) if a != b]
+            c.corrupted.append((s, r, diff))
+        else:
+            c.unexpected.append(r)
+    c.lost = [s for s in lost if s.index not in corrupted_sent]
+    # reordering: received order against bus order, globally and per id
+    last_by_id: dict[tuple, int] = {}
+    previous: tuple[Observed, Observed] | None = None
+    for s, r in sorted(c.matched, key=lambda p: p[1].index):
+        if previous and s.index < previous[0].index:
+            c.reordered.append((s, previous[0]))
+        ident = (s.frame.can_id, s.frame.extended)
+        if ident in last_by_id and s.index < last_by_id[ident]:
+            c.reordered_per_id += 1
+        last_by_id[ident] = max(s.index, last_by_id.get(ident, -1))
+        if not previous or s.index > previous[0].index:
+            previous = (s, r)
+        c.latency_ms.append((r.t_ns - s.t_ns) / 1e6)
+    return c
+
+
+def cycle_times(frames: list[Observed]) -> dict[str, dict]:
+    """Per id: count and cycle time statistics (ms) of a CAN stream."""
+    by_id: dict[str, list[int]] = defaultdict(list)
+    for o in frames:
+        ident = f"{o.frame.can_id:08X}" if o.frame.extended else f"{o.frame.can_id:03X}"
+        by_id[ident].append(o.t_ns)
+    out = {}
+    for ident, times in sorted(by_id.items()):
+        gaps = [(b - a) / 1e6 for a, b in zip(times, times[1:])]
+        out[ident] = {"count": len(times), "cycle_p50_ms": percentile(gaps, 0.5),
+                      "cycle_min_ms": min(gaps) if gaps else None, "cycle_max_ms": max(gaps) if gaps else None}
+    return out
+
+
+def describe(o: Observed, capture_name: str = "can.log") -> str:
+    where = f"{capture_name}:{o.line}" if o.line else f"zenoh #{o.index} seq {o.seq}"
+    return f"{o.frame.candump(o.key or 'bus').split(' ', 1)[1]} ({where})"

@@ -1,0 +1,137 @@
+"""Scenario files (scenarios/*.yaml): load, validate against the JSON Schema
+(scenarios/schema.json, the one source of truth for keys, types and units),
+and report problems as file:line: field: message."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+from .errors import ScenarioError
+
+SCHEMA_PATH = Path(__file__).with_name("scenario.schema.json")
+
+
+class _LineLoader(yaml.SafeLoader):
+    """YAML loader that remembers the line of every mapping key and sequence item."""
+
+
+def _construct_mapping(loader: _LineLoader, node: yaml.MappingNode) -> dict:
+    mapping = loader.construct_mapping(node, deep=True)
+    lines = {key_node.value: key_node.start_mark.line + 1 for key_node, _ in node.value
+             if isinstance(key_node, yaml.ScalarNode)}
+    return _Located(mapping, lines, node.start_mark.line + 1)
+
+
+def _construct_sequence(loader: _LineLoader, node: yaml.SequenceNode) -> list:
+    return _LocatedList(loader.construct_sequence(node, deep=True),
+                        [item.start_mark.line + 1 for item in node.value], node.start_mark.line + 1)
+
+
+class _Located(dict):
+    def __init__(self, data: dict, key_lines: dict[str, int], line: int):
+        super().__init__(data)
+        self.key_lines, self.line = key_lines, line
+
+
+class _LocatedList(list):
+    def __init__(self, data: list, item_lines: list[int], line: int):
+        super().__init__(data)
+        self.item_lines, self.line = item_lines, line
+
+
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
+
+
+def _line_of(doc: Any, path: list) -> int:
+    """The line of the deepest element of path that carries one."""
+    line, node = getattr(doc, "line", 1), doc
+    for part in path:
+        if isinstance(node, _Located) and part in node.key_lines:
+            line = node.key_lines[part]
+        elif isinstance(node, _LocatedList) and isinstance(part, int) and part < len(node.item_lines):
+            line = node.item_lines[part]
+        try:
+            node = node[part]
+        except (KeyError, IndexError, TypeError):
+            break
+    return line
+
+
+@dataclass(frozen=True)
+class Ecu:
+    name: str
+    bus: str
+    role: str = "replay"
+    trace: Path | None = None
+    speed: float = 1.0
+    loops: int = 1
+    start_offset_s: float = 0.0
+    id_remap: dict[int, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    path: Path
+    name: str
+    description: str
+    duration_s: float
+    buses: list[dict]
+    ecus: list[Ecu]
+    bridge: dict
+    expect: dict
+    raw: dict
+
+    @property
+    def bus_names(self) -> list[str]:
+        return [b["name"] for b in self.buses]
+
+
+def schema() -> dict:
+    return json.loads(SCHEMA_PATH.read_text())
+
+
+def load(path: str | Path) -> Scenario:
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise ScenarioError(str(path), None, f"cannot read: {e.strerror}") from None
+    try:
+        doc = yaml.load(text, Loader=_LineLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        raise ScenarioError(str(path), mark.line + 1 if mark else None, f"not valid YAML: {e}") from None
+    if not isinstance(doc, dict):
+        raise ScenarioError(str(path), 1, "a scenario is a mapping of keys (name, ecus, expect, ...)")
+    validator = jsonschema.Draft202012Validator(schema())
+    errors = sorted(validator.iter_errors(doc), key=lambda e: _line_of(doc, list(e.absolute_path)))
+    if errors:
+        e = errors[0]
+        where = ".".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise ScenarioError(str(path), _line_of(doc, list(e.absolute_path)), f"{where}: {e.message}")
+    buses = {b["name"] for b in doc["buses"]}
+    ecus = []
+    for i, e in enumerate(doc["ecus"]):
+        if e["bus"] not in buses:
+            raise ScenarioError(str(path), _line_of(doc, ["ecus", i, "bus"]),
+                                f"ecus.{i}.bus: '{e['bus']}' is not one of the buses {sorted(buses)}")
+        trace = (path.parent / e["trace"]).resolve() if "trace" in e else None
+        if e.get("role", "replay") == "replay" and trace is None:
+            raise ScenarioError(str(path), _line_of(doc, ["ecus", i]), f"ecus.{i}: role replay needs a trace")
+        if trace is not None and not trace.is_file():
+            raise ScenarioError(str(path), _line_of(doc, ["ecus", i, "trace"]),
+                                f"ecus.{i}.trace: no such file {trace}")
+        remap = {int(k, 16): int(v, 16) for k, v in e.get("id_remap", {}).items()}
+        ecus.append(Ecu(e["name"], e["bus"], e.get("role", "replay"), trace, e.get("speed", 1.0),
+                        e.get("loops", 1), e.get("start_offset_s", 0.0), remap))
+    names = [e.name for e in ecus]
+    if len(set(names)) != len(names):
+        raise ScenarioError(str(path), _line_of(doc, ["ecus"]), "ecus: names must be unique")
+    return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
+                    dict(doc.get("bridge", {})), dict(doc.get("expect", {})), doc)

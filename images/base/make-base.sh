@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# make-base.sh - provide the bench's base image (make base).
+#
+# Usage: make-base.sh <base-image> <output-tag> [ca-bundle]
+#   1. use <base-image> if Docker has it, else try `docker pull` (bounded);
+#   2. if that fails (no registry), build an equivalent image from Debian
+#      packages with debootstrap (bookworm, minbase) and `docker import` it;
+#   3. either way, tag <output-tag> = that image plus the CA bundle (default:
+#      the host's, or BENCH_CA_BUNDLE) so pip, cargo and apt inside image
+#      builds trust the same TLS-intercepting proxy the host does.
+# Prints which path was taken. Needs root for debootstrap.
+set -euo pipefail
+
+base=$1
+out=$2
+ca=${3:-${BENCH_CA_BUNDLE:-/etc/ssl/certs/ca-certificates.crt}}
+here=$(cd "$(dirname "$0")" && pwd)
+work=${BUILD_DIR:-build}/base
+suite=${DEBIAN_SUITE:-bookworm}
+mirror=${DEBIAN_MIRROR:-http://deb.debian.org/debian}
+local_base=canbench/debootstrap:$suite
+
+if docker image inspect "$base" >/dev/null 2>&1; then
+	echo "base: using $base (already present)"
+	from=$base
+elif timeout 120 docker pull "$base" >/dev/null 2>&1; then
+	echo "base: pulled $base"
+	from=$base
+elif docker image inspect "$local_base" >/dev/null 2>&1; then
+	echo "base: $base cannot be pulled; using $local_base built earlier from Debian packages"
+	from=$local_base
+else
+	echo "base: $base cannot be pulled; building $local_base from Debian packages with debootstrap"
+	command -v debootstrap >/dev/null || { echo "base: debootstrap is missing (apt-get install debootstrap)" >&2; exit 1; }
+	rm -rf "$work/rootfs"
+	mkdir -p "$work"
+	debootstrap --variant=minbase --include=ca-certificates "$suite" "$work/rootfs" "$mirror" >"$work/debootstrap.log" 2>&1 ||
+		{ tail -n 20 "$work/debootstrap.log" >&2; exit 1; }
+	# the same sources as debian:bookworm-slim: main, updates, security (rustc-web lives there)
+	cat >"$work/rootfs/etc/apt/sources.list" <<SOURCES
+deb $mirror $suite main
+deb $mirror $suite-updates main
+deb http://deb.debian.org/debian-security $suite-security main
+SOURCES
+	rm -rf "$work/rootfs/var/cache/apt/archives/"*.deb "$work/rootfs/var/lib/apt/lists/"*
+	tar -C "$work/rootfs" -c . | docker import \
+		--change 'ENV LANG=C.UTF-8 PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin' \
+		--change 'CMD ["bash"]' - "$local_base" >/dev/null
+	rm -rf "$work/rootfs"
+	from=$local_base
+fi
+
+[ -r "$ca" ] || { echo "base: CA bundle $ca is not readable (set BENCH_CA_BUNDLE)" >&2; exit 1; }
+ctx=$(mktemp -d)
+trap 'rm -rf "$ctx"' EXIT
+cp "$ca" "$ctx/bench-ca-bundle.pem"
+cp "$here/Dockerfile" "$ctx/"
+docker build -q --build-arg FROM_IMAGE="$from" -t "$out" "$ctx" >/dev/null
+echo "base: $out = $from + CA bundle from $ca"
