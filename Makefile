@@ -20,11 +20,27 @@ CMAKE_GEN      := -G Ninja
 # The ASan bridge runs under the (never sanitized) preload library.
 ASAN_ENV       := ASAN_OPTIONS=verify_asan_link_order=0:detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1
 
+# -- the bench in compose --------------------------------------------------------
+BASE_IMAGE     ?= debian:bookworm-slim
+BENCH_BASE     := canbench/base:bookworm
+COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
+BENCH_CAN_MODE ?= $(shell scripts/detect-can)
+BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
+IMAGE_SOURCES  := images ucan firmware canbench tests/scenarios tests/data pyproject.toml .dockerignore
+# content hash of everything the images are built from: unchanged sources, no rebuild
+BENCH_TAG      ?= $(shell { git ls-files -s $(IMAGE_SOURCES); git diff HEAD -- $(IMAGE_SOURCES); \
+                   git ls-files -o --exclude-standard $(IMAGE_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-12)
+SCENARIO       ?= $(wildcard scenarios/*.yaml)
+export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE
+
 .PHONY: help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge fuzz fuzz-ucan fuzz-firmware bench-bus test clean
+        check-python check-bridge check-faults fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
+        shell logs
 
 help:
-	@echo "make test       run the bench's scenarios against the bridge (the main job)"
+	@echo "make test       run the bench's scenarios against the bridge (the main job; SCENARIO=file)"
+	@echo "make images     build the bench's images (only what changed); make base: the base image"
+	@echo "make shell      a shell in the orchestrator image; make logs: the latest run's container logs"
 	@echo "make check      the project's own tests (unit, bus conformance, bridge integration, fuzz)"
 	@echo "make ucan       build the userspace CAN bus (hub, preload library, ucanctl)"
 	@echo "make firmware   build zenoh-node for Linux (C component + Rust Zenoh port)"
@@ -91,15 +107,38 @@ fuzz-firmware:
 
 fuzz: fuzz-ucan fuzz-firmware
 
-check: check-python check-ucan check-firmware check-bus check-bridge fuzz
+# The bench must catch a broken bridge: each seeded fault fails exactly its checks.
+check-faults: ucan firmware zenohd
+	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/faults
+
+check: check-python check-ucan check-firmware check-bus check-bridge check-faults fuzz
 	@echo "make check: all project tests passed"
 
 bench-bus: ucan
 	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD)
 
-test:
-	@echo "make test: the bench scenarios are not built yet (see README, Status)." >&2
-	@exit 1
+preflight:
+	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }
+	@docker info >/dev/null 2>&1 || { echo "preflight: the Docker daemon is not running or not reachable (sudo systemctl start docker; are you in the docker group?)" >&2; exit 1; }
+	@$(COMPOSE) version >/dev/null 2>&1 || { echo "preflight: neither 'docker compose' nor docker-compose works (apt-get install docker-compose)" >&2; exit 1; }
+	@echo "preflight: compose: $(COMPOSE); CAN bus: $(BENCH_CAN_MODE)$(if $(filter kernel,$(BENCH_CAN_MODE)), (kernel vcan, bus gets NET_ADMIN), (userspace hub)); images: canbench/*:$(BENCH_TAG)"
+
+base: preflight
+	@BUILD_DIR=$(BUILD) images/base/make-base.sh $(BASE_IMAGE) $(BENCH_BASE)
+
+images: base
+	@scripts/build-images $(BENCH_TAG) $(BENCH_BASE)
+
+test: images
+	@status=0; for s in $(SCENARIO); do scripts/bench-run $$s || status=1; done; \
+	 if [ $$status -eq 0 ]; then echo "make test: all scenarios passed"; else echo "make test: FAILED (see above; reports/latest)"; fi; \
+	 exit $$status
+
+shell: images
+	docker run --rm -it -v $(CURDIR)/scenarios:/scenarios:ro -v $(CURDIR)/reports:/reports canbench/orchestrator:$(BENCH_TAG) bash
+
+logs:
+	@cat reports/latest/containers.log
 
 clean:
 	rm -rf $(BUILD)

@@ -1,7 +1,7 @@
 """canbench command line.
 
   canbench validate SCENARIO...            check scenario files and their traces
-  canbench compose-ecus SCENARIO           compose override with one service per ECU
+  canbench compose-override SCENARIO       compose override: bus, bridge settings, one service per ECU
   canbench ecu --scenario S --name N ...   run one emulated ECU (inside its container)
   canbench gen-trace --seconds 2 --out F   write a synthetic powertrain trace
 
@@ -30,8 +30,26 @@ def cmd_validate(args) -> int:
     return 0
 
 
-def compose_ecus(sc: scenario.Scenario, scenario_in_container: str) -> dict:
-    services = {}
+BRIDGE_ENV = {  # scenario bridge key -> the bridge's environment variable (its Kconfig name)
+    "mode": "ZENOH_NODE_MODE", "publish_period_ms": "ZENOH_PUBLISH_PERIOD_MS",
+    "batch_max_frames": "ZENOH_BATCH_MAX_FRAMES", "allow_ids": "ZENOH_NODE_ALLOW_IDS",
+    "deny_ids": "ZENOH_NODE_DENY_IDS", "rx_congestion": "ZENOH_RX_CONGESTION", "rx_priority": "ZENOH_RX_PRIORITY",
+}
+
+
+def bus_spec(bus: dict) -> str:
+    opts = [f"{k}={bus[k]}" for k in ("bitrate", "stuffing") if k in bus]
+    return bus["name"] + (":" + ",".join(opts) if opts else "")
+
+
+def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
+    bridge_env = {"ZENOH_NODE_CAN": ",".join(sc.bus_names), "ZENOH_PUBLISH_PERIOD_MS": "0"}
+    bridge_env.update({env: str(sc.bridge[key]) for key, env in BRIDGE_ENV.items() if key in sc.bridge})
+    services: dict = {
+        "bus": {"environment": {"BENCH_CAN_IFACES": " ".join(bus_spec(b) for b in sc.buses)}},
+        "bridge": {"environment": bridge_env},
+        "orchestrator": {"environment": {"SCENARIO": scenario_in_container}},
+    }
     for e in sc.ecus:
         services[f"ecu-{e.name}"] = {
             "image": "canbench/ecu:${BENCH_TAG:-latest}",
@@ -46,9 +64,9 @@ def compose_ecus(sc: scenario.Scenario, scenario_in_container: str) -> dict:
     return {"services": services}
 
 
-def cmd_compose_ecus(args) -> int:
+def cmd_compose_override(args) -> int:
     sc = scenario.load(args.scenario)
-    yaml.safe_dump(compose_ecus(sc, args.container_path or str(args.scenario)), sys.stdout, sort_keys=False)
+    yaml.safe_dump(compose_override(sc, args.container_path or str(args.scenario)), sys.stdout, sort_keys=False)
     return 0
 
 
@@ -76,10 +94,10 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("validate", help="check scenario files and their traces")
     p.add_argument("scenarios", nargs="+", type=Path)
     p.set_defaults(func=cmd_validate)
-    p = sub.add_parser("compose-ecus", help="compose override with one service per ECU")
+    p = sub.add_parser("compose-override", help="compose override: bus, bridge settings, one service per ECU")
     p.add_argument("scenario", type=Path)
     p.add_argument("--container-path", help="the scenario's path inside the containers")
-    p.set_defaults(func=cmd_compose_ecus)
+    p.set_defaults(func=cmd_compose_override)
     p = sub.add_parser("ecu", help="run one emulated ECU")
     p.add_argument("--scenario", type=Path, required=True)
     p.add_argument("--name", required=True)

@@ -219,12 +219,13 @@ class Bridge:
         if not BRIDGE.exists():
             pytest.skip(f"bridge not built: {BRIDGE} (make firmware)")
         self.bus, self.router = bus, router
+        self.binary = BRIDGE
         self.log = bus.workdir / "bridge.log"
         self.proc: subprocess.Popen | None = None
 
     def start(self, *args: str) -> subprocess.Popen:
         with open(self.log, "ab") as log:
-            self.proc = subprocess.Popen([str(BRIDGE), "--router", self.router.endpoint, *args],
+            self.proc = subprocess.Popen([str(self.binary), "--router", self.router.endpoint, *args],
                                          stdout=log, stderr=log, env=self.bus.env)
         return self.proc
 

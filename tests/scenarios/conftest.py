@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from canbench import run, scenario
+from canbench import checks, run, scenario
 
 
 def pytest_addoption(parser):
@@ -49,5 +49,6 @@ def pytest_sessionfinish(session, exitstatus):
     if result is None:
         return
     result.metrics["verdicts"] = getattr(pytest, "_bench_verdicts", {})
+    result.metrics["problems"] = checks.failing(result)
     result.metrics["passed"] = all(v in ("passed", "skipped") for v in result.metrics["verdicts"].values())
     run.write_metrics(result)

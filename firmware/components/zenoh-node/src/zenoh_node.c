@@ -65,6 +65,12 @@ struct bus {
 	zn_mutex_t *can_lock; /* the reader reopens the port; the subscriber transmits on it */
 	zn_publisher_t *pub;
 	zn_subscriber_t *sub;
+#ifdef ZN_SEEDED_FAULTS
+	zn_publisher_t *misrouted;
+	uint64_t fault_count;
+	uint8_t held[ZN_BATCH_MAX_FRAMES * ZENOH_CAN_WIRE_SIZE], held_att[ZN_ATTACHMENT_HEADER + ZN_BATCH_MAX_FRAMES * 8];
+	size_t held_len, held_att_len;
+#endif
 	zn_token_t *token;
 	zn_thread_t *reader, *publisher;
 	/* rx queue: ring of rx_entry, guarded by lock */
@@ -94,6 +100,42 @@ static struct {
 } node;
 
 static const char *const mode_names[] = { "client", "peer", "router" };
+
+#ifdef ZN_SEEDED_FAULTS
+/* Seeded faults: a broken bridge on purpose, so the bench can prove each of
+ * its checks fails for the fault it exists for. Compiled only into the
+ * zenoh-node-faulty test executable; ZN_FAULT=<kind>[:<n>] selects one:
+ *   drop:N   drop every Nth sample          dup:N    publish every Nth sample twice
+ *   swap:N   publish every Nth sample after the one that follows it
+ *   flip:N   flip the lowest bit of data byte 0 of every Nth sample
+ *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted */
+#include <stdlib.h>
+#include <time.h>
+static struct {
+	enum { FAULT_NONE, FAULT_DROP, FAULT_DUP, FAULT_SWAP, FAULT_FLIP, FAULT_DELAY, FAULT_WRONGKEY } kind;
+	unsigned n;
+} fault;
+
+static void parse_fault(void)
+{
+	static const char *const names[] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey" };
+	const char *spec = getenv("ZN_FAULT");
+	if (!spec || !*spec)
+		return;
+	for (int k = 1; k <= FAULT_WRONGKEY; k++) {
+		size_t len = strlen(names[k]);
+		if (strncmp(spec, names[k], len) == 0 && (spec[len] == ':' || spec[len] == '\0')) {
+			fault.kind = k;
+			fault.n = spec[len] == ':' ? (unsigned)strtoul(spec + len + 1, NULL, 10) : 1;
+			if (fault.n == 0)
+				fault.n = 1;
+			zn_log("W", "SEEDED FAULT ACTIVE: %s (n=%u) - this bridge is broken on purpose", names[k], fault.n);
+			return;
+		}
+	}
+	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay:N or wrongkey; no fault seeded", spec);
+}
+#endif
 static const char *const tx_reason_names[TX_REASONS] = {
 	"ok", "argument", "length", "dlc", "flags", "reserved", "id_range", "remote_data", "padding", "attachment",
 };
@@ -248,6 +290,63 @@ static void put_u64_le(uint8_t *p, uint64_t v)
 		p[i] = (uint8_t)(v >> (8 * i));
 }
 
+#ifdef ZN_SEEDED_FAULTS
+static int put_sample(struct bus *b, uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
+{
+	if (fault.kind == FAULT_NONE)
+		return zn_put(b->pub, payload, len, att, att_len);
+	int nth = ++b->fault_count % fault.n == 0;
+	switch (fault.kind) {
+	case FAULT_DROP:
+		return nth ? 0 : zn_put(b->pub, payload, len, att, att_len); /* "published", silently lost */
+	case FAULT_DUP:
+		if (nth)
+			zn_put(b->pub, payload, len, att, att_len);
+		return zn_put(b->pub, payload, len, att, att_len);
+	case FAULT_SWAP:
+		if (nth && b->held_len == 0) { /* hold this one back until the next sample is out */
+			memcpy(b->held, payload, len);
+			memcpy(b->held_att, att, att_len);
+			b->held_len = len;
+			b->held_att_len = att_len;
+			return 0;
+		}
+		if (zn_put(b->pub, payload, len, att, att_len) != 0)
+			return -1;
+		if (b->held_len) {
+			zn_put(b->pub, b->held, b->held_len, b->held_att, b->held_att_len);
+			b->held_len = 0;
+		}
+		return 0;
+	case FAULT_FLIP:
+		if (nth && payload[4] > 0 && !(payload[5] & ZENOH_CAN_FLAG_RTR))
+			payload[8] ^= 0x01;
+		return zn_put(b->pub, payload, len, att, att_len);
+	case FAULT_DELAY: {
+		/* a pipeline delay, not a throughput cap: hold until CAN receive time + n ms */
+		int64_t rx_ns = 0;
+		for (int i = 7; i >= 0; i--)
+			rx_ns = rx_ns << 8 | att[ZN_ATTACHMENT_HEADER + i];
+		int64_t due = rx_ns + (int64_t)fault.n * 1000000;
+		struct timespec ts = { .tv_sec = due / 1000000000, .tv_nsec = due % 1000000000 };
+		while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, NULL) != 0)
+			;
+		return zn_put(b->pub, payload, len, att, att_len);
+	}
+	case FAULT_WRONGKEY:
+		return zn_put(b->misrouted, payload, len, att, att_len);
+	case FAULT_NONE:
+		break;
+	}
+	return zn_put(b->pub, payload, len, att, att_len);
+}
+#else
+static int put_sample(struct bus *b, uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
+{
+	return zn_put(b->pub, payload, len, att, att_len);
+}
+#endif
+
 /* Publishes frames[0..n) (consecutive sequence numbers) as one sample. */
 static void publish(struct bus *b, const struct rx_entry *frames, size_t n)
 {
@@ -267,7 +366,7 @@ static void publish(struct bus *b, const struct rx_entry *frames, size_t n)
 		len += ZENOH_CAN_WIRE_SIZE;
 		put_u64_le(attachment + ZN_ATTACHMENT_HEADER + 8 * i, (uint64_t)frames[i].rx_time_ns);
 	}
-	if (zn_put(b->pub, payload, len, attachment, ZN_ATTACHMENT_HEADER + 8 * n) == 0) {
+	if (put_sample(b, payload, len, attachment, ZN_ATTACHMENT_HEADER + 8 * n) == 0) {
 		COUNT(b->n.published_samples);
 		COUNT_N(b->n.published_frames, n);
 	} else {
@@ -536,6 +635,14 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 		zn_log("E", "cannot declare %s / %s", b->rx_key, b->tx_key);
 		return ESP_FAIL;
 	}
+#ifdef ZN_SEEDED_FAULTS
+	if (fault.kind == FAULT_WRONGKEY) {
+		char key[ZN_KEY_MAX + 16];
+		snprintf(key, sizeof(key), "%s_misrouted", b->rx_key);
+		if (zn_declare_publisher(node.session, key, &cfg->rx_qos, &b->misrouted) != 0)
+			return ESP_FAIL;
+	}
+#endif
 	return ESP_OK;
 }
 
@@ -550,6 +657,9 @@ esp_err_t zenoh_node_init(const zenoh_node_config_t *cfg)
 	}
 	memset(&node, 0, sizeof(node));
 	node.cfg = *cfg;
+#ifdef ZN_SEEDED_FAULTS
+	parse_fault();
+#endif
 	node.start_ns = zn_monotonic_ns();
 	ZN_TRY(zn_mutex_new(&node.stop_lock));
 	ZN_TRY(zn_cond_new(&node.stop_cond));
@@ -627,6 +737,9 @@ void zenoh_node_stop(void)
 		struct bus *b = &node.buses[i];
 		zn_undeclare_subscriber(b->sub);
 		zn_undeclare_publisher(b->pub);
+#ifdef ZN_SEEDED_FAULTS
+		zn_undeclare_publisher(b->misrouted);
+#endif
 	}
 	zn_undeclare_queryable(node.stats_q);
 	char *stats = malloc(STATS_JSON_MAX);
