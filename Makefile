@@ -34,7 +34,7 @@ SCENARIO       ?= $(wildcard scenarios/*.yaml)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE
 
 .PHONY: help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
+        check-python check-bridge check-faults check-compose fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
         shell logs
 
 help:
@@ -111,7 +111,11 @@ fuzz: fuzz-ucan fuzz-firmware
 check-faults: ucan firmware zenohd
 	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/faults
 
-check: check-python check-ucan check-firmware check-bus check-bridge check-faults fuzz
+# The bench itself in compose, as make test runs it.
+check-compose: images
+	$(PYTEST) -q tests/compose
+
+check: check-python check-ucan check-firmware check-bus check-bridge check-faults fuzz check-compose
 	@echo "make check: all project tests passed"
 
 bench-bus: ucan

@@ -77,10 +77,9 @@ class ZenohCapture:
     def stop(self, path: Path) -> None:
         self.sub.undeclare()
         with open(path, "w") as f, self.lock:
-            for t, key, payload, att in self.samples:
-                f.write(json.dumps({"t_ns": t, "key": key, "payload": base64.b64encode(payload).decode(),
+            f.writelines(json.dumps({"t_ns": t, "key": key, "payload": base64.b64encode(payload).decode(),
                                     "attachment": base64.b64encode(att).decode() if att is not None else None})
-                        + "\n")
+                        + "\n" for t, key, payload, att in self.samples)
 
 
 def read_zenoh_capture(path: Path) -> list[tuple[int, str, bytes, bytes | None]]:

@@ -57,7 +57,7 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
             "depends_on": {"bus": {"condition": "service_healthy"}, "router": {"condition": "service_healthy"}},
             "environment": ["BENCH_CAN_MODE", "RUN_ID"],
             "user": "${BENCH_UID:-0}:${BENCH_GID:-0}",
-            "volumes": ["canbus:/run/ucan", "./reports:/reports", "./scenarios:/scenarios:ro"],
+            "volumes": ["canbus:/run/ucan", "./reports:/reports", "${SCENARIO_DIR:-./scenarios}:/scenarios:ro"],
             "command": ["canbench", "ecu", "--scenario", scenario_in_container, "--name", e.name,
                         "--run-id", "${RUN_ID}", "--run-dir", "/reports/${RUN_ID}", "--router", "tcp/router:7447"],
         }

@@ -56,7 +56,7 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
         wall0 = time.time_ns() - int(start * 1e9)
         messages = [m for _, m in plan]
         # MessageSync sleeps until each message's offset: the recorded timing
-        for (line, msg), synced in zip(plan, can.MessageSync(messages, timestamps=True, skip=3600)):
+        for (line, msg), synced in zip(plan, can.MessageSync(messages, timestamps=True, skip=3600), strict=True):
             bus.send(synced)
             now = time.perf_counter()
             errors_ms.append((now - start - msg.timestamp) * 1000)

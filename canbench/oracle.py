@@ -138,7 +138,7 @@ def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
         if candidates:
             s = candidates.popleft()
             corrupted_sent.add(s.index)
-            diff = [i for i, (a, b) in enumerate(zip(s.frame.data, r.frame.data)) if a != b]
+            diff = [i for i, (a, b) in enumerate(zip(s.frame.data, r.frame.data, strict=False)) if a != b]
             c.corrupted.append((s, r, diff))
         else:
             c.unexpected.append(r)
@@ -167,7 +167,7 @@ def cycle_times(frames: list[Observed]) -> dict[str, dict]:
         by_id[ident].append(o.t_ns)
     out = {}
     for ident, times in sorted(by_id.items()):
-        gaps = [(b - a) / 1e6 for a, b in zip(times, times[1:])]
+        gaps = [(b - a) / 1e6 for a, b in zip(times, times[1:], strict=False)]
         out[ident] = {"count": len(times), "cycle_p50_ms": percentile(gaps, 0.5),
                       "cycle_min_ms": min(gaps) if gaps else None, "cycle_max_ms": max(gaps) if gaps else None}
     return out

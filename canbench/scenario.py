@@ -103,7 +103,7 @@ def load(path: str | Path) -> Scenario:
     except OSError as e:
         raise ScenarioError(str(path), None, f"cannot read: {e.strerror}") from None
     try:
-        doc = yaml.load(text, Loader=_LineLoader)  # noqa: S506 - a SafeLoader subclass
+        doc = yaml.load(text, Loader=_LineLoader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         raise ScenarioError(str(path), mark.line + 1 if mark else None, f"not valid YAML: {e}") from None

@@ -3,6 +3,7 @@ a file:line) and then read with python-can's LogReader, like every other
 format it knows (.asc .blf .csv .trc .mf4)."""
 from __future__ import annotations
 
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,8 +48,8 @@ def _check_candump(path: Path, interfaces: set[str] | None) -> None:
             if not body.startswith(("R", "#")) and len(body) > 16:
                 raise TraceError(str(path), lineno, f"{len(body) // 2} data bytes: classic CAN carries at most 8")
             if interfaces is not None and m["iface"] not in interfaces:
-                raise TraceError(str(path), lineno,
-                                 f"interface '{m['iface']}' is not one of {sorted(interfaces)} (remap it in the scenario)")
+                raise TraceError(str(path), lineno, f"interface '{m['iface']}' is not one of "
+                                 f"{sorted(interfaces)} (remap it in the scenario)")
             ts = float(m["ts"])
             if last_ts is not None and ts < last_ts:
                 raise TraceError(str(path), lineno, f"timestamp {m['ts']} is earlier than the line before")
@@ -67,16 +68,21 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None) -> list[Tra
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
     is_candump = path.suffix in (".log", ".candump", "")
-    if is_candump:
-        _check_candump(path, interfaces)
     try:
-        messages = list(can.LogReader(str(path)))
+        if is_candump:
+            _check_candump(path, interfaces)
+            # canplayer skips lines that do not start with '(' (comments); python-can does not
+            numbered = [(n, raw.strip()) for n, raw in enumerate(open(path, errors="replace"), 1)
+                        if raw.strip().startswith("(")]
+            lines = [n for n, _ in numbered]
+            messages = list(can.CanutilsLogReader(io.StringIO("\n".join(text for _, text in numbered) + "\n")))
+        else:
+            messages = list(can.LogReader(str(path)))
+            lines = list(range(1, len(messages) + 1))
+    except TraceError:
+        raise
     except Exception as e:  # python-can raises many kinds for bad files
         raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
     if not messages:
         raise TraceError(str(path), None, "no frames in trace")
-    if is_candump:
-        lines = [n for n, raw in enumerate(open(path, errors="replace"), 1) if raw.strip().startswith("(")]
-    else:
-        lines = list(range(1, len(messages) + 1))
-    return [TraceFrame(line, msg) for line, msg in zip(lines, messages)]
+    return [TraceFrame(line, msg) for line, msg in zip(lines, messages, strict=True)]

@@ -11,10 +11,11 @@ import signal
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
+
+from canbench.runkeys import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 BUILD = Path(os.environ.get("UCAN_BUILD", REPO / "build" / "ucan"))
@@ -34,16 +35,7 @@ def kernel_has_vcan() -> bool:
 
 def wait_for(condition, what: str, timeout: float = READY_TIMEOUT_S):
     """Poll an explicit readiness condition (never a fixed sleep) until it holds."""
-    deadline = time.monotonic() + timeout
-    delay = 0.001
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"timed out after {timeout:.0f} s waiting for {what}")
-        time.sleep(delay)
-        delay = min(delay * 2, 0.05)
+    return wait_until(condition, timeout, what, step_s=0.005)
 
 
 class Bus:

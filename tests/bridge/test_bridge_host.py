@@ -5,14 +5,13 @@ extended, remote and zero-length frames; refusals; shutdown; router loss."""
 from __future__ import annotations
 
 import signal
-import subprocess
 import threading
 import time
 
 import pytest
+from conftest import wait_for, zenoh_session
 
 from canbench import wire
-from conftest import wait_for, zenoh_session
 
 WAIT_S = 30
 KINDS = [wire.Frame(0x123, 4, bytes.fromhex("DEADBEEF")),
@@ -50,7 +49,7 @@ class Collector:
             frames = wire.decode_batch(payload)
             meta = wire.decode_attachment(att or b"")
             assert meta.count == len(frames)
-            out += [(f, meta.first_seq + i, t) for i, (f, t) in enumerate(zip(frames, meta.rx_times_ns))]
+            out += [(f, meta.first_seq + i, t) for i, (f, t) in enumerate(zip(frames, meta.rx_times_ns, strict=True))]
         return out
 
     def wait_frames(self, count: int) -> list[tuple[wire.Frame, int, int]]:

@@ -5,17 +5,14 @@ hub-only features say so when skipped."""
 from __future__ import annotations
 
 import json
-import os
 import random
 import signal
 import socket
 import struct
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
-
 from conftest import Bus, require_userspace, wait_for
 
 WAIT_S = 30
@@ -103,7 +100,7 @@ def test_canplayer_replays_with_recorded_timing_and_remapping(bus, tmp_path):
     assert [line.split(" ", 1)[1] for line in lines] == [f"vcan0 {0x100 + i:03X}#{i:02X}" for i in range(4)]
     stamps = [float(line[1:line.index(")")]) for line in lines]
     spans = [b - stamps[0] for b in stamps]
-    for recorded, replayed in zip(gaps_s, spans):
+    for recorded, replayed in zip(gaps_s, spans, strict=True):
         assert recorded <= replayed + 0.002 and replayed < recorded + 0.05, (gaps_s, spans)
 
 
@@ -136,7 +133,8 @@ def test_pycan_filters_rtr_eff_inverted_and_join(bus):
     ]
     for frame in ["123#R", "12345123#01", "123#01", "124#02", "110#03", "777#04"]:
         bus.run(["cansend", "vcan0", frame])
-    got = [[(m["id"], m["ext"], m["rtr"]) for m in pycan_messages(r, n)] for r, n in zip(readers, (1, 3, 1))]
+    got = [[(m["id"], m["ext"], m["rtr"]) for m in pycan_messages(r, n)]
+           for r, n in zip(readers, (1, 3, 1), strict=True)]
     assert got[0] == [(0x123, False, False)]
     # inverted: everything whose low 11 bits are not 0x123 (the EFF and RTR 0x123 frames match, so are out)
     assert got[1] == [(0x124, False, False), (0x110, False, False), (0x777, False, False)]

@@ -11,8 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from conftest import BRIDGE, REPO, Bridge, wait_for, zenoh_session
+from conftest import BRIDGE, REPO, Bridge, zenoh_session
 
 FAULTY = Path(os.environ.get("ZN_BRIDGE_FAULTY", BRIDGE.with_name("zenoh-node-faulty")))
 SCENARIO = REPO / "scenarios" / "smoke.yaml"

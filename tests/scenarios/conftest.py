@@ -3,7 +3,6 @@
 verdicts written back into metrics.json."""
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 

@@ -24,7 +24,8 @@ def test_clean_copy_matches_everything():
     sent = stream()
     c = compare(sent, received([s.frame for s in sent]))
     s = c.summary()
-    assert (s["matched"], s["lost"], s["duplicates"], s["corrupted"], s["reordered"], s["unexpected"]) == (50, 0, 0, 0, 0, 0)
+    counts = (s["matched"], s["lost"], s["duplicates"], s["corrupted"], s["reordered"], s["unexpected"])
+    assert counts == (50, 0, 0, 0, 0, 0)
     assert s["latency"]["p50_ms"] == pytest.approx(0.2)
 
 

@@ -64,7 +64,8 @@ def throughput(build: Path, workdir: Path, env: dict, per_ms: int) -> dict:
     received = [sum(1 for line in open(f) if line.startswith("(")) for f in files]
     subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "reset"], check=True)
     return {"offered_per_s": per_ms * 1000, "achieved_per_s": round(THROUGHPUT_FRAMES / elapsed),
-            "frames": THROUGHPUT_FRAMES, "received": received, "lossless": all(n == THROUGHPUT_FRAMES for n in received),
+            "frames": THROUGHPUT_FRAMES, "received": received,
+            "lossless": all(n == THROUGHPUT_FRAMES for n in received),
             "hub_drops": stats["interfaces"][0]["rx_drops"]}
 
 
@@ -98,7 +99,7 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"bus-{time.strftime('%Y%m%d-%H%M%S')}.json"
     path.write_text(json.dumps(results, indent=2))
-    print("| offered frames/s | achieved | received per reader (of %d) | lossless |" % THROUGHPUT_FRAMES)
+    print(f"| offered frames/s | achieved | received per reader (of {THROUGHPUT_FRAMES}) | lossless |")
     print("|---|---|---|---|")
     for t in results["throughput"]:
         print(f"| {t['offered_per_s']} | {t['achieved_per_s']} | {', '.join(map(str, t['received']))} | "

@@ -99,14 +99,7 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 
 esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	ts.tv_sec += timeout_ms / 1000;
-	ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000;
-	if (ts.tv_nsec >= 1000000000) {
-		ts.tv_sec++;
-		ts.tv_nsec -= 1000000000;
-	}
+	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
 	struct mock_bus *b = can->bus;
 	while (b->rx_len == 0)

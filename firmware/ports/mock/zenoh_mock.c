@@ -207,14 +207,7 @@ const struct mock_put *mock_zenoh_put(size_t i)
 
 size_t mock_zenoh_wait_puts(size_t n, int timeout_ms)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	ts.tv_sec += timeout_ms / 1000;
-	ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000;
-	if (ts.tv_nsec >= 1000000000) {
-		ts.tv_sec++;
-		ts.tv_nsec -= 1000000000;
-	}
+	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
 	while (nputs < n && pthread_cond_timedwait(&put_made, &lock, &ts) == 0)
 		;

@@ -5,6 +5,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <time.h>
 
 #include "driver/can.h"
 
@@ -21,6 +22,20 @@ struct mock_put {
 };
 
 void mock_reset(void);
+
+/* CLOCK_REALTIME deadline timeout_ms from now, for pthread_cond_timedwait. */
+static inline struct timespec mock_deadline(int timeout_ms)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	ts.tv_sec += timeout_ms / 1000;
+	ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000;
+	if (ts.tv_nsec >= 1000000000) {
+		ts.tv_sec++;
+		ts.tv_nsec -= 1000000000;
+	}
+	return ts;
+}
 
 /* CAN */
 void mock_can_inject(const char *bus, const can_message_t *msg, int64_t rx_time_ns);

@@ -1,0 +1,84 @@
+"""The bench in compose, as `make test` runs it (scripts/bench-run): the smoke
+scenario passes with every report written; a scenario whose gate cannot be
+met fails on exactly that check; an invalid scenario stops with exit code 2
+before anything runs; no containers, networks or volumes are left behind.
+Needs the images (make images) and a running Docker daemon."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+DATA = REPO / "tests" / "data" / "compose"
+RUN_TIMEOUT_S = 300
+
+pytestmark = pytest.mark.compose
+
+
+def bench_run(scenario: Path) -> tuple[subprocess.CompletedProcess, Path | None]:
+    if subprocess.run(["docker", "image", "inspect", f"canbench/orchestrator:{os.environ.get('BENCH_TAG', 'latest')}"],
+                      capture_output=True).returncode != 0:
+        pytest.skip("bench images not built (make images)")
+    proc = subprocess.run([str(REPO / "scripts" / "bench-run"), str(scenario)], capture_output=True, text=True,
+                          timeout=RUN_TIMEOUT_S, cwd=REPO)
+    marker = "(reports in "
+    run_dir = next((line.split(marker)[1].rstrip(")") for line in proc.stdout.splitlines() if marker in line), None)
+    return proc, REPO / run_dir if run_dir else None
+
+
+def leftovers(run_dir: Path) -> list[str]:
+    project = "bench-" + "".join(c if c.isalnum() or c == "\n" else "-" for c in run_dir.name.lower())
+    out = []
+    for kind in ("ps -a", "network ls", "volume ls"):
+        label = f"label=com.docker.compose.project={project}"
+        names = subprocess.run(["docker", *kind.split(), "-q", "--filter", label],
+                               capture_output=True, text=True).stdout.split()
+        out += [f"{kind}: {n}" for n in names]
+    return out
+
+
+def junit_cases(run_dir: Path) -> dict[str, str]:
+    cases = {}
+    for case in ET.parse(run_dir / "junit.xml").iter("testcase"):
+        outcome = "failed" if case.find("failure") is not None or case.find("error") is not None else (
+            "skipped" if case.find("skipped") is not None else "passed")
+        cases[case.get("name")] = outcome
+    return cases
+
+
+def test_smoke_scenario_passes_and_writes_reports():
+    proc, run_dir = bench_run(REPO / "scenarios" / "smoke.yaml")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    assert run_dir is not None
+    for name in ("junit.xml", "metrics.json", "can.log", "zenoh.jsonl", "ecu-engine.json", "containers.log"):
+        assert (run_dir / name).is_file(), name
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["schema_version"] == 1 and metrics["passed"] is True
+    assert metrics["can_to_zenoh"]["vcan0"]["matched"] == metrics["ecus"]["engine"]["sent"] > 0
+    assert set(junit_cases(run_dir).values()) == {"passed"}
+    assert (REPO / "reports" / "latest").resolve() == run_dir.resolve()
+    assert leftovers(run_dir) == []
+
+
+def test_failing_gate_fails_the_run_on_that_check_only():
+    proc, run_dir = bench_run(DATA / "latency-gate-too-tight.yaml")
+    assert proc.returncode != 0 and "FAILED" in proc.stdout
+    cases = junit_cases(run_dir)
+    assert cases["test_check[latency_can_to_zenoh]"] == "failed"
+    assert [name for name, outcome in cases.items() if outcome == "failed"] == ["test_check[latency_can_to_zenoh]"]
+    assert "gate 0.001 ms" in (run_dir / "junit.xml").read_text()
+    assert json.loads((run_dir / "metrics.json").read_text())["passed"] is False
+    assert leftovers(run_dir) == []
+
+
+def test_invalid_scenario_stops_with_exit_2_and_file_line():
+    proc, run_dir = bench_run(DATA / "unknown-key.yaml")
+    assert proc.returncode == 2
+    assert "/scenarios/unknown-key.yaml:9: ecus.0: Additional properties are not allowed ('sped' was unexpected)" \
+        in proc.stderr
+    assert run_dir is None  # nothing ran, no report claims anything

@@ -1,0 +1,93 @@
+"""Bad scenarios and traces stop with a clear file:line error (exit code 2)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from canbench import cli, scenario
+from canbench.errors import ScenarioError, TraceError
+from canbench.trace import read_trace
+
+pytestmark = pytest.mark.unit
+
+GOOD_TRACE = "(1700000000.000000) vcan0 123#DEADBEEF\n(1700000000.010000) vcan0 12345678#01\n"
+
+
+def write(tmp_path: Path, name: str, text: str) -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def scenario_text(**overrides) -> str:
+    fields = {
+        "name": "t", "duration_s": "5", "buses": "\n  - name: vcan0",
+        "ecus": "\n  - name: engine\n    bus: vcan0\n    trace: trace.log", "expect": "\n  integrity: true",
+    }
+    fields.update(overrides)
+    return "".join(f"{k}: {v}\n" for k, v in fields.items() if v is not None)
+
+
+@pytest.mark.parametrize("text,line,fragment", [
+    ("(1700000000.000000) vcan0 123#DEADBEEF\n(1700000000.1) vcan0 XYZ#00\n", 2, "not a candump -L frame"),
+    ("(1700000000.000000) vcan0 123#DEADBEEF\n(1699999999.000000) vcan0 123#00\n", 2, "earlier than the line before"),
+    ("(1700000000.000000) can7 123#00\n", 1, "interface 'can7'"),
+    ("(1700000000.000000) vcan0 900#00\n", 1, "above 7FF"),
+    ("(1700000000.000000) vcan0 123#000102030405060708\n", 1, "at most 8"),
+])
+def test_malformed_traces_name_the_line(tmp_path, text, line, fragment):
+    path = write(tmp_path, "trace.log", text)
+    with pytest.raises(TraceError) as err:
+        read_trace(path, {"vcan0"})
+    assert str(err.value).startswith(f"{path}:{line}: ") and fragment in str(err.value)
+
+
+def test_empty_trace_is_refused(tmp_path):
+    path = write(tmp_path, "trace.log", "# only a comment\n")
+    with pytest.raises(TraceError, match="no frames"):
+        read_trace(path)
+
+
+def test_good_trace_keeps_line_numbers(tmp_path):
+    path = write(tmp_path, "trace.log", "# recorded on the test track\n" + GOOD_TRACE)
+    frames = read_trace(path, {"vcan0"})
+    assert [f.line for f in frames] == [2, 3] and frames[1].message.is_extended_id
+
+
+@pytest.mark.parametrize("overrides,line,fragment", [
+    ({"duration_s": "'ten'"}, 2, "duration_s: 'ten' is not of type 'number'"),
+    ({"duration_s": "-1"}, 2, "duration_s"),
+    ({"colour": "blue"}, 1, "Additional properties are not allowed ('colour' was unexpected)"),
+    ({"ecus": "\n  - name: engine\n    bus: vcan9\n    trace: trace.log"}, 7, "'vcan9' is not one of the buses"),
+    ({"ecus": "\n  - name: engine\n    bus: vcan0\n    trace: missing.log"}, 8, "no such file"),
+    ({"ecus": "\n  - name: engine\n    bus: vcan0\n    speed: 0\n    trace: trace.log"}, 8, "speed"),
+    ({"expect": "\n  latency:\n    can_to_zenoh: {p50: 5}"}, 11, "'p50' was unexpected"),
+])
+def test_bad_scenarios_name_file_line_and_field(tmp_path, overrides, line, fragment):
+    write(tmp_path, "trace.log", GOOD_TRACE)
+    path = write(tmp_path, "s.yaml", scenario_text(**overrides))
+    with pytest.raises(ScenarioError) as err:
+        scenario.load(path)
+    assert str(err.value).startswith(f"{path}:{line}: "), (str(err.value), path.read_text())
+    assert fragment in str(err.value)
+
+
+def test_not_yaml_and_not_a_mapping(tmp_path):
+    with pytest.raises(ScenarioError, match=":2: not valid YAML"):
+        scenario.load(write(tmp_path, "a.yaml", "name: x\n  bad: : indent\n"))
+    with pytest.raises(ScenarioError, match="is a mapping"):
+        scenario.load(write(tmp_path, "b.yaml", "- just\n- a list\n"))
+
+
+def test_cli_exit_code_2_and_one_line(tmp_path, capsys):
+    write(tmp_path, "trace.log", GOOD_TRACE)
+    path = write(tmp_path, "s.yaml", scenario_text(duration_s="'ten'"))
+    assert cli.main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"canbench: {path}:2: ")
+
+
+def test_shipped_scenarios_are_valid():
+    for path in sorted(Path(__file__).resolve().parents[2].glob("scenarios/*.yaml")):
+        assert cli.main(["validate", str(path)]) == 0
