@@ -65,8 +65,16 @@ firmware-asan:
 	cmake -S firmware -B $(FW_ASAN_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DZN_SANITIZE=ON -DZN_RUST_TARGET_DIR=$(CARGO_TARGET) >/dev/null
 	ninja -C $(FW_ASAN_BUILD)
 
+# zenohd is compiled once per cold machine: taken from the builder image when
+# Docker works (the images need it anyway), else installed from crates.io.
 $(CACHE)/zenohd-$(ZENOHD_VERSION)/bin/zenohd:
-	cargo install zenohd --version $(ZENOHD_VERSION) --locked --root $(CACHE)/zenohd-$(ZENOHD_VERSION)
+	@if docker info >/dev/null 2>&1; then \
+	   $(MAKE) --no-print-directory images && mkdir -p $(@D) && \
+	   id=$$(docker create canbench/builder:$(BENCH_TAG)) && docker cp $$id:/opt/zenohd/bin/zenohd $@ && \
+	   docker rm $$id >/dev/null && echo "zenohd: copied from canbench/builder:$(BENCH_TAG)"; \
+	 else \
+	   cargo install zenohd --version $(ZENOHD_VERSION) --locked --root $(CACHE)/zenohd-$(ZENOHD_VERSION); \
+	 fi
 
 zenohd: $(ZENOHD)
 	@$(ZENOHD) --version
@@ -86,6 +94,8 @@ check-firmware: firmware firmware-asan
 	ctest --test-dir $(FW_ASAN_BUILD) --output-on-failure
 
 check-python:
+	$(PYTHON) -m ruff check canbench tests ucan/bench
+	$(PYTHON) -m mypy --ignore-missing-imports canbench
 	$(PYTEST) -q -m unit tests/unit
 
 # The bridge with zenohd on the host bus: release build, then ASan/UBSan build.

@@ -34,7 +34,7 @@ class Observed:
 
 
 def read_candump(path: Path, interface: str | None = None) -> list[Observed]:
-    out = []
+    out: list[Observed] = []
     for lineno, line in enumerate(open(path), 1):
         m = CANDUMP.match(line)
         if not m or (interface and m[3] != interface):
@@ -53,7 +53,8 @@ def read_candump(path: Path, interface: str | None = None) -> list[Observed]:
 
 def zenoh_frames(samples, key: str) -> tuple[list[Observed], list[str]]:
     """Frames of the samples on key, in arrival order; and problems (bad payloads, other keys)."""
-    out, problems = [], []
+    out: list[Observed] = []
+    problems: list[str] = []
     for t_ns, sample_key, payload, att in samples:
         if sample_key != key:
             continue

@@ -112,24 +112,24 @@ def load(path: str | Path) -> Scenario:
     validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(doc), key=lambda e: _line_of(doc, list(e.absolute_path)))
     if errors:
-        e = errors[0]
-        where = ".".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise ScenarioError(str(path), _line_of(doc, list(e.absolute_path)), f"{where}: {e.message}")
+        first = errors[0]
+        where = ".".join(str(p) for p in first.absolute_path) or "(top level)"
+        raise ScenarioError(str(path), _line_of(doc, list(first.absolute_path)), f"{where}: {first.message}")
     buses = {b["name"] for b in doc["buses"]}
-    ecus = []
-    for i, e in enumerate(doc["ecus"]):
-        if e["bus"] not in buses:
+    ecus: list[Ecu] = []
+    for i, spec in enumerate(doc["ecus"]):
+        if spec["bus"] not in buses:
             raise ScenarioError(str(path), _line_of(doc, ["ecus", i, "bus"]),
-                                f"ecus.{i}.bus: '{e['bus']}' is not one of the buses {sorted(buses)}")
-        trace = (path.parent / e["trace"]).resolve() if "trace" in e else None
-        if e.get("role", "replay") == "replay" and trace is None:
+                                f"ecus.{i}.bus: '{spec['bus']}' is not one of the buses {sorted(buses)}")
+        trace = (path.parent / spec["trace"]).resolve() if "trace" in spec else None
+        if spec.get("role", "replay") == "replay" and trace is None:
             raise ScenarioError(str(path), _line_of(doc, ["ecus", i]), f"ecus.{i}: role replay needs a trace")
         if trace is not None and not trace.is_file():
             raise ScenarioError(str(path), _line_of(doc, ["ecus", i, "trace"]),
                                 f"ecus.{i}.trace: no such file {trace}")
-        remap = {int(k, 16): int(v, 16) for k, v in e.get("id_remap", {}).items()}
-        ecus.append(Ecu(e["name"], e["bus"], e.get("role", "replay"), trace, e.get("speed", 1.0),
-                        e.get("loops", 1), e.get("start_offset_s", 0.0), remap))
+        remap = {int(k, 16): int(v, 16) for k, v in spec.get("id_remap", {}).items()}
+        ecus.append(Ecu(spec["name"], spec["bus"], spec.get("role", "replay"), trace, spec.get("speed", 1.0),
+                        spec.get("loops", 1), spec.get("start_offset_s", 0.0), remap))
     names = [e.name for e in ecus]
     if len(set(names)) != len(names):
         raise ScenarioError(str(path), _line_of(doc, ["ecus"]), "ecus: names must be unique")

@@ -58,7 +58,7 @@ def generate(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0
 
 def write(path: Path, frames: list[can.Message]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with can.CanutilsLogWriter(str(path), channel=frames[0].channel) as writer:
+    with can.CanutilsLogWriter(str(path), channel=str(frames[0].channel)) as writer:
         for msg in frames:
             writer.on_message_received(msg)
 
