@@ -31,6 +31,7 @@ IMAGE_SOURCES  := images ucan firmware canbench tests/scenarios tests/data pypro
 BENCH_TAG      ?= $(shell { git ls-files -s $(IMAGE_SOURCES); git diff HEAD -- $(IMAGE_SOURCES); \
                    git ls-files -o --exclude-standard $(IMAGE_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-12)
 SCENARIO       ?= $(wildcard scenarios/*.yaml)
+ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE
 
 .PHONY: help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \

@@ -55,5 +55,6 @@ ctx=$(mktemp -d)
 trap 'rm -rf "$ctx"' EXIT
 cp "$ca" "$ctx/bench-ca-bundle.pem"
 cp "$here/Dockerfile" "$ctx/"
-docker build -q --build-arg FROM_IMAGE="$from" -t "$out" "$ctx" >/dev/null
+docker build -q --build-arg FROM_IMAGE="$from" -t "$out" "$ctx" >/dev/null 2>"$ctx/build.err" ||
+	{ cat "$ctx/build.err" >&2; exit 1; }
 echo "base: $out = $from + CA bundle from $ca"
