@@ -114,7 +114,14 @@ def load(path: str | Path) -> Scenario:
     if errors:
         first = errors[0]
         where = ".".join(str(p) for p in first.absolute_path) or "(top level)"
-        raise ScenarioError(str(path), _line_of(doc, list(first.absolute_path)), f"{where}: {first.message}")
+        line_path = list(first.absolute_path)
+        if first.validator == "additionalProperties" and isinstance(first.instance, dict):
+            # point at the unknown key itself, not at the mapping that holds it
+            allowed = set(first.schema.get("properties", {}))
+            unknown = [k for k in first.instance if k not in allowed]
+            if unknown:
+                line_path.append(unknown[0])
+        raise ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {first.message}")
     buses = {b["name"] for b in doc["buses"]}
     ecus: list[Ecu] = []
     for i, spec in enumerate(doc["ecus"]):

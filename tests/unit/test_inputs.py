@@ -58,11 +58,12 @@ def test_good_trace_keeps_line_numbers(tmp_path):
 @pytest.mark.parametrize("overrides,line,fragment", [
     ({"duration_s": "'ten'"}, 2, "duration_s: 'ten' is not of type 'number'"),
     ({"duration_s": "-1"}, 2, "duration_s"),
-    ({"colour": "blue"}, 1, "Additional properties are not allowed ('colour' was unexpected)"),
+    ({"colour": "blue"}, 11, "Additional properties are not allowed ('colour' was unexpected)"),
     ({"ecus": "\n  - name: engine\n    bus: vcan9\n    trace: trace.log"}, 7, "'vcan9' is not one of the buses"),
     ({"ecus": "\n  - name: engine\n    bus: vcan0\n    trace: missing.log"}, 8, "no such file"),
     ({"ecus": "\n  - name: engine\n    bus: vcan0\n    speed: 0\n    trace: trace.log"}, 8, "speed"),
     ({"expect": "\n  latency:\n    can_to_zenoh: {p50: 5}"}, 11, "'p50' was unexpected"),
+    ({"ecus": "\n  - name: engine\n    bus: vcan0\n    trace: trace.log\n    sped: 2"}, 9, "'sped' was unexpected"),
 ])
 def test_bad_scenarios_name_file_line_and_field(tmp_path, overrides, line, fragment):
     write(tmp_path, "trace.log", GOOD_TRACE)
