@@ -11,7 +11,7 @@
 enum opt_id {
 	OPT_ENABLED = 256, OPT_ROUTER, OPT_LISTEN, OPT_MODE, OPT_PERIOD, OPT_BATCH, OPT_PREFIX, OPT_NAME, OPT_CAN,
 	OPT_ALLOW, OPT_DENY, OPT_RX_PRIORITY, OPT_RX_CONGESTION, OPT_RX_EXPRESS, OPT_RX_QUEUE, OPT_ZENOH_CONFIG,
-	OPT_HELP,
+	OPT_COMPRESSION, OPT_HELP,
 };
 
 struct option_spec {
@@ -36,6 +36,7 @@ static const struct option_spec specs[] = {
 	{ OPT_RX_EXPRESS, "rx-express", "ZENOH_RX_EXPRESS", "0|1", "send CAN -> Zenoh samples without Zenoh batching (default 1)" },
 	{ OPT_RX_QUEUE, "rx-queue-frames", "ZENOH_RX_QUEUE_FRAMES", "N", "frames queued between CAN reader and publisher (default 65536)" },
 	{ OPT_ZENOH_CONFIG, "zenoh-config", "ZENOH_CONFIG", "FILE", "Zenoh JSON5 config applied first (TLS, auth)" },
+	{ OPT_COMPRESSION, "compression", "ZENOH_COMPRESSION", "0|1", "compress the Zenoh transport (default 0)" },
 	{ OPT_HELP, "help", NULL, NULL, "this help" },
 };
 #define NSPECS (sizeof(specs) / sizeof(specs[0]))
@@ -229,6 +230,11 @@ static int apply(zenoh_node_config_t *cfg, enum opt_id id, const char *value, co
 		cfg->rx_qos.express = b;
 		return 0;
 	}
+	case OPT_COMPRESSION:
+		if (parse_bool(value, &cfg->compression) == 0)
+			return 0;
+		snprintf(err, err_len, "%s='%s' is not 0 or 1", source, value);
+		return -1;
 	case OPT_ZENOH_CONFIG:
 		return set_string(cfg->zenoh_config_file, sizeof(cfg->zenoh_config_file), value, source, err, err_len);
 	case OPT_HELP:

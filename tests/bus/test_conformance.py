@@ -356,3 +356,58 @@ def test_bitrate_limits_delivery_rate_and_arbitrates_by_id(bus):
     stamps = [float(line[1:line.index(")")]) for line in lines]
     frame_s = 135 / 50_000  # 8-byte standard frame, worst-case stuffing
     assert stamps[-1] - stamps[0] >= 39 * frame_s * 0.95
+
+
+# -- more kernel semantics ----------------------------------------------------
+
+def test_loopback_off_hides_frames_from_everyone_on_the_host(bus):
+    reader = start_pycan(bus, "--count", "1")
+    code = (
+        "import socket\n"
+        "s = socket.socket(socket.PF_CAN, socket.SOCK_RAW, socket.CAN_RAW)\n"
+        "s.setsockopt(socket.SOL_CAN_RAW, socket.CAN_RAW_LOOPBACK, 0)\n"
+        "s.bind(('vcan0',))\n"
+        "s.send(bytes([0x11, 0, 0, 0, 1, 0, 0, 0, 0xAA]) + bytes(7))\n"  # 011#AA: nobody sees it
+    )
+    bus.run([sys.executable, "-c", code])
+    bus.run(["cansend", "vcan0", "022#BB"])  # loopback on (default): seen
+    assert [m["id"] for m in pycan_messages(reader, 1)] == [0x22]
+
+
+def test_fcntl_dupfd_shares_the_socket(bus):
+    code = (
+        "import fcntl, os, socket\n"
+        "s = socket.socket(socket.PF_CAN, socket.SOCK_RAW, socket.CAN_RAW)\n"
+        "s.bind(('vcan0',))\n"
+        "fd = fcntl.fcntl(s.fileno(), fcntl.F_DUPFD_CLOEXEC, 100)\n"
+        "s.close()\n"
+        "print('ready', flush=True)\n"
+        "print(os.read(fd, 16).hex(), flush=True)\n"
+    )
+    proc = bus.popen([sys.executable, "-c", code])
+    assert proc.stdout.readline().strip() == "ready"
+    bus.run(["cansend", "vcan0", "321#CD"])
+    out, err = proc.communicate(timeout=WAIT_S)
+    assert out.strip() == "2103000001000000cd00000000000000", err
+
+
+def test_pycan_notifier_delivers_to_listeners(bus):
+    code = (
+        "import can, threading\n"
+        "got, done = [], threading.Event()\n"
+        "def on_message(m):\n"
+        "    got.append(m.arbitration_id)\n"
+        "    done.set() if len(got) == 3 else None\n"
+        "with can.Bus(interface='socketcan', channel='vcan0') as b:\n"
+        "    n = can.Notifier(b, [on_message])\n"
+        "    print('ready', flush=True)\n"
+        "    ok = done.wait(10)\n"
+        "    n.stop()\n"
+        "print(ok, got)\n"
+    )
+    proc = bus.popen([sys.executable, "-c", code])
+    assert proc.stdout.readline().strip() == "ready"
+    for frame in ("101#01", "102#02", "103#03"):
+        bus.run(["cansend", "vcan0", frame])
+    out, err = proc.communicate(timeout=WAIT_S)
+    assert out.strip() == "True [257, 258, 259]", err

@@ -22,6 +22,7 @@ typedef struct {
 	const char *connect;	 /* comma-separated endpoints, may be empty */
 	const char *listen;	 /* comma-separated endpoints, may be empty */
 	const char *config_file; /* optional JSON5 file applied first (TLS, auth, ...) */
+	int compression;	 /* 1 = compress the transport (negotiated: used when the peer agrees) */
 } zn_session_config_t;
 
 typedef enum { ZN_CONGESTION_DROP = 0, ZN_CONGESTION_BLOCK = 1 } zn_congestion_t;

@@ -18,6 +18,8 @@
 #include "zn_port_can.h"
 #include "zn_port_os.h"
 
+#define CAN_RCVBUF_BYTES (4 << 20)
+
 struct zn_can {
 	int fd;
 	char name[IFNAMSIZ];
@@ -49,6 +51,9 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 		goto fail;
 	}
 	addr.can_ifindex = ifr.ifr_ifindex;
+	/* bursts must wait in the socket, not be dropped by it (the kernel caps this at rmem_max) */
+	int rcvbuf = CAN_RCVBUF_BYTES;
+	setsockopt(can->fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
 	/* kernel receive timestamps: latency is measured from the moment the frame was on the bus */
 	if (setsockopt(can->fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on)) < 0 ||
 	    bind(can->fd, (struct sockaddr *)&addr, sizeof(addr)) < 0) {

@@ -54,6 +54,7 @@ typedef struct {
 	zn_qos_t tx_qos;		       /* reserved for replies; commands arrive on the subscriber */
 	uint32_t rx_queue_frames;	       /* frames buffered between CAN reader and publisher */
 	char zenoh_config_file[ZN_ENDPOINTS_MAX]; /* optional JSON5 (TLS, auth) */
+	bool compression;			  /* CONFIG_ZENOH_COMPRESSION: compress the Zenoh transport */
 } zenoh_node_config_t;
 
 /* Fills cfg with the Kconfig defaults (CONFIG_* from sdkconfig). */

@@ -168,6 +168,9 @@ void zenoh_node_default_config(zenoh_node_config_t *cfg)
 	cfg->rx_qos = (zn_qos_t){ .priority = 5, .congestion = ZN_CONGESTION_BLOCK, .express = 1 };
 	cfg->tx_qos = (zn_qos_t){ .priority = 2, .congestion = ZN_CONGESTION_BLOCK, .express = 1 };
 	cfg->rx_queue_frames = CONFIG_ZENOH_RX_QUEUE_FRAMES;
+#ifdef CONFIG_ZENOH_COMPRESSION
+	cfg->compression = CONFIG_ZENOH_COMPRESSION;
+#endif
 }
 
 static int valid_key_chunk(const char *s)
@@ -669,6 +672,7 @@ esp_err_t zenoh_node_init(const zenoh_node_config_t *cfg)
 		.connect = cfg->router_address,
 		.listen = cfg->listen,
 		.config_file = cfg->zenoh_config_file[0] ? cfg->zenoh_config_file : NULL,
+		.compression = cfg->compression,
 	};
 	if (zn_open(&scfg, &node.session) != 0) {
 		zn_log("E", "cannot open the Zenoh session");

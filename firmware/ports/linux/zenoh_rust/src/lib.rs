@@ -29,6 +29,7 @@ pub struct ZnSessionConfig {
     connect: *const c_char,
     listen: *const c_char,
     config_file: *const c_char,
+    compression: c_int,
 }
 
 #[repr(C)]
@@ -92,6 +93,9 @@ fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
     }
     if let Some(listen) = c_str(cfg.listen).filter(|s| !s.trim().is_empty()) {
         set("listen/endpoints", endpoints_json(listen))?;
+    }
+    if cfg.compression != 0 {
+        set("transport/unicast/compression/enabled", "true".into())?;
     }
     // One connection attempt per open: zn_open retries with its own logged
     // backoff, so a bridge started before its router waits for it, never exits.
