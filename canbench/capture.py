@@ -24,11 +24,13 @@ def bound_can_receivers() -> int:
         out = subprocess.run(["ucanctl", "-d", ucan_dir, "stats", "-j"], capture_output=True, text=True,
                              env={k: v for k, v in os.environ.items() if k != "LD_PRELOAD"})
         return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
-    try:
-        text = Path("/proc/net/can/rcvlist_all").read_text()
-    except OSError:
-        return 0
-    return sum(1 for line in text.splitlines() if line.strip().startswith("vcan"))
+    count = 0
+    for path in Path("/proc/net/can").glob("rcvlist_*"):  # one entry per filter, in its list
+        for line in path.read_text().splitlines():
+            fields = line.split()
+            if len(fields) >= 6 and (fields[0].startswith("vcan") or fields[0] == "any"):
+                count += 1
+    return count
 
 
 class CanCapture:

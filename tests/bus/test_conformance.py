@@ -5,6 +5,7 @@ hub-only features say so when skipped."""
 from __future__ import annotations
 
 import json
+import os
 import random
 import signal
 import socket
@@ -16,8 +17,10 @@ import pytest
 from conftest import Bus, require_userspace, wait_for
 
 WAIT_S = 30
-SEQUENCE_FRAMES = 100_000
-SEQUENCE_RATE_PER_MS = 50  # cangen -g 1 -c 50: 50k frames/s
+# cangen -g 1 -c 50: 50k frames/s; the real-kernel lane runs under CPU emulation (about
+# ten times slower), where it sends fewer frames at a tenth of the rate (ucan/vm/vcan-vm sets VCANVM)
+SEQUENCE_FRAMES = 20_000 if os.environ.get("VCANVM") else 100_000
+SEQUENCE_RATE_PER_MS = 5 if os.environ.get("VCANVM") else 50
 
 
 def start_candump(bus: Bus, *args: str, readers: int = 1) -> subprocess.Popen:
@@ -75,7 +78,9 @@ def test_cansend_to_candump_every_frame_kind_in_order(bus):
         bus.run(["cansend", "vcan0", frame])
     bus.run(["cansend", "vcan1", "321#01"])  # other interface: not seen
     out, _ = stop(dump)
-    assert candump_frames(out) == [f"vcan0 {f}" for f in ALL_KINDS]
+    # the kernel (>= 6.0) sets CANFD_FDF (4) in every FD frame's flags: 1AB##1... is received as 1AB##5...
+    expected = [f.replace("##1", "##5") for f in ALL_KINDS]
+    assert candump_frames(out) == [f"vcan0 {f}" for f in expected]
 
 
 def test_candump_any_names_the_interface_of_each_frame(bus):
@@ -100,8 +105,9 @@ def test_canplayer_replays_with_recorded_timing_and_remapping(bus, tmp_path):
     assert [line.split(" ", 1)[1] for line in lines] == [f"vcan0 {0x100 + i:03X}#{i:02X}" for i in range(4)]
     stamps = [float(line[1:line.index(")")]) for line in lines]
     spans = [b - stamps[0] for b in stamps]
+    # canplayer paces from its first frame: each gap within a few ms (the first write may be late)
     for recorded, replayed in zip(gaps_s, spans, strict=True):
-        assert recorded <= replayed + 0.002 and replayed < recorded + 0.05, (gaps_s, spans)
+        assert recorded - 0.005 <= replayed < recorded + 0.05, (gaps_s, spans)
 
 
 def test_cansequence_50k_frames_per_second_no_loss_no_reordering(bus):

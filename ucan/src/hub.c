@@ -726,6 +726,9 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 		memcpy(&hdr, msg, sizeof(hdr));
 		memset(&frame, 0, sizeof(frame));
 		memcpy(&frame, msg + sizeof(hdr), size);
+		/* linux >= 6.0 marks every CAN FD frame it sends (af_can.c can_send) */
+		if (size == CANFD_MTU)
+			frame.flags |= CANFD_FDF;
 		struct iface *ifc = find_iface(hdr.ifindex);
 		if (ifc->info.bitrate) {
 			if (queue_for_wire(ifc, idx, &frame, size) < 0)
