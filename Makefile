@@ -35,7 +35,7 @@ ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE
 
 .PHONY: help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
+        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
         shell logs
 
 help:
@@ -87,8 +87,8 @@ check-ucan: ucan ucan-asan
 # The conformance suite against the release hub, then against the ASan/UBSan hub
 # (the preload library is never sanitized: it lives inside arbitrary programs).
 check-bus: ucan ucan-asan
-	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) $(PYTEST) -q tests/bus
-	UCAN_BUILD=$(CURDIR)/$(BUILD)/ucan-asan $(PYTEST) -q tests/bus
+	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) $(PYTEST) -q -rs tests/bus --ignore tests/bus/test_differential.py
+	UCAN_BUILD=$(CURDIR)/$(BUILD)/ucan-asan $(PYTEST) -q tests/bus --ignore tests/bus/test_differential.py
 
 check-firmware: firmware firmware-asan
 	ctest --test-dir $(FW_BUILD) --output-on-failure
@@ -118,6 +118,20 @@ fuzz-firmware:
 
 fuzz: fuzz-ucan fuzz-firmware
 
+# Real-kernel lane: the conformance suite and the differential check (userspace hub vs
+# kernel vcan, same frames) on kernel vcan - natively where the kernel has vcan, else
+# in Debian's kernel under QEMU (ucan/vm/vcan-vm), where the bridge's CAN port runs too.
+KERNEL_LANE_BRIDGE_TESTS := every_frame_kind or invalid_commands or sigterm
+check-kernel: ucan firmware zenohd
+	@if [ "$$(BENCH_CAN=auto scripts/detect-can)" = kernel ]; then \
+	   echo "kernel lane: native kernel vcan"; \
+	   UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) BENCH_CAN=kernel $(PYTEST) -q tests/bus tests/bridge -k "$(KERNEL_LANE_BRIDGE_TESTS) or not bridge"; \
+	 else \
+	   echo "kernel lane: Debian's kernel in QEMU (ucan/vm/vcan-vm), no kernel vcan on this host"; \
+	   ucan/vm/vcan-vm -- env UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZENOHD=$(ZENOHD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node \
+	     $(PYTEST) -p no:cacheprovider -q tests/bus tests/bridge -k "$(KERNEL_LANE_BRIDGE_TESTS) or not bridge"; \
+	 fi
+
 # The bench must catch a broken bridge: each seeded fault fails exactly its checks.
 check-faults: ucan firmware zenohd
 	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/faults
@@ -126,7 +140,7 @@ check-faults: ucan firmware zenohd
 check-compose: images
 	$(PYTEST) -q tests/compose
 
-check: check-python check-ucan check-firmware check-bus check-bridge check-faults fuzz check-compose
+check: check-python check-ucan check-firmware check-bus check-kernel check-bridge check-faults fuzz check-compose
 	@echo "make check: all project tests passed"
 
 bench-bus: ucan

@@ -5,6 +5,8 @@
 
 #define CAN_EFF_RTR_FLAGS (CAN_EFF_FLAG | CAN_RTR_FLAG)
 
+int can_filter_test_ignore_rtr;
+
 static int filter_matches(canid_t can_id, struct can_filter filter)
 {
 	canid_t inverted = filter.can_id & CAN_INV_FILTER;
@@ -16,6 +18,8 @@ static int filter_matches(canid_t can_id, struct can_filter filter)
 	/* 'SFF only' filters: an EFF-flag mask with a SFF id ignores the upper id bits */
 	if ((mask & CAN_EFF_FLAG) && !(want & CAN_EFF_FLAG))
 		mask &= (CAN_SFF_MASK | CAN_EFF_RTR_FLAGS);
+	if (can_filter_test_ignore_rtr)
+		mask &= ~CAN_RTR_FLAG;
 	want &= mask;
 	if (inverted)
 		return (can_id & mask) != want;

@@ -12,4 +12,9 @@
 int can_raw_accepts(canid_t can_id, const struct can_filter *filters, uint32_t nfilters,
 		    uint32_t err_mask, int join_filters);
 
+/* Test only: a deliberately broken emulation (filters ignore the RTR bit), set by
+ * ucan-hub from UCAN_HUB_TEST_FAULT=ignore-rtr-filter, so the differential check
+ * against kernel vcan can prove it catches a filter bug. */
+extern int can_filter_test_ignore_rtr;
+
 #endif

@@ -928,6 +928,11 @@ int main(int argc, char **argv)
 		return 2;
 	for (unsigned i = 0; i < hub.nifs; i++)
 		hub.ifinfos[i] = hub.ifaces[i].info;
+	const char *test_fault = getenv("UCAN_HUB_TEST_FAULT");
+	if (test_fault && strcmp(test_fault, "ignore-rtr-filter") == 0) {
+		can_filter_test_ignore_rtr = 1;
+		logmsg("TEST FAULT: filters ignore the RTR bit (UCAN_HUB_TEST_FAULT)");
+	}
 
 	struct sigaction sa = { .sa_handler = on_signal };
 	sigaction(SIGINT, &sa, NULL);
