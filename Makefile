@@ -34,7 +34,7 @@ SCENARIO       ?= $(wildcard scenarios/*.yaml)
 ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE
 
-.PHONY: help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
+.PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
         check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
         shell logs
 
@@ -47,7 +47,8 @@ help:
 	@echo "make firmware   build zenoh-node for Linux (C component + Rust Zenoh port)"
 	@echo "make zenohd     install zenohd $(ZENOHD_VERSION) from crates.io into $(CACHE)"
 	@echo "make fuzz       bounded libFuzzer runs (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
-	@echo "make bench-bus  userspace bus throughput/latency benchmark (not part of check)"
+	@echo "make bench      benchmarks, ratios against baselines measured in the same run (not part of check)"
+	@echo "make check-kernel  the real-kernel lane alone (kernel vcan natively, or in QEMU)"
 	@echo "make clean      remove $(BUILD)/ (not the cache in $(CACHE))"
 
 ucan:
@@ -145,6 +146,10 @@ check: check-python check-ucan check-firmware check-bus check-kernel check-bridg
 
 bench-bus: ucan
 	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD)
+
+# Benchmarks for nightly runs, never part of check. Today: the userspace bus
+# (docs/userspace-bus.md); the bridge benchmark against a Python reference is to come.
+bench: bench-bus
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }

@@ -72,7 +72,8 @@ class Bus:
         with open(self.hub_log, "ab") as log:
             self.hub = subprocess.Popen(
                 [str(BUILD / "ucan-hub"), "-d", str(self.workdir), "-r", str(write_fd), *self.hub_args],
-                stdout=log, stderr=log, pass_fds=(write_fd,), env={**self.env, "LD_PRELOAD": "", "UCAN_HUB_TEST_FAULT": os.environ.get("UCAN_HUB_TEST_FAULT", "")},
+                stdout=log, stderr=log, pass_fds=(write_fd,), env={**self.env, "LD_PRELOAD": "",
+                     "UCAN_HUB_TEST_FAULT": os.environ.get("UCAN_HUB_TEST_FAULT", "")},
             )
         os.close(write_fd)
         with os.fdopen(read_fd) as ready:

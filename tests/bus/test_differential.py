@@ -16,8 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from conftest import BUILD, KERNEL_VCAN, REPO, Bus
+from conftest import KERNEL_VCAN, REPO, Bus
 
 PROBE = Path(__file__).with_name("differential.py")
 sys.path.insert(0, str(PROBE.parent))
