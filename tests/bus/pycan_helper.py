@@ -47,7 +47,8 @@ def main() -> int:
     ap.add_argument("--fd", action="store_true")
     ap.add_argument("--errors", action="store_true", help="receive error frames")
     ap.add_argument("--join", action="store_true")
-    ap.add_argument("--timeout", type=float, default=10.0)
+    # only a bound for failures: under CPU emulation starting the other readers alone takes ~5 s each
+    ap.add_argument("--timeout", type=float, default=60.0)
     args = ap.parse_args()
 
     kwargs: dict = {"interface": "socketcan", "channel": args.channel, "fd": args.fd,
