@@ -23,17 +23,26 @@ SEQUENCE_FRAMES = 10_000 if os.environ.get("VCANVM") else 100_000
 SEQUENCE_RATE_PER_MS = 5 if os.environ.get("VCANVM") else 50
 
 
-def start_candump(bus: Bus, *args: str, readers: int = 1) -> subprocess.Popen:
-    """candump writing to a file: a pipe nobody reads yet would stall it after 64 KiB."""
+def start_candump(bus: Bus, *args: str, readers: int = 1, count: int | None = None,
+                  prefix: tuple[str, ...] = ()) -> subprocess.Popen:
+    """candump writing to a file: a pipe nobody reads yet would stall it after 64 KiB.
+    count: candump exits by itself after that many frames, so stopping it never races
+    the delivery of the last frame (a SIGINT can end it before it read a queued frame)."""
     before = bus.receivers()
     out = open(bus.workdir / f"candump-{len(list(bus.workdir.glob('candump-*')))}.log", "w+")
-    proc = bus.popen(["candump", *args], stdout=out)
+    limit = ("-n", str(count)) if count is not None else ()
+    proc = bus.popen([*prefix, "candump", *limit, *args], stdout=out)
     proc.output_file = out  # type: ignore[attr-defined]
     bus.wait_receivers(before + readers)
     return proc
 
 
 def stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[str, str]:
+    if "-n" in proc.args:  # it stops by itself after its count; wait for that
+        try:
+            proc.wait(timeout=WAIT_S)
+        except subprocess.TimeoutExpired:
+            pass  # fewer frames than expected: stop it and let the assertion show what came
     if proc.poll() is None:
         proc.send_signal(sig)
     out, err = proc.communicate(timeout=WAIT_S)
@@ -73,7 +82,7 @@ ALL_KINDS = ["123#DEADBEEF", "12345678#0102030405060708", "7FF#R", "0AA#R3", "00
 # -- can-utils ----------------------------------------------------------------
 
 def test_cansend_to_candump_every_frame_kind_in_order(bus):
-    dump = start_candump(bus, "-L", "vcan0")
+    dump = start_candump(bus, "-L", "vcan0", count=len(ALL_KINDS))
     for frame in ALL_KINDS:
         bus.run(["cansend", "vcan0", frame])
     bus.run(["cansend", "vcan1", "321#01"])  # other interface: not seen
@@ -84,7 +93,7 @@ def test_cansend_to_candump_every_frame_kind_in_order(bus):
 
 
 def test_candump_any_names_the_interface_of_each_frame(bus):
-    dump = start_candump(bus, "-ta", "-x", "any")
+    dump = start_candump(bus, "-ta", "-x", "any", count=2)
     bus.run(["cansend", "vcan0", "100#01"])
     bus.run(["cansend", "vcan1", "200#02"])
     out, _ = stop(dump)
@@ -98,7 +107,7 @@ def test_canplayer_replays_with_recorded_timing_and_remapping(bus, tmp_path):
     log = tmp_path / "trace.log"
     gaps_s = [0.0, 0.05, 0.10, 0.20]
     log.write_text("".join(f"({1000 + t:.6f}) can1 {0x100 + i:03X}#{i:02X}\n" for i, t in enumerate(gaps_s)))
-    dump = start_candump(bus, "-L", "vcan0")
+    dump = start_candump(bus, "-L", "vcan0", count=4)
     bus.run(["canplayer", "-I", str(log), "vcan0=can1"])
     out, _ = stop(dump)
     lines = [line for line in out.splitlines() if line.startswith("(")]
@@ -111,7 +120,7 @@ def test_canplayer_replays_with_recorded_timing_and_remapping(bus, tmp_path):
 
 
 def test_cansequence_50k_frames_per_second_no_loss_no_reordering(bus):
-    checker = start_candump(bus, "-L", "vcan0")
+    checker = start_candump(bus, "-L", "vcan0", count=SEQUENCE_FRAMES)
     seq = bus.popen(["cansequence", "-r", "-q1", "vcan0"])  # -q takes its number attached
     bus.wait_receivers(2)
     bus.run(["cangen", "vcan0", "-I", "2", "-L", "8", "-D", "i", "-g", "1", "-c", str(SEQUENCE_RATE_PER_MS),
@@ -242,7 +251,7 @@ def test_slow_reader_loses_frames_counted_without_slowing_others(bus):
     require_userspace(bus, "drop counters come from ucanctl")
     stalled = start_candump(bus, "vcan0")
     stalled.send_signal(signal.SIGSTOP)
-    healthy = start_candump(bus, "-L", "vcan0")
+    healthy = start_candump(bus, "-L", "vcan0", count=20_000)
     total = 20_000  # paced at 20k frames/s: the healthy reader keeps up, the stalled one overflows
     bus.run(["cangen", "vcan0", "-I", "7", "-L", "8", "-D", "i", "-g", "1", "-c", "20", "-n", str(total),
              "-p", "100"], timeout=120)
@@ -260,8 +269,7 @@ def test_two_network_namespaces_share_one_bus(bus):
     require_userspace(bus, "kernel vcan is per network namespace")
     if subprocess.run(["unshare", "-n", "true"], capture_output=True).returncode != 0:
         pytest.skip("unshare -n not permitted here (needs CAP_SYS_ADMIN)")
-    dump = bus.popen(["unshare", "-n", "candump", "-L", "vcan0"])
-    bus.wait_receivers(1)
+    dump = start_candump(bus, "-L", "vcan0", count=1, prefix=("unshare", "-n"))
     bus.run(["unshare", "-n", "cansend", "vcan0", "42A#2A"])
     out, _ = stop(dump)
     assert candump_frames(out) == ["vcan0 42A#2A"]
@@ -288,7 +296,7 @@ def test_hub_death_gives_network_down_and_restart_replaces_stale_socket(bus):
     assert (bus.workdir / "hub.sock").exists()
     bus.start_hub()
     assert "replaced stale socket" in bus.hub_log.read_text()
-    dump = start_candump(bus, "-L", "vcan0")
+    dump = start_candump(bus, "-L", "vcan0", count=1)
     bus.run(["cansend", "vcan0", "123#01"])
     out, _ = stop(dump)
     assert candump_frames(out) == ["vcan0 123#01"]
@@ -296,7 +304,7 @@ def test_hub_death_gives_network_down_and_restart_replaces_stale_socket(bus):
 
 def test_hub_survives_garbage_and_keeps_serving(bus):
     require_userspace(bus, "hub protocol robustness")
-    dump = start_candump(bus, "-L", "vcan0")
+    dump = start_candump(bus, "-L", "vcan0", count=1)
     rng = random.Random(1234)
     path = str(bus.workdir / "hub.sock")
     payloads = [b"", b"\x01", struct.pack("<I", 12) + b"\xff" * 30, struct.pack("<II", 10, 0xFFFFFFFF) + bytes(20),
