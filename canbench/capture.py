@@ -17,6 +17,19 @@ import zenoh
 from .runkeys import wait_until
 
 
+def kernel_can_receivers() -> int:
+    """Receive-list entries of the kernel's CAN core: one per filter of every bound CAN_RAW
+    socket, in whichever list the filter landed (rcvlist_all has only the match-all ones)."""
+    count = 0
+    for path in Path("/proc/net/can").glob("rcvlist_*"):
+        for line in path.read_text().splitlines():
+            fields = line.split()
+            # entries: "  vcan0  123  000007FF  <function>  <userdata>  <matches>  <ident>"
+            if len(fields) >= 6 and (fields[0].startswith("vcan") or fields[0] == "any"):
+                count += 1
+    return count
+
+
 def bound_can_receivers() -> int:
     """Bound CAN_RAW sockets on the bus: the hub's count, or the kernel's receive lists."""
     ucan_dir = os.environ.get("UCAN_DIR", "/run/ucan")
@@ -24,13 +37,7 @@ def bound_can_receivers() -> int:
         out = subprocess.run(["ucanctl", "-d", ucan_dir, "stats", "-j"], capture_output=True, text=True,
                              env={k: v for k, v in os.environ.items() if k != "LD_PRELOAD"})
         return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
-    count = 0
-    for path in Path("/proc/net/can").glob("rcvlist_*"):  # one entry per filter, in its list
-        for line in path.read_text().splitlines():
-            fields = line.split()
-            if len(fields) >= 6 and (fields[0].startswith("vcan") or fields[0] == "any"):
-                count += 1
-    return count
+    return kernel_can_receivers()
 
 
 class CanCapture:

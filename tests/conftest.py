@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from canbench.capture import kernel_can_receivers
 from canbench.runkeys import wait_until
 
 REPO = Path(__file__).resolve().parents[1]
@@ -31,19 +32,6 @@ def kernel_has_vcan() -> bool:
         return False
     subprocess.run(["ip", "link", "del", probe], capture_output=True)
     return True
-
-
-def kernel_receivers() -> int:
-    """Receive-list entries of the kernel's CAN core: one per filter of every bound CAN_RAW
-    socket, in whichever list the filter landed (rcvlist_all has only the match-all ones)."""
-    count = 0
-    for path in Path("/proc/net/can").glob("rcvlist_*"):
-        for line in path.read_text().splitlines():
-            fields = line.split()
-            # entries: "  vcan0  123  000007FF  <function>  <userdata>  <matches>  <ident>"
-            if len(fields) >= 6 and (fields[0].startswith("vcan") or fields[0] == "any"):
-                count += 1
-    return count
 
 
 def wait_for(condition, what: str, timeout: float = READY_TIMEOUT_S):
@@ -95,7 +83,7 @@ class Bus:
         """Number of bound CAN_RAW sockets on the bus (readiness of readers)."""
         if self.mode == "userspace":
             return sum(1 for c in self.stats()["clients"] if c["bound"])
-        return kernel_receivers()
+        return kernel_can_receivers()
 
     def wait_receivers(self, count: int) -> None:
         wait_for(lambda: self.receivers() >= count, f"{count} CAN receiver(s) bound")
