@@ -74,10 +74,6 @@ class ZenohCapture:
         with self.lock:
             self.samples.append((now, str(sample.key_expr), sample.payload.to_bytes(), att))
 
-    def count(self) -> int:
-        with self.lock:
-            return len(self.samples)
-
     def frames_on(self, keys: set[str]) -> int:
         """16-byte frames received so far on these keys."""
         with self.lock:
