@@ -32,7 +32,7 @@ BENCH_TAG      ?= $(shell { git ls-files -s $(IMAGE_SOURCES); git diff HEAD -- $
                    git ls-files -o --exclude-standard $(IMAGE_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-12)
 SCENARIO       ?= $(wildcard scenarios/*.yaml)
 ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
-export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE
+export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
         check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \

@@ -79,6 +79,16 @@ class ZenohCapture:
         with self.lock:
             return sum(len(payload) // 16 for _, key, payload, _ in self.samples if key in keys)
 
+    def frames_with_ids(self, ids_by_key: dict[str, set[int]]) -> int:
+        """Frames received so far on these keys whose id is in that key's set."""
+        with self.lock:
+            samples = [(key, payload) for _, key, payload, _ in self.samples if key in ids_by_key]
+        count = 0
+        for key, payload in samples:
+            for i in range(0, len(payload) - len(payload) % 16, 16):
+                count += int.from_bytes(payload[i:i + 4], "little") in ids_by_key[key]
+        return count
+
     def stop(self, path: Path) -> None:
         self.sub.undeclare()
         with open(path, "w") as f, self.lock:

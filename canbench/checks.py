@@ -23,7 +23,7 @@ def _expect(result: RunResult, name: str, default=None):
 
 
 def integrity(result: RunResult) -> list[str] | None:
-    """Every frame on the bus reached Zenoh byte-exact, once (within the loss budget)."""
+    """Every frame the ECUs put on the bus reached Zenoh byte-exact, once (within the loss budget)."""
     if not _expect(result, "integrity", True):
         return None
     budget = _expect(result, "loss_budget", 0)
@@ -60,21 +60,126 @@ def ordering(result: RunResult) -> list[str] | None:
     return problems
 
 
+def _latency_gate(result: RunResult, direction: str, comparisons) -> list[str] | None:
+    gate = (_expect(result, "latency", {}) or {}).get(direction)
+    if not gate or not ("p50_ms" in gate or "p99_ms" in gate):
+        return None
+    problems = []
+    for bus, comparison in comparisons:
+        lat = comparison.summary()["latency"]
+        if lat["count"] == 0:
+            continue  # nothing arrived: the integrity checks report that, latency has nothing to measure
+        if "p50_ms" in gate and lat["p50_ms"] > gate["p50_ms"]:
+            problems.append(f"{bus}: p50 {lat['p50_ms']:.3f} ms > gate {gate['p50_ms']} ms "
+                            f"(p90 {lat['p90_ms']:.3f}, p99 {lat['p99_ms']:.3f}, max {lat['max_ms']:.3f} ms)")
+        if "p99_ms" in gate and lat["p99_ms"] > gate["p99_ms"]:
+            problems.append(f"{bus}: p99 {lat['p99_ms']:.3f} ms > gate {gate['p99_ms']} ms")
+    return problems
+
+
 def latency_can_to_zenoh(result: RunResult) -> list[str] | None:
-    """Median CAN -> Zenoh latency within the scenario's gate (p99/max reported)."""
-    gate = (_expect(result, "latency", {}) or {}).get("can_to_zenoh")
-    if not gate:
+    """Median CAN -> Zenoh latency (bus timestamp to Zenoh receive) within the gate."""
+    return _latency_gate(result, "can_to_zenoh", [(b.bus, b.comparison) for b in result.buses])
+
+
+def latency_zenoh_to_can(result: RunResult) -> list[str] | None:
+    """Median Zenoh -> CAN latency (put to bus timestamp) within the gate."""
+    return _latency_gate(result, "zenoh_to_can", [(b.bus, b.zenoh_to_can) for b in result.buses if b.zenoh_to_can])
+
+
+def latency_round_trip(result: RunResult) -> list[str] | None:
+    """Median round trip (put -> CAN -> echo ECU -> CAN -> Zenoh receive) within the gate."""
+    return _latency_gate(result, "round_trip", [(b.bus, b.round_trip) for b in result.buses if b.round_trip])
+
+
+def zenoh_to_can(result: RunResult) -> list[str] | None:
+    """Every command put on a tx key reached its bus byte-exact, once, in put order, and the
+    bridge put nothing else on the bus."""
+    if not result.scenario.commands:
         return None
     problems = []
     for b in result.buses:
-        lat = b.comparison.summary()["latency"]
-        if lat["count"] == 0:
-            continue  # nothing arrived: integrity reports that, latency has nothing to measure
-        if "p50_ms" in gate and lat["p50_ms"] > gate["p50_ms"]:
-            problems.append(f"{b.bus}: p50 {lat['p50_ms']:.3f} ms > gate {gate['p50_ms']} ms "
-                            f"(p90 {lat['p90_ms']:.3f}, p99 {lat['p99_ms']:.3f}, max {lat['max_ms']:.3f} ms)")
-        if "p99_ms" in gate and lat["p99_ms"] > gate["p99_ms"]:
-            problems.append(f"{b.bus}: p99 {lat['p99_ms']:.3f} ms > gate {gate['p99_ms']} ms")
+        c = b.zenoh_to_can
+        if c is None or not b.commands:
+            continue
+        if _expect(result, "integrity", True):
+            if c.lost:
+                problems.append(f"{b.bus}: {len(c.lost)} commands never reached the bus: {_frames(c.lost)}")
+            if c.duplicates:
+                problems.append(f"{b.bus}: {len(c.duplicates)} commands written twice: {_frames(c.duplicates)}")
+            if c.corrupted:
+                listed = "; ".join(f"{describe(s)} reached the bus as {r.frame.candump(b.bus).split(' ', 1)[1]} "
+                                   f"({describe(r)}, bytes {diff})" for s, r, diff in c.corrupted[:SHOW])
+                problems.append(f"{b.bus}: {len(c.corrupted)} commands corrupted: {listed}")
+            if c.unexpected:
+                problems.append(f"{b.bus}: {len(c.unexpected)} frames on the bus that neither a command nor an ECU "
+                                f"explains: {_frames(c.unexpected)}")
+        if _expect(result, "ordering", True) and c.reordered:
+            listed = "; ".join(f"{describe(s)} after {describe(p)}" for s, p in c.reordered[:SHOW])
+            problems.append(f"{b.bus}: {len(c.reordered)} commands out of put order: {listed}")
+    return problems
+
+
+def round_trip(result: RunResult) -> list[str] | None:
+    """Every command an echo ECU answers came back on Zenoh as its answer."""
+    trips = [b for b in result.buses if b.round_trip]
+    if not trips:
+        return None
+    problems = []
+    for b in trips:
+        c = b.round_trip
+        assert c is not None
+        if len(c.lost) > _expect(result, "loss_budget", 0):
+            problems.append(f"{b.bus}: {len(c.lost)} of {c.sent} answers never came back on {b.rx_key}, "
+                            f"expected: {_frames(c.lost)}")
+    return problems
+
+
+def cycle_time(result: RunResult) -> list[str] | None:
+    """Per id, the cycle time a Zenoh consumer sees matches the bus (median within
+    tolerance_pct, no gap above max_gap_factor x the expected cycle)."""
+    gate = _expect(result, "cycle_time")
+    if not gate:
+        return None
+    tolerance = gate.get("tolerance_pct")
+    factor = gate.get("max_gap_factor")
+    explicit = {int(k, 16): v for k, v in gate.get("ids", {}).items()}
+    problems = []
+    for b in result.buses:
+        for ident, sides in b.cycle_times.items():
+            can, zen = sides["can"], sides["zenoh"]
+            if can["count"] < gate.get("min_frames", 5):
+                continue
+            expected = explicit.get(int(ident, 16), can["cycle_p50_ms"])
+            if not zen or zen["count"] < 2:
+                problems.append(f"{b.bus} id {ident}: no cycle on Zenoh ({zen['count'] if zen else 0} frames)")
+                continue
+            if tolerance is not None and abs(zen["cycle_p50_ms"] - expected) > expected * tolerance / 100:
+                problems.append(f"{b.bus} id {ident}: median cycle {zen['cycle_p50_ms']:.2f} ms on Zenoh, expected "
+                                f"{expected:.2f} ms +-{tolerance}%")
+            if factor is not None and zen["cycle_max_ms"] > expected * factor:
+                problems.append(f"{b.bus} id {ident}: a gap of {zen['cycle_max_ms']:.2f} ms on Zenoh, more than "
+                                f"{factor} x {expected:.2f} ms")
+    return problems
+
+
+def latency_regression(result: RunResult) -> list[str] | None:
+    """Median latency per direction not worse than the baseline run's by more than
+    max_regression_pct (differences under regression_floor_ms are noise)."""
+    gates = {d: g for d, g in (_expect(result, "latency", {}) or {}).items() if "max_regression_pct" in g}
+    if not gates or result.baseline is None:
+        return None
+    problems = []
+    for direction, gate in gates.items():
+        for bus, now in result.metrics.get(direction, {}).items():
+            before = result.baseline.get(direction, {}).get(bus)
+            if not before or before["latency"]["p50_ms"] is None or now["latency"]["p50_ms"] is None:
+                continue
+            old, new = before["latency"]["p50_ms"], now["latency"]["p50_ms"]
+            if new > old * (1 + gate["max_regression_pct"] / 100) and new - old > gate.get("regression_floor_ms", 0.05):
+                problems.append(f"{direction} {bus}: p50 {new:.3f} ms vs {old:.3f} ms in baseline run "
+                                f"{result.baseline.get('run_id')} (+{(new / old - 1) * 100:.0f}% > "
+                                f"{gate['max_regression_pct']}%)")
     return problems
 
 
@@ -102,9 +207,16 @@ def bridge_stats_agree(result: RunResult) -> list[str] | None:
         bus_stats = next((s for s in result.bridge_stats["buses"] if s["bus"] == b.bus), None)
         if bus_stats is None:
             problems.append(f"no stats for {b.bus}")
-        elif bus_stats["published_frames"] != len(b.zenoh_frames):
+            continue
+        if bus_stats["published_frames"] != len(b.zenoh_frames):
             problems.append(f"{b.bus}: bridge says it published {bus_stats['published_frames']} frames, "
                             f"the capture received {len(b.zenoh_frames)}")
+        tx = b.zenoh_to_can
+        if tx is not None:
+            written = len(tx.matched) + len(tx.duplicates) + len(tx.corrupted) + len(tx.unexpected)
+            if bus_stats["tx_frames"] != written:
+                problems.append(f"{b.bus}: bridge says it wrote {bus_stats['tx_frames']} frames to CAN, "
+                                f"the bus carried {written} from it")
     return problems
 
 
@@ -112,6 +224,12 @@ CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "integrity": integrity,
     "ordering": ordering,
     "latency_can_to_zenoh": latency_can_to_zenoh,
+    "zenoh_to_can": zenoh_to_can,
+    "latency_zenoh_to_can": latency_zenoh_to_can,
+    "round_trip": round_trip,
+    "latency_round_trip": latency_round_trip,
+    "cycle_time": cycle_time,
+    "latency_regression": latency_regression,
     "only_expected_keys": only_expected_keys,
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,

@@ -3,7 +3,7 @@
   canbench validate SCENARIO...            check scenario files and their traces
   canbench compose-override SCENARIO       compose override: bus, bridge settings, one service per ECU
   canbench ecu --scenario S --name N ...   run one emulated ECU (inside its container)
-  canbench gen-trace --seconds 2 --out F   write a synthetic powertrain trace
+  canbench gen-trace --kind K --out F      write a synthetic trace (powertrain, mixed, burst)
 
 Errors are one line (file:line where it applies); --debug shows the traceback.
 Exit codes: 0 ok, 1 run failure, 2 bad input."""
@@ -34,7 +34,9 @@ BRIDGE_ENV = {  # scenario bridge key -> the bridge's environment variable (its 
     "mode": "ZENOH_NODE_MODE", "publish_period_ms": "ZENOH_PUBLISH_PERIOD_MS",
     "batch_max_frames": "ZENOH_BATCH_MAX_FRAMES", "allow_ids": "ZENOH_NODE_ALLOW_IDS",
     "deny_ids": "ZENOH_NODE_DENY_IDS", "rx_congestion": "ZENOH_RX_CONGESTION", "rx_priority": "ZENOH_RX_PRIORITY",
+    "listen": "ZENOH_LISTEN",
 }
+BRIDGE_LISTEN = "tcp/0.0.0.0:7448"  # where a consumer reaches the bridge directly (topology consumer: bridge)
 
 
 def bus_spec(bus: dict) -> str:
@@ -45,11 +47,27 @@ def bus_spec(bus: dict) -> str:
 def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
     bridge_env = {"ZENOH_NODE_CAN": ",".join(sc.bus_names), "ZENOH_PUBLISH_PERIOD_MS": "0"}
     bridge_env.update({env: str(sc.bridge[key]) for key, env in BRIDGE_ENV.items() if key in sc.bridge})
+    orchestrator_env = {"SCENARIO": scenario_in_container}
     services: dict = {
         "bus": {"environment": {"BENCH_CAN_IFACES": " ".join(bus_spec(b) for b in sc.buses)}},
         "bridge": {"environment": bridge_env},
-        "orchestrator": {"environment": {"SCENARIO": scenario_in_container}},
+        "orchestrator": {"environment": orchestrator_env},
     }
+    if sc.consumer == "bridge":
+        bridge_env.setdefault("ZENOH_LISTEN", BRIDGE_LISTEN)
+        # the orchestrator shares the bus's network namespace with the bridge
+        port = bridge_env["ZENOH_LISTEN"].split(",")[0].rsplit(":", 1)[1]
+        orchestrator_env["BENCH_CONSUMER"] = f"tcp/127.0.0.1:{port}"
+    elif sc.consumer == "far_router":
+        services["router2"] = {
+            "image": "${ROUTER_IMAGE:-canbench/router:latest}",
+            "command": ["--config", "/etc/zenohd/zenohd.json5"],
+            "volumes": ["./images/router/zenohd-far.json5:/etc/zenohd/zenohd.json5:ro"],
+            "depends_on": {"router": {"condition": "service_healthy"}},
+            "healthcheck": {"test": ["CMD", "bash", "-c", "</dev/tcp/127.0.0.1/7447"], "interval": "1s",
+                            "timeout": "2s", "retries": 60},
+        }
+        orchestrator_env["BENCH_CONSUMER"] = "tcp/router2:7447"
     for e in sc.ecus:
         services[f"ecu-{e.name}"] = {
             "image": "canbench/ecu:${BENCH_TAG:-latest}",
@@ -81,9 +99,7 @@ def cmd_ecu(args) -> int:
 
 
 def cmd_gen_trace(args) -> int:
-    frames = tracegen.generate(args.seconds)
-    tracegen.write(args.out, frames)
-    print(f"{args.out}: {len(frames)} frames over {args.seconds} s")
+    print(tracegen.generate_file(args.kind, args.seconds, args.frames, args.out))
     return 0
 
 
@@ -106,9 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--router", default="tcp/router:7447")
     p.add_argument("--timeout", type=float, default=120, help="seconds to wait for the capture to be ready")
     p.set_defaults(func=cmd_ecu)
-    p = sub.add_parser("gen-trace", help="write a synthetic powertrain trace (candump -L)")
-    p.add_argument("--seconds", type=float, default=2.0)
-    p.add_argument("--out", type=Path, required=True)
+    p = sub.add_parser("gen-trace", help="write a synthetic trace (candump -L): powertrain, mixed, burst")
+    tracegen.add_arguments(p)
     p.set_defaults(func=cmd_gen_trace)
     args = ap.parse_args(argv)
     try:

@@ -1,42 +1,70 @@
-"""An emulated ECU: replays its trace on its bus with the recorded timing
-(python-can MessageSync), logs what it sent and when, and reports its own
-timing fidelity so a verdict never blames the bridge for emulator jitter.
+"""An emulated ECU, one of three roles:
+  replay    its trace with the recorded timing (python-can MessageSync)
+  periodic  generated messages (counter + checksum) for run_s
+  echo      answers frames with ids in echo_ids, canfdtest style (id + offset,
+            every data byte + 1), until the orchestrator says stop
+Each logs what it sent and when (ecu-<name>.sent.tsv, frames in candump form)
+and reports its own timing fidelity so a verdict never blames the bridge for
+emulator jitter.
 
 The ECU waits for the run's capture to be ready (a liveliness token the
-orchestrator declares), then replays, then publishes its summary on
+orchestrator declares), runs its role, then publishes its summary on
 bench/runs/<run-id>/ecus/<name>/done and exits."""
 from __future__ import annotations
 
 import json
 import statistics
+import threading
 import time
 from pathlib import Path
 
 import can
 
-from . import runkeys
+from . import runkeys, tracegen
 from .scenario import Ecu, Scenario
 from .trace import read_trace
+from .wire import Frame
+
+ECHO_POLL_S = 0.05  # how often the echo loop looks at its stop flag while the bus is quiet
 
 
 def schedule(ecu: Ecu, scenario: Scenario) -> list[tuple[int, can.Message]]:
-    """(trace line, message) in send order, with speed, loops, offset and id remap applied."""
+    """(trace line, message) in send order, with speed, loops, offset and id remap applied.
+    Generated (periodic) frames have line 0."""
+    if ecu.role == "periodic":
+        return [(0, m) for m in tracegen.periodic(ecu.messages, ecu.run_s, ecu.start_offset_s, ecu.bus)]
     frames = read_trace(ecu.trace, None) if ecu.trace else []
+    return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap)
+
+
+def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
+               id_remap: dict[int, int]) -> list[tuple[int, can.Message]]:
     if not frames:
         return []
     t0 = frames[0].message.timestamp
     span = frames[-1].message.timestamp - t0
     period = span + (frames[1].message.timestamp - t0 if len(frames) > 1 else 0.001)
     out = []
-    for loop in range(ecu.loops):
+    for loop in range(loops):
         for tf in frames:
             m = tf.message
-            offset = ecu.start_offset_s + (m.timestamp - t0 + loop * period) / ecu.speed
+            offset = start_offset_s + (m.timestamp - t0 + loop * period) / speed
             out.append((tf.line, can.Message(
-                timestamp=offset, arbitration_id=ecu.id_remap.get(m.arbitration_id, m.arbitration_id),
+                timestamp=offset, arbitration_id=id_remap.get(m.arbitration_id, m.arbitration_id),
                 is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame, dlc=m.dlc,
-                data=b"" if m.is_remote_frame else m.data, channel=ecu.bus)))
+                data=b"" if m.is_remote_frame else m.data, channel=bus)))
     return out
+
+
+def frame_of(msg: can.Message) -> Frame:
+    return Frame(msg.arbitration_id, msg.dlc, b"" if msg.is_remote_frame else bytes(msg.data),
+                 msg.is_extended_id, msg.is_remote_frame)
+
+
+def fidelity(errors_ms: list[float]) -> dict:
+    return {"p50": round(percentile(errors_ms, 0.5), 3), "p99": round(percentile(errors_ms, 0.99), 3),
+            "max": round(max(errors_ms, default=0.0), 3),
+            "mean": round(statistics.fmean(errors_ms), 3) if errors_ms else 0.0}
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -46,12 +74,15 @@ def percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
 
 
+SENT_LOG_HEADER = "# trace_line\tsend_time_ns\tframe (candump form)\n"
+
+
 def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
     plan = schedule(ecu, scenario)
     sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
     errors_ms: list[float] = []
     with can.Bus(interface="socketcan", channel=ecu.bus) as bus, open(sent_log, "w") as log:
-        log.write("# trace_line\tsend_time_ns\tframe\n")
+        log.write(SENT_LOG_HEADER)
         start = time.perf_counter()
         wall0 = time.time_ns() - int(start * 1e9)
         messages = [m for _, m in plan]
@@ -60,13 +91,43 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
             bus.send(synced)
             now = time.perf_counter()
             errors_ms.append((now - start - msg.timestamp) * 1000)
-            log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{msg.arbitration_id:X}#{msg.data.hex().upper()}\n")
-    return {
-        "name": ecu.name, "bus": ecu.bus, "trace": str(ecu.trace), "sent": len(plan),
-        "fidelity_ms": {"p50": round(percentile(errors_ms, 0.5), 3), "p99": round(percentile(errors_ms, 0.99), 3),
-                        "max": round(max(errors_ms, default=0.0), 3),
-                        "mean": round(statistics.fmean(errors_ms), 3) if errors_ms else 0.0},
-    }
+            log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
+    return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
+            "sent": len(plan), "fidelity_ms": fidelity(errors_ms)}
+
+
+def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
+    """Answers every request until stop is set and the socket holds nothing more. Bound to
+    the bus before it says ready (a liveliness token the orchestrator waits for)."""
+    sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
+    filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if i > 0x7FF else 0x7FF, "extended": i > 0x7FF}
+               for i in sorted(ecu.echo_ids)]
+    received = answered = 0
+    turnaround_ms: list[float] = []
+    with can.Bus(interface="socketcan", channel=ecu.bus, can_filters=filters) as bus, open(sent_log, "w") as log:
+        log.write(SENT_LOG_HEADER)
+        ready = session.liveliness().declare_token(runkeys.ecu_ready(run_id, ecu.name))
+        runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
+        while True:
+            msg = bus.recv(timeout=ECHO_POLL_S)
+            if msg is None:
+                if stop.is_set():
+                    break
+                continue
+            if msg.is_remote_frame or msg.is_error_frame or msg.arbitration_id not in ecu.echo_ids:
+                continue
+            received += 1
+            can_id, data = ecu.answer(msg.arbitration_id, bytes(msg.data))
+            answer = can.Message(arbitration_id=can_id, is_extended_id=msg.is_extended_id, data=data,
+                                 dlc=msg.dlc, channel=ecu.bus)
+            bus.send(answer)
+            now_ns = time.time_ns()
+            answered += 1
+            turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)
+            log.write(f"0\t{now_ns}\t{frame_of(answer).candump(ecu.bus)}\n")
+        ready.undeclare()
+    return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
+            "turnaround_ms": fidelity(turnaround_ms)}
 
 
 def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, timeout_s: float) -> dict:
@@ -75,8 +136,14 @@ def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, 
         raise SystemExit(f"{scenario.path}: no ECU named {name!r}")
     session = runkeys.open_session(router)
     try:
-        runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
-        summary = replay(ecu, scenario, run_dir)
+        stop = threading.Event()
+        stop_sub = session.declare_subscriber(runkeys.ecu_stop(run_id), lambda _sample: stop.set())
+        if ecu.role == "echo":
+            summary = echo(ecu, run_dir, stop, session, run_id, timeout_s)
+        else:
+            runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
+            summary = replay(ecu, scenario, run_dir)
+        stop_sub.undeclare()
         (run_dir / f"ecu-{ecu.name}.json").write_text(json.dumps(summary, indent=2))
         session.put(runkeys.ecu_done(run_id, name), json.dumps(summary))
         return summary

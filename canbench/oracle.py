@@ -13,7 +13,7 @@ has the same id and length (corrupted), else counted as unexpected."""
 from __future__ import annotations
 
 import re
-from collections import defaultdict, deque
+from collections import Counter, defaultdict, deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,6 +31,19 @@ class Observed:
     key: str = ""      # Zenoh: key expression of the sample
     seq: int = -1      # Zenoh: bridge sequence number
     bridge_rx_ns: int = 0  # Zenoh: CAN receive time the bridge put in the attachment
+    origin: str = "can.log"  # the file `line` refers to
+
+
+FRAME_TEXT = re.compile(r"^(\S+)\s+([0-9A-Fa-f]+)#(R\d?|[0-9A-Fa-f]*)$")
+
+
+def parse_frame(ident: str, body: str) -> wire.Frame:
+    """A frame from candump's '<id>#<body>' parts (8 hex digits = 29-bit id)."""
+    extended = len(ident) == 8
+    if body.startswith("R"):
+        return wire.Frame(int(ident, 16), int(body[1:] or 0), b"", extended, True)
+    data = bytes.fromhex(body)
+    return wire.Frame(int(ident, 16), len(data), data, extended)
 
 
 def read_candump(path: Path, interface: str | None = None) -> list[Observed]:
@@ -41,13 +54,31 @@ def read_candump(path: Path, interface: str | None = None) -> list[Observed]:
             continue
         sec, frac, _, ident, body = m.groups()
         t_ns = int(sec) * 1_000_000_000 + int(frac.ljust(9, "0")[:9])
-        extended = len(ident) == 8
-        if body.startswith("R"):
-            frame = wire.Frame(int(ident, 16), int(body[1:] or 0), b"", extended, True)
-        else:
-            data = bytes.fromhex(body)
-            frame = wire.Frame(int(ident, 16), len(data), data, extended)
-        out.append(Observed(frame, t_ns, len(out), line=lineno))
+        out.append(Observed(parse_frame(ident, body), t_ns, len(out), line=lineno))
+    return out
+
+
+@dataclass(frozen=True)
+class SentRecord:
+    log_line: int     # line in the send log
+    bus: str
+    source_line: int  # line in the trace it came from (0: generated)
+    t_ns: int
+    frame: wire.Frame
+
+
+def read_sent_log(path: Path) -> list[SentRecord]:
+    """An ECU's or the commander's send log. Columns: source line, send time (ns since
+    the epoch), the frame in candump form '<bus> <id>#<data>'."""
+    out = []
+    for lineno, raw in enumerate(open(path), 1):
+        if raw.startswith("#") or not raw.strip():
+            continue
+        line, t_ns, text = raw.rstrip("\n").split("\t")
+        m = FRAME_TEXT.match(text)
+        if not m:
+            raise ValueError(f"{path}: not a frame: {text!r}")
+        out.append(SentRecord(lineno, m[1], int(line), int(t_ns), parse_frame(m[2], m[3])))
     return out
 
 
@@ -111,6 +142,35 @@ class Comparison:
 
 def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
     """sent: CAN frames in bus order; received: Zenoh frames in arrival order."""
+    c, _ = _classify(sent, received, None)
+    return c
+
+
+def compare_commands(commands: list[Observed], bus: list[Observed],
+                     sent_by_others: Counter) -> tuple[Comparison, list[Observed]]:
+    """Zenoh -> CAN: commands in put order against the bus in bus order. Bus frames that
+    other nodes (ECUs) say they sent are theirs and returned; any other bus frame came from
+    the bridge: a duplicate of a command, a corrupted command, or unexpected."""
+    return _classify(commands, bus, Counter(sent_by_others))
+
+
+def match_subset(expected: list[Observed], observed: list[Observed]) -> Comparison:
+    """Each expected frame against a stream that also carries other traffic (round trip:
+    echo answers among everything on the rx key). Only matched and lost are meaningful."""
+    c, _ = _classify(expected, observed, _everything())
+    c.received = len(c.matched)
+    return c
+
+
+class _everything(Counter):
+    """An 'explained' budget that explains every frame."""
+
+    def __missing__(self, key):
+        return 1 << 62
+
+
+def _classify(sent: list[Observed], received: list[Observed],
+              explained: Counter | None) -> tuple[Comparison, list[Observed]]:
     c = Comparison(sent=len(sent), received=len(received))
     waiting: dict[tuple, deque[Observed]] = defaultdict(deque)
     for s in sent:
@@ -118,16 +178,23 @@ def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
     seen_keys = set(waiting)
     match_of: dict[int, Observed] = {}  # sent index -> received
     leftovers: list[Observed] = []
+    others: list[Observed] = []
     for r in received:
-        queue = waiting.get(_key(r.frame))
+        k = _key(r.frame)
+        queue = waiting.get(k)
         if queue:
             s = queue.popleft()
             match_of[s.index] = r
             c.matched.append((s, r))
-        elif _key(r.frame) in seen_keys:
+        elif explained is not None and explained[k] > 0:
+            explained[k] -= 1
+            others.append(r)
+        elif k in seen_keys:
             c.duplicates.append(r)
         else:
             leftovers.append(r)
+    if explained is not None:
+        c.received -= len(others)
     lost = [s for s in sent if s.index not in match_of]
     # corruption: an unknown frame where a lost frame of the same id and length was due
     lost_by_id: dict[tuple, deque[Observed]] = defaultdict(deque)
@@ -144,7 +211,7 @@ def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
         else:
             c.unexpected.append(r)
     c.lost = [s for s in lost if s.index not in corrupted_sent]
-    # reordering: received order against bus order, globally and per id
+    # reordering: received order against sent order, globally and per id
     last_by_id: dict[tuple, int] = {}
     previous: tuple[Observed, Observed] | None = None
     for s, r in sorted(c.matched, key=lambda p: p[1].index):
@@ -157,7 +224,7 @@ def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
         if not previous or s.index > previous[0].index:
             previous = (s, r)
         c.latency_ms.append((r.t_ns - s.t_ns) / 1e6)
-    return c
+    return c, others
 
 
 def cycle_times(frames: list[Observed]) -> dict[str, dict]:
@@ -174,6 +241,15 @@ def cycle_times(frames: list[Observed]) -> dict[str, dict]:
     return out
 
 
-def describe(o: Observed, capture_name: str = "can.log") -> str:
-    where = f"{capture_name}:{o.line}" if o.line else f"zenoh #{o.index} seq {o.seq}"
+def frame_key(f: wire.Frame) -> tuple:
+    return _key(f)
+
+
+def describe(o: Observed) -> str:
+    if o.line:
+        where = f"{o.origin}:{o.line}"
+    elif o.key:
+        where = f"zenoh #{o.index} seq {o.seq}"
+    else:
+        where = f"{o.origin} #{o.index}"
     return f"{o.frame.candump(o.key or 'bus').split(' ', 1)[1]} ({where})"

@@ -1,22 +1,28 @@
 """Runs one scenario from the orchestrator's side: wait for the bridge's
-liveliness token, start both captures, tell the ECUs to go (a liveliness
-token), wait for every ECU's done message, drain, stop, analyse, and write
-metrics.json. The pytest checks (tests/scenarios) read the result."""
+liveliness token (through the consumer's path) and for every echo ECU's, start
+both captures, tell the ECUs to go (a liveliness token), put the commands on
+the tx keys, wait for every ECU's done message, let the echoes stop, drain,
+stop, analyse, and write metrics.json. The pytest checks (tests/scenarios)
+read the result."""
 from __future__ import annotations
 
 import json
 import threading
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import oracle, runkeys
+from . import oracle, runkeys, wire
 from .capture import CanCapture, ZenohCapture, read_zenoh_capture
+from .commands import Commander, tx_key
+from .commands import plan as command_plan
 from .scenario import Scenario
 
 METRICS_SCHEMA_VERSION = 1
 BRIDGE_READY_TIMEOUT_S = 60
 DRAIN_TIMEOUT_S = 5.0
+ECHO_STOP_TIMEOUT_S = 15
 
 
 @dataclass
@@ -25,8 +31,12 @@ class BusResult:
     rx_key: str
     can_frames: list[oracle.Observed]
     zenoh_frames: list[oracle.Observed]
-    comparison: oracle.Comparison
+    comparison: oracle.Comparison       # CAN -> Zenoh
     problems: list[str]
+    commands: list[oracle.Observed] = field(default_factory=list)
+    zenoh_to_can: oracle.Comparison | None = None
+    round_trip: oracle.Comparison | None = None
+    cycle_times: dict = field(default_factory=dict)  # id -> {"can": stats, "zenoh": stats}
 
 
 @dataclass
@@ -39,6 +49,7 @@ class RunResult:
     bridge_stats: dict | None
     unexpected_keys: list[str]
     metrics: dict = field(default_factory=dict)
+    baseline: dict | None = None  # metrics.json of the run to compare with (relative regression gate)
 
 
 def rx_key(prefix: str, bus: str, bus_count: int) -> str:
@@ -50,35 +61,90 @@ def query_stats(session, prefix: str) -> dict | None:
     return json.loads(replies[0].ok.payload.to_bytes()) if replies else None
 
 
-def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can") -> RunResult:
+Located = list[tuple[str, oracle.Observed]]  # (bus, frame)
+
+
+def expected_answers(scenario: Scenario, commands: Located) -> Located:
+    """(bus, the echo's answer) for every command an echo ECU answers; the answer carries the
+    command's put time and place, so latency is the round trip and failures name the command."""
+    out = []
+    for bus, cmd in commands:
+        f = cmd.frame
+        echo = next((e for e in scenario.echoes if e.bus == bus and f.can_id in e.echo_ids), None)
+        if echo is None or f.remote:
+            continue
+        can_id, data = echo.answer(f.can_id, f.data)
+        out.append((bus, oracle.Observed(wire.Frame(can_id, f.dlc, data, f.extended), cmd.t_ns, cmd.index,
+                                         line=cmd.line, origin=cmd.origin)))
+    return out
+
+
+def _answer_ids(scenario: Scenario) -> dict[str, set[int]]:
+    """Per bus: the ids of echo answers."""
+    out: dict[str, set[int]] = {}
+    for e in scenario.echoes:
+        out.setdefault(e.bus, set()).update(i + e.answer_id_offset for i in e.echo_ids)
+    return out
+
+
+def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can",
+            consumer: str | None = None, baseline: dict | None = None) -> RunResult:
+    """router: where the bench coordinates (ECUs, stats); consumer: where the capture and the
+    commands connect (the router by default; a far router or the bridge itself by topology)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     session = runkeys.open_session(router)
+    data = session if consumer in (None, router) else runkeys.open_session(consumer)
     try:
-        runkeys.wait_token(session, f"{prefix}/bridges/**", BRIDGE_READY_TIMEOUT_S)
+        # the token seen through the consumer's path: the data path is up end to end
+        runkeys.wait_token(data, f"{prefix}/bridges/**", BRIDGE_READY_TIMEOUT_S)
+        for e in scenario.echoes:
+            runkeys.wait_token(session, runkeys.ecu_ready(run_id, e.name), BRIDGE_READY_TIMEOUT_S)
         done: dict[str, dict] = {}
-        all_done = threading.Event()
-        names = {e.name for e in scenario.ecus}
+        senders_done = threading.Event()
+        echoes_done = threading.Event()
+        senders = {e.name for e in scenario.ecus if e.role != "echo"}
+        echo_names = {e.name for e in scenario.echoes}
 
         def on_done(sample) -> None:
             name = str(sample.key_expr).split("/")[-2]
             done[name] = json.loads(sample.payload.to_bytes())
-            if names <= set(done):
-                all_done.set()
+            if senders <= set(done):
+                senders_done.set()
+            if echo_names <= set(done):
+                echoes_done.set()
 
         done_sub = session.declare_subscriber(f"bench/runs/{run_id}/ecus/*/done", on_done)
         can_capture = CanCapture(run_dir / "can.log", scenario.bus_names)
-        zenoh_capture = ZenohCapture(session, f"{prefix}/**")
+        zenoh_capture = ZenohCapture(data, f"{prefix}/**")
+        commander = Commander(data, scenario, run_dir / "commands.tsv", prefix) if scenario.commands else None
         ready = session.liveliness().declare_token(runkeys.capture_ready(run_id))
         started = time.monotonic()
+        bridge_stats = None
         try:
-            if not all_done.wait(scenario.duration_s + 30):
-                missing = sorted(names - set(done))
+            if commander:
+                commander.start()
+            deadline = scenario.duration_s + 30
+            if not senders_done.wait(deadline):
+                missing = sorted(senders - set(done))
                 raise TimeoutError(f"ECUs {missing} did not finish within duration_s + 30 s "
-                                   f"({scenario.duration_s + 30:.0f} s); see their container logs")
+                                   f"({deadline:.0f} s); see their container logs")
+            if commander:
+                commander.join(max(0.0, deadline - (time.monotonic() - started)))
+                if commander.is_alive():
+                    raise TimeoutError(f"commands not all put within duration_s + 30 s ({deadline:.0f} s)")
+                if commander.error:
+                    raise RuntimeError(f"putting commands failed: {commander.error}")
             traffic_s = time.monotonic() - started
-            # drain: until the bridge has published everything it read, or a bounded wait
             period_s = scenario.bridge.get("publish_period_ms", 0) / 1000
+            if commander:
+                _drain_commands(session, data, prefix, commander.sent, scenario, zenoh_capture, period_s)
+            if echo_names:
+                session.put(runkeys.ecu_stop(run_id), b"")
+                if not echoes_done.wait(ECHO_STOP_TIMEOUT_S):
+                    raise TimeoutError(f"echo ECUs {sorted(echo_names - set(done))} did not stop within "
+                                       f"{ECHO_STOP_TIMEOUT_S} s; see their container logs")
 
+            # drain: until the bridge has published everything it read, or a bounded wait
             def drained() -> bool:
                 stats = query_stats(session, prefix)
                 if not stats:
@@ -105,33 +171,91 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
             can_capture.stop()
             zenoh_capture.stop(run_dir / "zenoh.jsonl")
     finally:
+        if data is not session:
+            data.close()
         session.close()
-    return analyse(scenario, run_id, run_dir, prefix, done, bridge_stats, traffic_s)
+    return analyse(scenario, run_id, run_dir, prefix, done, bridge_stats, traffic_s, baseline)
+
+
+def _drain_commands(session, data, prefix: str, sent: int, scenario: Scenario, capture: ZenohCapture,
+                    period_s: float) -> None:
+    """Bounded waits until the bridge has handled every command it was sent, and the
+    echoes' answers to them are back on Zenoh; what is missing then is loss."""
+    def handled() -> bool:
+        stats = query_stats(session, prefix)
+        return stats is not None and sum(b["tx_frames"] + b["can_tx_errors"] + sum(b["tx_rejected"].values())
+                                   for b in stats["buses"]) >= sent
+    try:
+        runkeys.wait_until(handled, DRAIN_TIMEOUT_S, "the bridge to write the commands to CAN")
+    except TimeoutError:
+        return
+    answer_ids = _answer_ids(scenario)
+    if not answer_ids:
+        return
+    wanted = len(expected_answers(scenario, [(bus, oracle.Observed(frame, 0, 0))
+                                            for _, bus, _, frame in command_plan(scenario)]))
+    keys = {rx_key(prefix, b, len(scenario.bus_names)): ids for b, ids in answer_ids.items()}
+    try:
+        runkeys.wait_until(lambda: capture.frames_with_ids(keys) >= wanted, DRAIN_TIMEOUT_S + period_s,
+                           "the echoes' answers to reach the capture")
+    except TimeoutError:
+        pass
+
+
+def _sent_by_ecus(run_dir: Path, bus: str) -> Counter:
+    """What the ECUs on this bus say they sent (their send logs), by frame content."""
+    out: Counter = Counter()
+    for log in sorted(run_dir.glob("ecu-*.sent.tsv")):
+        out.update(oracle.frame_key(r.frame) for r in oracle.read_sent_log(log) if r.bus == bus)
+    return out
+
+
+def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.Observed, oracle.Observed]]) -> dict:
+    can_side = oracle.cycle_times(can_frames)
+    zenoh_side = oracle.cycle_times(sorted((r for _, r in matched), key=lambda o: o.index))
+    return {ident: {"can": stats, "zenoh": zenoh_side.get(ident)} for ident, stats in can_side.items()}
 
 
 def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: dict[str, dict],
-            bridge_stats: dict | None, traffic_s: float) -> RunResult:
+            bridge_stats: dict | None, traffic_s: float, baseline: dict | None = None) -> RunResult:
     samples = read_zenoh_capture(run_dir / "zenoh.jsonl")
-    expected_keys = {rx_key(prefix, b, len(scenario.bus_names)) for b in scenario.bus_names}
-    expected_keys |= {k.replace("/rx", "/tx") for k in expected_keys}
+    n = len(scenario.bus_names)
+    expected_keys = {rx_key(prefix, b, n) for b in scenario.bus_names}
+    expected_keys |= {tx_key(prefix, b, n) for b in scenario.bus_names}
     unexpected_keys = sorted({key for _, key, _, _ in samples if key not in expected_keys})
+    commands_log = run_dir / "commands.tsv"
+    commands = [(r.bus, oracle.Observed(r.frame, r.t_ns, i, line=r.log_line, origin="commands.tsv"))
+                for i, r in enumerate(oracle.read_sent_log(commands_log) if commands_log.exists() else [])]
+    answers = expected_answers(scenario, commands)
     buses = []
     for bus in scenario.bus_names:
-        key = rx_key(prefix, bus, len(scenario.bus_names))
+        key = rx_key(prefix, bus, n)
         can_frames = oracle.read_candump(run_dir / "can.log", bus)
         zenoh_frames, problems = oracle.zenoh_frames(samples, key)
-        buses.append(BusResult(bus, key, can_frames, zenoh_frames, oracle.compare(can_frames, zenoh_frames), problems))
-    result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys)
+        bus_commands = [c for b, c in commands if b == bus]
+        tx = None
+        from_ecus = can_frames
+        if scenario.commands:
+            tx, from_ecus = oracle.compare_commands(bus_commands, can_frames, _sent_by_ecus(run_dir, bus))
+        comparison = oracle.compare(from_ecus, zenoh_frames)
+        bus_answers = [a for b, a in answers if b == bus]
+        round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
+        buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
+                               _cycle_times(from_ecus, comparison.matched)))
+    result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys, baseline=baseline)
     result.metrics = {
         "schema_version": METRICS_SCHEMA_VERSION,
         "run_id": run_id,
         "scenario": scenario.name,
         "traffic_s": round(traffic_s, 3),
         "can_to_zenoh": {b.bus: b.comparison.summary() for b in buses},
-        "cycle_times": {b.bus: oracle.cycle_times(b.can_frames) for b in buses},
+        "zenoh_to_can": {b.bus: b.zenoh_to_can.summary() for b in buses if b.zenoh_to_can},
+        "round_trip": {b.bus: b.round_trip.summary() for b in buses if b.round_trip},
+        "cycle_times": {b.bus: b.cycle_times for b in buses},
         "ecus": ecus,
         "bridge_stats": bridge_stats,
         "unexpected_keys": unexpected_keys,
+        "baseline_run_id": baseline.get("run_id") if baseline else None,
         "verdicts": {},
     }
     write_metrics(result)

@@ -18,6 +18,16 @@ def ecu_done(run_id: str, name: str) -> str:
     return f"bench/runs/{run_id}/ecus/{name}/done"
 
 
+def ecu_ready(run_id: str, name: str) -> str:
+    """Liveliness token of an echo ECU bound to its bus, ready to answer."""
+    return f"bench/runs/{run_id}/ecus/{name}/ready"
+
+
+def ecu_stop(run_id: str) -> str:
+    """Put by the orchestrator when echo ECUs may stop answering."""
+    return f"bench/runs/{run_id}/stop"
+
+
 def open_session(endpoint: str) -> zenoh.Session:
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')

@@ -64,6 +64,16 @@ def _line_of(doc: Any, path: list) -> int:
 
 
 @dataclass(frozen=True)
+class Message:
+    """A generated periodic message (periodic ECUs, generated commands)."""
+    can_id: int
+    cycle_ms: float
+    dlc: int = 8
+    extended: bool = False
+    remote: bool = False
+
+
+@dataclass(frozen=True)
 class Ecu:
     name: str
     bus: str
@@ -73,6 +83,25 @@ class Ecu:
     loops: int = 1
     start_offset_s: float = 0.0
     id_remap: dict[int, int] = field(default_factory=dict)
+    echo_ids: frozenset[int] = frozenset()
+    answer_id_offset: int = 1
+    messages: tuple[Message, ...] = ()
+    run_s: float = 0.0
+
+    def answer(self, can_id: int, data: bytes) -> tuple[int, bytes]:
+        """The echo role's answer to a request (canfdtest style)."""
+        return can_id + self.answer_id_offset, bytes((b + 1) & 0xFF for b in data)
+
+
+@dataclass(frozen=True)
+class Commands:
+    """Frames the consumer puts on a bus's tx key: a trace or generated messages."""
+    bus: str
+    trace: Path | None = None
+    speed: float = 1.0
+    messages: tuple[Message, ...] = ()
+    run_s: float = 0.0
+    start_offset_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -86,10 +115,16 @@ class Scenario:
     bridge: dict
     expect: dict
     raw: dict
+    commands: list[Commands] = field(default_factory=list)
+    consumer: str = "router"
 
     @property
     def bus_names(self) -> list[str]:
         return [b["name"] for b in self.buses]
+
+    @property
+    def echoes(self) -> list[Ecu]:
+        return [e for e in self.ecus if e.role == "echo"]
 
 
 def schema() -> dict:
@@ -123,22 +158,53 @@ def load(path: str | Path) -> Scenario:
                 line_path.append(unknown[0])
         raise ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {first.message}")
     buses = {b["name"] for b in doc["buses"]}
+
+    def fail(where: list, message: str) -> ScenarioError:
+        return ScenarioError(str(path), _line_of(doc, where), f"{'.'.join(map(str, where))}: {message}")
+
+    def trace_of(spec: dict, where: list) -> Path | None:
+        if "trace" not in spec:
+            return None
+        trace = (path.parent / spec["trace"]).resolve()
+        if not trace.is_file():
+            raise fail([*where, "trace"], f"no such file {trace}")
+        return trace
+
+    def messages_of(spec: dict) -> tuple[Message, ...]:
+        return tuple(Message(int(m["id"], 16), m["cycle_ms"], m.get("dlc", 8), m.get("extended", False),
+                             m.get("remote", False)) for m in spec.get("messages", []))
+
     ecus: list[Ecu] = []
     for i, spec in enumerate(doc["ecus"]):
         if spec["bus"] not in buses:
-            raise ScenarioError(str(path), _line_of(doc, ["ecus", i, "bus"]),
-                                f"ecus.{i}.bus: '{spec['bus']}' is not one of the buses {sorted(buses)}")
-        trace = (path.parent / spec["trace"]).resolve() if "trace" in spec else None
-        if spec.get("role", "replay") == "replay" and trace is None:
-            raise ScenarioError(str(path), _line_of(doc, ["ecus", i]), f"ecus.{i}: role replay needs a trace")
-        if trace is not None and not trace.is_file():
-            raise ScenarioError(str(path), _line_of(doc, ["ecus", i, "trace"]),
-                                f"ecus.{i}.trace: no such file {trace}")
+            raise fail(["ecus", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
+        role = spec.get("role", "replay")
+        trace = trace_of(spec, ["ecus", i])
+        needs = {"replay": ["trace"], "echo": ["echo_ids"], "periodic": ["messages", "run_s"]}[role]
+        for key in needs:
+            if key not in spec:
+                raise fail(["ecus", i], f"role {role} needs {key}")
         remap = {int(k, 16): int(v, 16) for k, v in spec.get("id_remap", {}).items()}
-        ecus.append(Ecu(spec["name"], spec["bus"], spec.get("role", "replay"), trace, spec.get("speed", 1.0),
-                        spec.get("loops", 1), spec.get("start_offset_s", 0.0), remap))
+        ecus.append(Ecu(spec["name"], spec["bus"], role, trace, spec.get("speed", 1.0), spec.get("loops", 1),
+                        spec.get("start_offset_s", 0.0), remap,
+                        frozenset(int(x, 16) for x in spec.get("echo_ids", [])), spec.get("answer_id_offset", 1),
+                        messages_of(spec), spec.get("run_s", 0.0)))
     names = [e.name for e in ecus]
     if len(set(names)) != len(names):
         raise ScenarioError(str(path), _line_of(doc, ["ecus"]), "ecus: names must be unique")
+    commands: list[Commands] = []
+    for i, spec in enumerate(doc.get("commands", [])):
+        if spec["bus"] not in buses:
+            raise fail(["commands", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
+        if ("trace" in spec) == ("messages" in spec):
+            raise fail(["commands", i], "give either trace or messages (with run_s)")
+        if "messages" in spec and "run_s" not in spec:
+            raise fail(["commands", i], "messages need run_s")
+        commands.append(Commands(spec["bus"], trace_of(spec, ["commands", i]), spec.get("speed", 1.0),
+                                 messages_of(spec), spec.get("run_s", 0.0), spec.get("start_offset_s", 0.0)))
+    bridge = dict(doc.get("bridge", {}))
+    consumer = doc.get("topology", {}).get("consumer", "router")
+    if consumer == "bridge" and bridge.get("mode", "client") == "client":
+        raise fail(["topology", "consumer"], "a consumer can connect to the bridge only in bridge.mode peer or router")
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
-                    dict(doc.get("bridge", {})), dict(doc.get("expect", {})), doc)
+                    bridge, dict(doc.get("expect", {})), doc, commands, consumer)

@@ -1,9 +1,14 @@
-"""A realistic synthetic powertrain trace: periodic messages with their own
-cycle times, 4-bit rolling counters and checksums, mixed 11/29-bit ids, a
-remote request and a zero-length frame, written with python-can's
-CanutilsLogWriter (candump -L).
+"""Synthetic traces, in candump -L form:
 
-  python -m canbench.tracegen --seconds 2 --out scenarios/traces/powertrain.log
+  powertrain  periodic messages with their own cycle times, 4-bit rolling
+              counters and checksums, mixed 11/29-bit ids, a remote request
+              and a zero-length frame (a realistic powertrain bus)
+  mixed       every frame shape CAN 2.0 has: 11/29-bit ids at the range ends,
+              remote frames of every dlc, zero-length frames, 1..8 data bytes
+  burst       back-to-back frames with one timestamp: a sender that offers
+              more than the bus carries (saturation, arbitration)
+
+  canbench gen-trace --kind powertrain --seconds 2 --out scenarios/traces/powertrain-2s.log
 
 Each message: (id, extended, cycle_ms, dlc). Byte 0 low nibble is a rolling
 counter, the last byte an 8-bit checksum (sum of the other bytes, like many
@@ -15,6 +20,8 @@ import math
 from pathlib import Path
 
 import can
+
+from .wire import Frame
 
 MESSAGES = [
     (0x0C0, False, 10, 8),         # engine speed / torque
@@ -50,27 +57,83 @@ def generate(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0
             frames.append(can.Message(timestamp=t, arbitration_id=can_id, is_extended_id=extended,
                                       dlc=dlc, data=_payload(can_id, dlc, n, t - start), channel=iface))
     # a diagnostic remote request once a second
-    frames += [can.Message(timestamp=start + 0.5 + s, arbitration_id=0x7E0, is_remote_frame=True, dlc=8,
+    frames += [can.Message(timestamp=start + 0.5 + s, arbitration_id=0x7E0, is_extended_id=False, is_remote_frame=True, dlc=8,
                            channel=iface) for s in range(int(seconds))]
     frames.sort(key=lambda m: (m.timestamp, m.arbitration_id))
     return frames
 
 
+def mixed(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0") -> list[can.Message]:
+    """Every 5 ms one frame of a rotating set of shapes."""
+    shapes = [(0x000, False, False, 0), (0x7FF, False, False, 8), (0x1FFFFFFF, True, False, 8),
+              (0x00000000, True, False, 0), (0x123, False, True, 0), (0x124, False, True, 8),
+              (0x18DAF110, True, True, 3), (0x18DA10F1, True, False, 1)]
+    shapes += [(0x400 + n, False, False, n) for n in range(1, 8)]
+    frames = []
+    for n in range(int(seconds * 200)):
+        can_id, extended, remote, dlc = shapes[n % len(shapes)]
+        t = start + n * 0.005
+        frames.append(can.Message(timestamp=t, arbitration_id=can_id, is_extended_id=extended,
+                                  is_remote_frame=remote, dlc=dlc,
+                                  data=b"" if remote else _payload(can_id, dlc, n, n * 0.005), channel=iface))
+    return frames
+
+
+def burst(count: int, start: float = 1_700_000_000.0, iface: str = "vcan0") -> list[can.Message]:
+    """count frames offered at once: ids cycle through 16 priorities, 8 bytes each."""
+    return [can.Message(timestamp=start, arbitration_id=0x100 + (n * 7) % 16, is_extended_id=False, dlc=8,
+                        data=_payload(0x100 + n % 16, 8, n, n * 1e-4), channel=iface) for n in range(count)]
+
+
+def periodic(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> list[can.Message]:
+    """Frames of scenario messages (canbench.scenario.Message) for `seconds`, in time order,
+    with the same counter/checksum payloads as the synthetic trace."""
+    frames: list[can.Message] = []
+    for m in messages:
+        phase = (m.can_id % 97) / 97 * min(m.cycle_ms, 10) / 1000
+        for n in range(max(1, int(seconds * 1000 / m.cycle_ms))):
+            t = start + phase + n * m.cycle_ms / 1000
+            frames.append(can.Message(timestamp=t, arbitration_id=m.can_id, is_extended_id=m.extended,
+                                      is_remote_frame=m.remote, dlc=m.dlc,
+                                      data=b"" if m.remote else _payload(m.can_id, m.dlc, n, t - start),
+                                      channel=iface))
+    frames.sort(key=lambda f: (f.timestamp, f.arbitration_id))
+    return frames
+
+
 def write(path: Path, frames: list[can.Message]) -> None:
+    """candump -L lines. Not python-can's CanutilsLogWriter: it drops the dlc of remote
+    frames ('123#R' for every dlc), which its own reader and canplayer understand ('123#R8')."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with can.CanutilsLogWriter(str(path), channel=str(frames[0].channel)) as writer:
-        for msg in frames:
-            writer.on_message_received(msg)
+    with open(path, "w") as out:
+        for m in frames:
+            frame = Frame(m.arbitration_id, m.dlc, b"" if m.is_remote_frame else bytes(m.data), m.is_extended_id,
+                          m.is_remote_frame)
+            out.write(f"({m.timestamp:.6f}) {frame.candump(str(m.channel))}\n")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seconds", type=float, default=2.0)
-    ap.add_argument("--out", type=Path, required=True)
+    add_arguments(ap)
     args = ap.parse_args()
-    frames = generate(args.seconds)
-    write(args.out, frames)
-    print(f"{args.out}: {len(frames)} frames over {args.seconds} s")
+    print(generate_file(args.kind, args.seconds, args.frames, args.out))
+
+
+KINDS = ("powertrain", "mixed", "burst")
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--kind", choices=KINDS, default="powertrain")
+    ap.add_argument("--seconds", type=float, default=2.0, help="powertrain, mixed: length of the trace")
+    ap.add_argument("--frames", type=int, default=2000, help="burst: frames offered at once")
+    ap.add_argument("--out", type=Path, required=True)
+
+
+def generate_file(kind: str, seconds: float, count: int, out: Path) -> str:
+    frames = {"powertrain": lambda: generate(seconds), "mixed": lambda: mixed(seconds),
+              "burst": lambda: burst(count)}[kind]()
+    write(out, frames)
+    return f"{out}: {len(frames)} {kind} frames"
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 verdicts written back into metrics.json."""
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -17,7 +18,11 @@ def pytest_addoption(parser):
     group.addoption("--run-id", default=os.environ.get("RUN_ID", "local"), help="run identifier")
     group.addoption("--run-dir", default=os.environ.get("RUN_DIR"), help="where the run writes its files")
     group.addoption("--router", default=os.environ.get("BENCH_ROUTER", "tcp/router:7447"),
-                    help="Zenoh router endpoint")
+                    help="Zenoh router endpoint the bench coordinates through")
+    group.addoption("--consumer", default=os.environ.get("BENCH_CONSUMER"),
+                    help="endpoint the capture and the commands connect to (default: the router)")
+    group.addoption("--baseline", default=os.environ.get("BENCH_BASELINE") or None,
+                    help="metrics.json (or its run directory) of a run to gate relative regressions against")
 
 
 @pytest.fixture(scope="session")
@@ -31,7 +36,12 @@ def bench_options(request):
 @pytest.fixture(scope="session")
 def scenario_run(bench_options, request):
     sc = scenario.load(bench_options.scenario)
-    result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router)
+    baseline = None
+    if bench_options.baseline:
+        path = Path(bench_options.baseline)
+        baseline = json.loads((path / "metrics.json" if path.is_dir() else path).read_text())
+    result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router,
+                         consumer=bench_options.consumer, baseline=baseline)
     request.config._bench_result = result
     return result
 

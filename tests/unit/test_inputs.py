@@ -64,6 +64,15 @@ def test_good_trace_keeps_line_numbers(tmp_path):
     ({"ecus": "\n  - name: engine\n    bus: vcan0\n    speed: 0\n    trace: trace.log"}, 8, "speed"),
     ({"expect": "\n  latency:\n    can_to_zenoh: {p50: 5}"}, 11, "'p50' was unexpected"),
     ({"ecus": "\n  - name: engine\n    bus: vcan0\n    trace: trace.log\n    sped: 2"}, 9, "'sped' was unexpected"),
+    ({"ecus": "\n  - name: tester\n    bus: vcan0\n    role: echo"}, 6, "role echo needs echo_ids"),
+    ({"ecus": "\n  - name: b\n    bus: vcan0\n    role: periodic\n    run_s: 1"}, 6, "role periodic needs messages"),
+    ({"ecus": "\n  - name: b\n    bus: vcan0\n    role: periodic\n    run_s: 1\n    messages:\n"
+              "      - {id: '12G', cycle_ms: 10}"}, 11, "'12G' does not match"),
+    ({"commands": "\n  - bus: vcan3\n    trace: trace.log"}, 12, "commands.0.bus: 'vcan3' is not one of"),
+    ({"commands": "\n  - bus: vcan0\n    messages: [{id: '600', cycle_ms: 10}]"}, 12, "messages need run_s"),
+    ({"commands": "\n  - bus: vcan0"}, 12, "give either trace or messages"),
+    ({"topology": "\n  consumer: bridge"}, 12, "only in bridge.mode peer or router"),
+    ({"expect": "\n  cycle_time: {tolerance_pct: -5}"}, 10, "cycle_time.tolerance_pct"),
 ])
 def test_bad_scenarios_name_file_line_and_field(tmp_path, overrides, line, fragment):
     write(tmp_path, "trace.log", GOOD_TRACE)

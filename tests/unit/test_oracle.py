@@ -5,7 +5,9 @@ from __future__ import annotations
 import pytest
 
 from canbench import wire
-from canbench.oracle import Observed, compare, cycle_times
+from collections import Counter
+
+from canbench.oracle import Observed, compare, compare_commands, cycle_times, frame_key, match_subset
 
 pytestmark = pytest.mark.unit
 
@@ -79,3 +81,48 @@ def test_nothing_received_is_all_lost():
 def test_cycle_times_per_id():
     cycles = cycle_times(stream(30))
     assert cycles["100"]["count"] == 10 and cycles["100"]["cycle_p50_ms"] == pytest.approx(3.0)
+
+
+def bus_with(commands: list[Observed], ecu_frames: list[wire.Frame], extra: list[wire.Frame] = ()) -> list[Observed]:
+    """A bus carrying the commands interleaved with ECU frames, then extra frames."""
+    frames = []
+    for i, c in enumerate(commands):
+        frames.append(c.frame)
+        if i < len(ecu_frames):
+            frames.append(ecu_frames[i])
+    frames += list(extra)
+    return [Observed(f, 1_000_000 * i + 300_000, i, line=i + 1) for i, f in enumerate(frames)]
+
+
+def ecu_stream(n: int = 20) -> list[wire.Frame]:
+    return [wire.Frame(0x200, 1, bytes([i % 16])) for i in range(n)]
+
+
+def test_commands_separate_from_ecu_traffic():
+    commands = stream(20)
+    ecu = ecu_stream()
+    c, theirs = compare_commands(commands, bus_with(commands, ecu), Counter(frame_key(f) for f in ecu))
+    assert len(c.matched) == 20 and not c.lost and not c.unexpected and not c.duplicates
+    assert [o.frame for o in theirs] == ecu
+    assert c.summary()["latency"]["p50_ms"] > 0
+
+
+def test_command_written_twice_or_corrupted_or_invented():
+    commands = stream(20)
+    f = commands[3].frame
+    bus = [o.frame for o in bus_with(commands, [])]
+    bus[3] = wire.Frame(f.can_id, f.dlc, bytes([f.data[0], f.data[1] ^ 0x80]))  # corrupted on the way
+    bus += [commands[5].frame, wire.Frame(0x7AB, 0)]                            # a duplicate, an invented frame
+    observed = [Observed(fr, i, i, line=i + 1) for i, fr in enumerate(bus)]
+    c, theirs = compare_commands(commands, observed, Counter())
+    assert [s.index for s, _, _ in c.corrupted] == [3] and c.corrupted[0][2] == [1]
+    assert len(c.duplicates) == 1 and [o.frame.can_id for o in c.unexpected] == [0x7AB]
+    assert not c.lost and theirs == []
+
+
+def test_round_trip_matches_answers_among_other_traffic():
+    answers = stream(10)
+    traffic = [Observed(f, 5_000_000 + i, i, key="k") for i, f in
+               enumerate([wire.Frame(0x555, 0)] + [a.frame for a in answers if a.index != 4])]
+    c = match_subset(answers, traffic)
+    assert len(c.matched) == 9 and [o.index for o in c.lost] == [4] and not c.unexpected

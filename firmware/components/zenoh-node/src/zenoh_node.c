@@ -108,21 +108,34 @@ static const char *const mode_names[] = { "client", "peer", "router" };
  *   drop:N   drop every Nth sample          dup:N    publish every Nth sample twice
  *   swap:N   publish every Nth sample after the one that follows it
  *   flip:N   flip the lowest bit of data byte 0 of every Nth sample
- *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted */
+ *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted
+ * and on the Zenoh -> CAN path:
+ *   txdrop:N never write every Nth command  txflip:N flip the lowest bit of data byte 0 of every Nth */
 #include <stdlib.h>
 #include <time.h>
 static struct {
-	enum { FAULT_NONE, FAULT_DROP, FAULT_DUP, FAULT_SWAP, FAULT_FLIP, FAULT_DELAY, FAULT_WRONGKEY } kind;
+	enum {
+		FAULT_NONE,
+		FAULT_DROP,
+		FAULT_DUP,
+		FAULT_SWAP,
+		FAULT_FLIP,
+		FAULT_DELAY,
+		FAULT_WRONGKEY,
+		FAULT_TXDROP,
+		FAULT_TXFLIP,
+	} kind;
 	unsigned n;
+	unsigned tx_count;
 } fault;
 
 static void parse_fault(void)
 {
-	static const char *const names[] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey" };
+	static const char *const names[] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey", "txdrop", "txflip" };
 	const char *spec = getenv("ZN_FAULT");
 	if (!spec || !*spec)
 		return;
-	for (int k = 1; k <= FAULT_WRONGKEY; k++) {
+	for (int k = 1; k <= FAULT_TXFLIP; k++) {
 		size_t len = strlen(names[k]);
 		if (strncmp(spec, names[k], len) == 0 && (spec[len] == ':' || spec[len] == '\0')) {
 			fault.kind = k;
@@ -133,7 +146,21 @@ static void parse_fault(void)
 			return;
 		}
 	}
-	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay:N or wrongkey; no fault seeded", spec);
+	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N or wrongkey; no fault seeded", spec);
+}
+
+/* The Zenoh -> CAN faults: 1 = drop this command (the caller still counts it written). */
+static int tx_fault(can_message_t *msg)
+{
+	if (fault.kind != FAULT_TXDROP && fault.kind != FAULT_TXFLIP)
+		return 0;
+	if (++fault.tx_count % fault.n)
+		return 0;
+	if (fault.kind == FAULT_TXDROP)
+		return 1;
+	if (msg->data_length_code > 0 && !msg->rtr)
+		msg->data[0] ^= 0x01;
+	return 0;
 }
 #endif
 static const char *const tx_reason_names[TX_REASONS] = {
@@ -513,6 +540,12 @@ static void on_command(const uint8_t *payload, size_t len, const uint8_t *attach
 	}
 	zn_mutex_lock(b->can_lock);
 	for (size_t i = 0; i < count; i++) {
+#ifdef ZN_SEEDED_FAULTS
+		if (tx_fault(&msgs[i])) {
+			COUNT(b->n.tx_frames); /* "written", silently lost */
+			continue;
+		}
+#endif
 		if (zn_can_transmit(b->can, &msgs[i], CAN_TRANSMIT_TIMEOUT_MS) == ESP_OK)
 			COUNT(b->n.tx_frames);
 		else
