@@ -1,5 +1,10 @@
 """canbench command line.
 
+  canbench run SCENARIO                    run one scenario in compose (scripts/bench-run)
+  canbench open [RUN]                      the HTML report of a run (default reports/latest)
+  canbench compare OLD NEW                 diff two runs' metrics.json; exit 1 on a regression
+  canbench summarise TRACE                 per-id counts, cycle times, jitter and bus load of a trace
+  canbench scaffold TRACE --name N         a scenario replaying a trace, gates derived from it
   canbench validate SCENARIO...            check scenario files and their traces
   canbench compose-override SCENARIO       compose override: bus, bridge settings, one service per ECU
   canbench ecu --scenario S --name N ...   run one emulated ECU (inside its container)
@@ -10,22 +15,26 @@ Exit codes: 0 ok, 1 run failure, 2 bad input."""
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
+import webbrowser
 from pathlib import Path
 
 import yaml
 
-from . import ecu, scenario, tracegen
-from .errors import BenchError
+from . import authoring, compare, ecu, scenario, tracegen
+from .errors import BenchError, InputError
 from .trace import read_trace
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def cmd_validate(args) -> int:
     for path in args.scenarios:
         sc = scenario.load(path)
-        for e in sc.ecus:
-            if e.trace:
-                read_trace(e.trace, None)
+        for trace in [e.trace for e in sc.ecus] + [c.trace for c in sc.commands]:
+            if trace:
+                read_trace(trace, None)
         print(f"{path}: ok ({len(sc.ecus)} ECUs on {', '.join(sc.bus_names)})")
     return 0
 
@@ -103,6 +112,49 @@ def cmd_gen_trace(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    old, new = compare.load_metrics(args.old), compare.load_metrics(args.new)
+    rows = compare.compare(old, new, args.latency_pct, args.floor_ms, args.p99_pct)
+    print(compare.render(rows, old, new))
+    return 1 if any(r.regression for r in rows) else 0
+
+
+def cmd_summarise(args) -> int:
+    for trace in args.traces:
+        print(authoring.summarise(trace, args.bitrate).table())
+    return 0
+
+
+def cmd_scaffold(args) -> int:
+    out = args.out or Path("scenarios") / f"{args.name}.yaml"
+    if out.exists() and not args.force:
+        raise InputError(str(out), None, "exists already (--force to overwrite)")
+    text = authoring.scaffold(args.trace, args.name, out, args.bitrate)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    scenario.load(out)  # what we write must be valid
+    print(f"{out}: written; review its gates, then: make test SCENARIO={out}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    script = REPO / "scripts" / "bench-run"
+    if not script.exists():
+        raise InputError(str(script), None, "canbench run needs the bench's repository (scripts/bench-run)")
+    scenario.load(args.scenario)
+    return subprocess.call([str(script), str(args.scenario)], cwd=REPO)
+
+
+def cmd_open(args) -> int:
+    page = (args.run or Path("reports") / "latest") / "report.html"
+    if not page.exists():
+        raise InputError(str(page), None, "no report there (make test writes reports/<run>/report.html)")
+    print(page.resolve())
+    if not args.print_only:
+        webbrowser.open(page.resolve().as_uri())
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="canbench", description=__doc__.split("\n")[0])
     ap.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -125,6 +177,31 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("gen-trace", help="write a synthetic trace (candump -L): powertrain, mixed, burst")
     tracegen.add_arguments(p)
     p.set_defaults(func=cmd_gen_trace)
+    p = sub.add_parser("compare", help="diff two runs' metrics.json; exit 1 on a regression (nightly gate)")
+    p.add_argument("old", type=Path, help="metrics.json or run directory of the reference run")
+    p.add_argument("new", type=Path, help="metrics.json or run directory of the run to judge")
+    p.add_argument("--latency-pct", type=float, default=50.0, help="p50 may grow by this %% (default 50)")
+    p.add_argument("--floor-ms", type=float, default=0.05, help="smaller p50 changes are noise (default 0.05)")
+    p.add_argument("--p99-pct", type=float, default=None, help="also gate p99 growth at this %%")
+    p.set_defaults(func=cmd_compare)
+    p = sub.add_parser("summarise", aliases=["summarize"], help="per-id summary of traces")
+    p.add_argument("traces", nargs="+", type=Path)
+    p.add_argument("--bitrate", type=int, default=500_000, help="for the bus load (default 500000)")
+    p.set_defaults(func=cmd_summarise)
+    p = sub.add_parser("scaffold", help="write a scenario replaying a trace")
+    p.add_argument("trace", type=Path)
+    p.add_argument("--name", required=True, help="scenario name (lowercase, digits, - and _)")
+    p.add_argument("--out", type=Path, help="default scenarios/<name>.yaml")
+    p.add_argument("--bitrate", type=int, default=500_000)
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=cmd_scaffold)
+    p = sub.add_parser("run", help="run one scenario in compose (scripts/bench-run)")
+    p.add_argument("scenario", type=Path)
+    p.set_defaults(func=cmd_run)
+    p = sub.add_parser("open", help="open a run's HTML report (default reports/latest)")
+    p.add_argument("run", nargs="?", type=Path)
+    p.add_argument("--print-only", action="store_true", help="print the path, do not start a browser")
+    p.set_defaults(func=cmd_open)
     args = ap.parse_args(argv)
     try:
         return args.func(args)

@@ -37,6 +37,7 @@ class BusResult:
     zenoh_to_can: oracle.Comparison | None = None
     round_trip: oracle.Comparison | None = None
     cycle_times: dict = field(default_factory=dict)  # id -> {"can": stats, "zenoh": stats}
+    bus_frames: list[oracle.Observed] = field(default_factory=list)  # the whole bus capture
 
 
 @dataclass
@@ -241,7 +242,7 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
-                               _cycle_times(from_ecus, comparison.matched)))
+                               _cycle_times(from_ecus, comparison.matched), can_frames))
     result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys, baseline=baseline)
     result.metrics = {
         "schema_version": METRICS_SCHEMA_VERSION,

@@ -117,6 +117,7 @@ class Scenario:
     raw: dict
     commands: list[Commands] = field(default_factory=list)
     consumer: str = "router"
+    dbc: Path | None = None
 
     @property
     def bus_names(self) -> list[str]:
@@ -206,5 +207,10 @@ def load(path: str | Path) -> Scenario:
     consumer = doc.get("topology", {}).get("consumer", "router")
     if consumer == "bridge" and bridge.get("mode", "client") == "client":
         raise fail(["topology", "consumer"], "a consumer can connect to the bridge only in bridge.mode peer or router")
+    dbc = None
+    if "dbc" in doc:
+        dbc = (path.parent / doc["dbc"]).resolve()
+        if not dbc.is_file():
+            raise fail(["dbc"], f"no such file {dbc}")
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
-                    bridge, dict(doc.get("expect", {})), doc, commands, consumer)
+                    bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc)

@@ -57,8 +57,8 @@ def generate(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0
             frames.append(can.Message(timestamp=t, arbitration_id=can_id, is_extended_id=extended,
                                       dlc=dlc, data=_payload(can_id, dlc, n, t - start), channel=iface))
     # a diagnostic remote request once a second
-    frames += [can.Message(timestamp=start + 0.5 + s, arbitration_id=0x7E0, is_extended_id=False, is_remote_frame=True, dlc=8,
-                           channel=iface) for s in range(int(seconds))]
+    frames += [can.Message(timestamp=start + 0.5 + s, arbitration_id=0x7E0, is_extended_id=False,
+                           is_remote_frame=True, dlc=8, channel=iface) for s in range(int(seconds))]
     frames.sort(key=lambda m: (m.timestamp, m.arbitration_id))
     return frames
 

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import pytest
 
-from canbench import checks, run, scenario
+from canbench import checks, report, run, scenario
 
 
 def pytest_addoption(parser):
@@ -61,3 +62,31 @@ def pytest_sessionfinish(session, exitstatus):
     result.metrics["problems"] = checks.failing(result)
     result.metrics["passed"] = all(v in ("passed", "skipped") for v in result.metrics["verdicts"].values())
     run.write_metrics(result)
+    # recordings and the HTML page come after the verdicts they show; a failure here is
+    # reported, never allowed to change a verdict
+    writers = {"recording.mcap": lambda p: report.write_mcap(result, p, report.load_dbc(result.scenario.dbc)),
+               "report.html": lambda p: report.write_html(result, p)}
+    for name, write in writers.items():
+        try:
+            write(result.run_dir / name)
+        except Exception as e:  # noqa: BLE001 - any failure of a report writer is reported the same way
+            print(f"\ncanbench: writing {name} failed: {e!r}", file=sys.stderr)
+            session.exitstatus = session.exitstatus or 1
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    result = getattr(config, "_bench_result", None)
+    if result is None:
+        return
+    tr = terminalreporter
+    tr.section(f"bench run {result.run_id}")
+    directions = {"can_to_zenoh": "CAN -> Zenoh", "zenoh_to_can": "Zenoh -> CAN", "round_trip": "round trip"}
+    for key, label in directions.items():
+        for bus, s in result.metrics.get(key, {}).items():
+            lat = s["latency"]
+            p50 = "-" if lat["p50_ms"] is None else f"{lat['p50_ms']:.3f}"
+            p99 = "-" if lat["p99_ms"] is None else f"{lat['p99_ms']:.3f}"
+            tr.write_line(f"{label:13} {bus:6} {s['matched']:>7}/{s['sent']:<7} matched  lost {s['lost']:<5} "
+                          f"dup {s['duplicates']:<4} corrupt {s['corrupted']:<4} reorder {s['reordered']:<4} "
+                          f"p50 {p50} ms  p99 {p99} ms")
+    tr.write_line(f"report: {result.run_dir / 'report.html'}")

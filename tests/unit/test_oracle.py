@@ -2,11 +2,11 @@
 fault the bench exists to catch lands in its own category and names frames."""
 from __future__ import annotations
 
+from collections import Counter
+
 import pytest
 
 from canbench import wire
-from collections import Counter
-
 from canbench.oracle import Observed, compare, compare_commands, cycle_times, frame_key, match_subset
 
 pytestmark = pytest.mark.unit

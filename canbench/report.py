@@ -1,0 +1,247 @@
+"""Reports of a run, next to metrics.json in reports/<run-id>/:
+
+  recording.mcap  CAN frames, Zenoh samples and commands on documented channels
+                  (JSON messages with JSON Schemas: Foxglove and Rerun open it),
+                  plus decoded signals when the scenario names a DBC file
+  report.html     one self-contained page: verdicts, latency histogram + CDF per
+                  direction, per-id table, timeline, emulator fidelity, links
+
+MCAP channels (message encoding json, schema encoding jsonschema):
+  /can/<bus>            canbench.CanFrame    every frame on the bus (log time: bus timestamp)
+  /zenoh/<bus>          canbench.ZenohFrame  every frame the consumer received (log time: receive)
+  /commands/<bus>       canbench.CanFrame    every command put on the tx key (log time: put)
+  /signals/<bus>/<msg>  canbench.Signals     DBC-decoded signals of bus frames"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import cantools
+from mcap.writer import Writer
+
+from . import oracle
+
+if TYPE_CHECKING:
+    from .run import RunResult
+
+FRAME_FIELDS = {
+    "bus": {"type": "string"}, "id": {"type": "integer"}, "id_hex": {"type": "string"},
+    "extended": {"type": "boolean"}, "remote": {"type": "boolean"}, "dlc": {"type": "integer"},
+    "data": {"type": "string", "description": "hex"}, "source": {"type": "string", "description": "file:line"},
+}
+SCHEMAS = {
+    "canbench.CanFrame": {"type": "object", "properties": FRAME_FIELDS},
+    "canbench.ZenohFrame": {"type": "object", "properties": {
+        **FRAME_FIELDS, "key": {"type": "string"}, "seq": {"type": "integer"},
+        "bridge_rx_ns": {"type": "integer"}, "latency_ms": {"type": "number"}}},
+    "canbench.Signals": {"type": "object", "additionalProperties": {"type": "number"}},
+}
+
+
+def _frame_json(bus: str, o: oracle.Observed) -> dict:
+    f = o.frame
+    return {"bus": bus, "id": f.can_id, "id_hex": f"{f.can_id:08X}" if f.extended else f"{f.can_id:03X}",
+            "extended": f.extended, "remote": f.remote, "dlc": f.dlc, "data": f.data.hex().upper(),
+            "source": f"{o.origin}:{o.line}" if o.line else ""}
+
+
+def load_dbc(path: Path | None):
+    return cantools.database.load_file(str(path)) if path else None
+
+
+def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
+    with open(path, "wb") as out:
+        writer = Writer(out)
+        writer.start(profile="", library="canbench")
+        schema_ids = {name: writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
+                      for name, schema in SCHEMAS.items()}
+        channels: dict[str, int] = {}
+        seqs: dict[str, int] = {}
+
+        def emit(topic: str, schema: str, t_ns: int, message: dict) -> None:
+            if topic not in channels:
+                channels[topic] = writer.register_channel(topic, "json", schema_ids[schema])
+            seqs[topic] = seqs.get(topic, 0) + 1
+            writer.add_message(channels[topic], log_time=t_ns, publish_time=t_ns, sequence=seqs[topic],
+                               data=json.dumps(message).encode())
+
+        for b in result.buses:
+            latency_of = {r.index: (r.t_ns - s.t_ns) / 1e6 for s, r in b.comparison.matched}
+            for o in b.bus_frames:
+                emit(f"/can/{b.bus}", "canbench.CanFrame", o.t_ns, _frame_json(b.bus, o))
+                if dbc is not None and not o.frame.remote:
+                    signals = _decode(dbc, o.frame)
+                    if signals:
+                        emit(f"/signals/{b.bus}/{signals[0]}", "canbench.Signals", o.t_ns, signals[1])
+            for o in b.zenoh_frames:
+                emit(f"/zenoh/{b.bus}", "canbench.ZenohFrame", o.t_ns,
+                     {**_frame_json(b.bus, o), "key": o.key, "seq": o.seq, "bridge_rx_ns": o.bridge_rx_ns,
+                      "latency_ms": latency_of.get(o.index)})
+            for o in b.commands:
+                emit(f"/commands/{b.bus}", "canbench.CanFrame", o.t_ns, _frame_json(b.bus, o))
+        writer.add_metadata("canbench.run", {"run_id": result.run_id, "scenario": result.scenario.name,
+                                             "passed": str(result.metrics.get("passed"))})
+        writer.finish()
+
+
+def _decode(dbc, frame) -> tuple[str, dict] | None:
+    try:
+        message = dbc.get_message_by_frame_id(frame.can_id | (0x80000000 if frame.extended else 0))
+    except KeyError:
+        try:
+            message = dbc.get_message_by_frame_id(frame.can_id)
+        except KeyError:
+            return None
+    try:
+        decoded = message.decode(frame.data, decode_choices=False)
+    except Exception:  # a frame the DBC does not describe correctly is still recorded raw
+        return None
+    return message.name, {k: float(v) for k, v in decoded.items() if isinstance(v, int | float)}
+
+
+# ---- HTML ----
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+    return f'<img alt="" src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">'
+
+
+def _latency_plots(series: dict[str, list[float]]) -> str:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    series = {k: v for k, v in series.items() if v}
+    if not series:
+        return "<p>No latency samples.</p>"
+    fig, (hist, cdf) = plt.subplots(1, 2, figsize=(11, 3.5))
+    for name, values in series.items():
+        hist.hist(values, bins=60, alpha=0.6, label=name)
+        ordered = sorted(values)
+        cdf.plot(ordered, [(i + 1) / len(ordered) for i in range(len(ordered))], label=name)
+    hist.set_xlabel("latency (ms)")
+    hist.set_ylabel("frames")
+    hist.set_title("histogram")
+    cdf.set_xlabel("latency (ms)")
+    cdf.set_ylabel("fraction of frames")
+    cdf.set_title("CDF")
+    cdf.grid(alpha=0.3)
+    hist.legend(fontsize=8)
+    cdf.legend(fontsize=8)
+    return _png(fig)
+
+
+def _timeline(result: RunResult) -> str:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    starts = [o.t_ns for b in result.buses for o in b.can_frames[:1] + b.commands[:1]]
+    if not starts:
+        return "<p>No traffic.</p>"
+    t0 = min(starts)
+    fig, ax = plt.subplots(figsize=(11, 3))
+    for b in result.buses:
+        for name, frames in ((f"{b.bus} bus", b.can_frames), (f"{b.bus} Zenoh", b.zenoh_frames),
+                             (f"{b.bus} commands", b.commands)):
+            if frames:
+                times = [(o.t_ns - t0) / 1e9 for o in frames]
+                bins = max(1, int((max(times) - min(times)) / 0.1) + 1)
+                ax.hist(times, bins=bins, histtype="step", label=name)
+        lost = b.comparison.lost + (b.zenoh_to_can.lost if b.zenoh_to_can else [])
+        if lost:
+            ax.plot([(o.t_ns - t0) / 1e9 for o in lost], [0] * len(lost), "rx", label=f"{b.bus} lost")
+    for window in result.metrics.get("faults", []):
+        ax.axvspan(window["start_s"], window["end_s"], color="orange", alpha=0.2)
+    ax.set_xlabel("s since first frame")
+    ax.set_ylabel("frames per 100 ms")
+    ax.legend(fontsize=8)
+    return _png(fig)
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c if str(c).startswith('<') else html.escape(str(c))}</td>"
+                                    for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _ms(v) -> str:
+    return "" if v is None else f"{v:.3f}"
+
+
+def write_html(result: RunResult, path: Path) -> None:
+    m = result.metrics
+    verdicts = m.get("verdicts", {})
+    problems = m.get("problems", {})
+    verdict_rows = []
+    for test, outcome in verdicts.items():
+        check = test.split("[")[-1].rstrip("]")
+        colour = {"passed": "pass", "failed": "fail"}.get(outcome, "skip")
+        listed = "<br>".join(html.escape(p) for p in problems.get(check, []))
+        verdict_rows.append([check, f'<span class="{colour}">{outcome}</span>', f"<small>{listed}</small>"])
+    directions = [("CAN -> Zenoh", "can_to_zenoh"), ("Zenoh -> CAN", "zenoh_to_can"), ("round trip", "round_trip")]
+    lat_rows = []
+    for label, key in directions:
+        for bus, s in m.get(key, {}).items():
+            lat = s["latency"]
+            lat_rows.append([label, bus, s["sent"], s["matched"], s["lost"], s["duplicates"], s["corrupted"],
+                             s["reordered"], _ms(lat["p50_ms"]), _ms(lat["p90_ms"]), _ms(lat["p99_ms"]),
+                             _ms(lat["max_ms"])])
+    series = {}
+    for b in result.buses:
+        series[f"{b.bus} CAN->Zenoh"] = b.comparison.latency_ms
+        if b.zenoh_to_can:
+            series[f"{b.bus} Zenoh->CAN"] = b.zenoh_to_can.latency_ms
+        if b.round_trip:
+            series[f"{b.bus} round trip"] = b.round_trip.latency_ms
+    id_rows = []
+    for b in result.buses:
+        lost_by_id: dict[str, int] = {}
+        for o in b.comparison.lost:
+            ident = f"{o.frame.can_id:08X}" if o.frame.extended else f"{o.frame.can_id:03X}"
+            lost_by_id[ident] = lost_by_id.get(ident, 0) + 1
+        for ident, sides in b.cycle_times.items():
+            can, zen = sides["can"], sides["zenoh"] or {}
+            id_rows.append([b.bus, ident, can["count"], zen.get("count", 0), lost_by_id.get(ident, 0),
+                            _ms(can["cycle_p50_ms"]), _ms(zen.get("cycle_p50_ms")), _ms(zen.get("cycle_max_ms"))])
+    ecu_rows = []
+    for name, e in sorted(m.get("ecus", {}).items()):
+        fid = e.get("fidelity_ms") or e.get("turnaround_ms") or {}
+        ecu_rows.append([name, e.get("role", "replay"), e.get("bus"), e.get("sent"), _ms(fid.get("p50")),
+                         _ms(fid.get("p99")), _ms(fid.get("max"))])
+    files = [f for f in ("metrics.json", "junit.xml", "recording.mcap", "can.log", "zenoh.jsonl", "commands.tsv",
+                         "containers.log") if (path.parent / f).exists() or f == "containers.log"]
+    files += sorted(p.name for p in path.parent.glob("ecu-*"))
+    links = " · ".join(f'<a href="{f}">{f}</a>' for f in files)
+    passed = m.get("passed")
+    verdict = "PASSED" if passed else "FAILED"
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(m['scenario'])} - canbench</title>
+<style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:1em 0}}
+td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}} .pass{{color:#080}}
+.fail{{color:#c00;font-weight:bold}} .skip{{color:#888}} h1 .fail,h1 .pass{{font-size:80%}}</style></head><body>
+<h1>{html.escape(m['scenario'])} <span class="{'pass' if passed else 'fail'}">{verdict}</span></h1>
+<p>Run {html.escape(m['run_id'])} · traffic {m.get('traffic_s')} s · {html.escape(result.scenario.description)}
+{'· baseline ' + html.escape(str(m['baseline_run_id'])) if m.get('baseline_run_id') else ''}</p>
+<p>{links}</p>
+<h2>Verdicts</h2>{_table(["check", "verdict", "problems"], verdict_rows)}
+<h2>Frames and latency</h2>
+{_table(["direction", "bus", "sent", "matched", "lost", "dup", "corrupted", "reordered", "p50 ms", "p90 ms",
+         "p99 ms", "max ms"], lat_rows)}
+{_latency_plots(series)}
+<h2>Timeline</h2>{_timeline(result)}
+<h2>Per id</h2>
+{_table(["bus", "id", "on bus", "on Zenoh", "lost", "bus cycle p50 ms", "Zenoh cycle p50 ms", "Zenoh max gap ms"],
+        id_rows)}
+<h2>Emulated ECUs</h2><p>Send-time error against the trace (echo: turnaround), so a verdict never blames the
+bridge for the emulator's jitter.</p>
+{_table(["ECU", "role", "bus", "sent", "p50 ms", "p99 ms", "max ms"], ecu_rows)}
+</body></html>"""
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(page)
+    tmp.replace(path)

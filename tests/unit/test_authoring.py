@@ -1,0 +1,66 @@
+"""Authoring help and the nightly gate on hand-made inputs: trace summary,
+scaffolded scenarios that validate, and `canbench compare` catching each kind
+of regression while ignoring noise."""
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pytest
+
+from canbench import authoring, cli, scenario, tracegen
+
+pytestmark = pytest.mark.unit
+
+
+def test_summary_infers_cycle_times_and_load(tmp_path):
+    trace = tmp_path / "t.log"
+    tracegen.write(trace, tracegen.generate(2.0))
+    s = authoring.summarise(trace, 500_000)
+    cycles = {i.ident: i.cycle_ms for i in s.ids}
+    assert cycles["0C0"] == pytest.approx(10.0) and cycles["18FEF100"] == pytest.approx(100.0)
+    assert 4 < s.load_pct < 7  # ~190 frames/s of ~8 bytes at 500 kbit/s
+
+
+def test_scaffold_copies_the_trace_and_validates(tmp_path):
+    trace = tmp_path / "recorded" / "drive.log"
+    tracegen.write(trace, tracegen.generate(1.0))
+    out = tmp_path / "scenarios" / "drive.yaml"
+    assert cli.main(["scaffold", str(trace), "--name", "drive", "--out", str(out)]) == 0
+    sc = scenario.load(out)
+    assert sc.ecus[0].trace == (tmp_path / "scenarios" / "traces" / "drive.log").resolve()
+    assert sc.expect["cycle_time"]["ids"]["0C0"] == pytest.approx(10.0)
+    assert cli.main(["scaffold", str(trace), "--name", "drive", "--out", str(out)]) == 2  # no silent overwrite
+
+
+def metrics(p50=0.5, lost=0, verdict="passed") -> dict:
+    summary = {"sent": 100, "matched": 100 - lost, "lost": lost, "duplicates": 0, "corrupted": 0, "reordered": 0,
+               "latency": {"count": 100, "p50_ms": p50, "p90_ms": p50 * 2, "p99_ms": p50 * 3, "max_ms": p50 * 4}}
+    return {"schema_version": 1, "run_id": "r", "scenario": "smoke", "can_to_zenoh": {"vcan0": summary},
+            "verdicts": {"test_check[integrity]": verdict}}
+
+
+@pytest.mark.parametrize("new,regressed", [
+    (metrics(), False),
+    (metrics(p50=0.52), False),              # noise
+    (metrics(p50=0.09 / 0.5 * 0.5), False),  # faster
+    (metrics(p50=1.0), True),                # +100%
+    (metrics(lost=1), True),
+    (metrics(verdict="failed"), True),
+])
+def test_compare_exit_code(tmp_path, capsys, new, regressed):
+    old_path, new_path = tmp_path / "old.json", tmp_path / "new.json"
+    old_path.write_text(json.dumps(metrics()))
+    new_path.write_text(json.dumps(new))
+    assert cli.main(["compare", str(old_path), str(new_path)]) == (1 if regressed else 0)
+    assert ("REGRESSION" in capsys.readouterr().out) == regressed
+
+
+def test_compare_refuses_unknown_schema(tmp_path):
+    bad = copy.deepcopy(metrics())
+    bad["schema_version"] = 99
+    (tmp_path / "a.json").write_text(json.dumps(metrics()))
+    (tmp_path / "b.json").write_text(json.dumps(bad))
+    assert cli.main(["compare", str(tmp_path / "a.json"), str(tmp_path / "b.json")]) == 2
+    assert Path(tmp_path / "b.json").exists()
