@@ -90,12 +90,11 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
 
 def _decode(dbc, frame) -> tuple[str, dict] | None:
     try:
-        message = dbc.get_message_by_frame_id(frame.can_id | (0x80000000 if frame.extended else 0))
+        message = dbc.get_message_by_frame_id(frame.can_id)
     except KeyError:
-        try:
-            message = dbc.get_message_by_frame_id(frame.can_id)
-        except KeyError:
-            return None
+        return None
+    if message.is_extended_frame != frame.extended:
+        return None
     try:
         decoded = message.decode(frame.data, decode_choices=False)
     except Exception:  # a frame the DBC does not describe correctly is still recorded raw

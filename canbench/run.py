@@ -7,6 +7,7 @@ read the result."""
 from __future__ import annotations
 
 import json
+import sys
 import threading
 import time
 from collections import Counter
@@ -23,6 +24,12 @@ METRICS_SCHEMA_VERSION = 1
 BRIDGE_READY_TIMEOUT_S = 60
 DRAIN_TIMEOUT_S = 5.0
 ECHO_STOP_TIMEOUT_S = 15
+PROGRESS_EVERY_S = 2.0
+
+
+def progress(line: str) -> None:
+    """One line on the real stderr (pytest captures the rest), for long runs."""
+    print(f"canbench: {line}", file=sys.__stderr__, flush=True)
 
 
 @dataclass
@@ -120,12 +127,19 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
         commander = Commander(data, scenario, run_dir / "commands.tsv", prefix) if scenario.commands else None
         ready = session.liveliness().declare_token(runkeys.capture_ready(run_id))
         started = time.monotonic()
+        all_keys = {rx_key(prefix, b, len(scenario.bus_names)) for b in scenario.bus_names}
         bridge_stats = None
         try:
             if commander:
                 commander.start()
             deadline = scenario.duration_s + 30
-            if not senders_done.wait(deadline):
+            # progress while the traffic runs; the wait itself is on the ECUs' done messages
+            while not senders_done.wait(PROGRESS_EVERY_S) and time.monotonic() - started < deadline:
+                progress(f"{time.monotonic() - started:5.1f} s of up to {scenario.duration_s:g} s: "
+                         f"{len(set(done) & senders)}/{len(senders)} ECUs done, "
+                         f"{zenoh_capture.frames_on(all_keys)} frames on Zenoh"
+                         + (f", {commander.sent}/{len(commander.items)} commands put" if commander else ""))
+            if not senders_done.is_set():
                 missing = sorted(senders - set(done))
                 raise TimeoutError(f"ECUs {missing} did not finish within duration_s + 30 s "
                                    f"({deadline:.0f} s); see their container logs")
