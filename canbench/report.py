@@ -214,7 +214,7 @@ def write_html(result: RunResult, path: Path) -> None:
         fid = e.get("fidelity_ms") or e.get("turnaround_ms") or {}
         ecu_rows.append([name, e.get("role", "replay"), e.get("bus"), e.get("sent"), _ms(fid.get("p50")),
                          _ms(fid.get("p99")), _ms(fid.get("max"))])
-    files = [f for f in ("metrics.json", "junit.xml", "recording.mcap", "can.log", "zenoh.jsonl", "commands.tsv",
+    files = [f for f in ("metrics.json", "junit.xml", "recording.mcap", "can.log", "zenoh.tsv", "commands.tsv",
                          "containers.log") if (path.parent / f).exists() or f == "containers.log"]
     files += sorted(p.name for p in path.parent.glob("ecu-*"))
     links = " · ".join(f'<a href="{f}">{f}</a>' for f in files)

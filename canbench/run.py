@@ -123,7 +123,8 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
 
         done_sub = session.declare_subscriber(f"bench/runs/{run_id}/ecus/*/done", on_done)
         can_capture = CanCapture(run_dir / "can.log", scenario.bus_names)
-        zenoh_capture = ZenohCapture(data, f"{prefix}/**")
+        zenoh_capture = ZenohCapture(data, consumer or router, f"{prefix}/**", run_dir / "zenoh.tsv",
+                                     runkeys.zenoh_capture_ready(run_id))
         commander = Commander(data, scenario, run_dir / "commands.tsv", prefix) if scenario.commands else None
         ready = session.liveliness().declare_token(runkeys.capture_ready(run_id))
         started = time.monotonic()
@@ -184,7 +185,7 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
             ready.undeclare()
             done_sub.undeclare()
             can_capture.stop()
-            zenoh_capture.stop(run_dir / "zenoh.jsonl")
+            zenoh_capture.stop()
     finally:
         if data is not session:
             data.close()
@@ -233,7 +234,7 @@ def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.O
 
 def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: dict[str, dict],
             bridge_stats: dict | None, traffic_s: float, baseline: dict | None = None) -> RunResult:
-    samples = read_zenoh_capture(run_dir / "zenoh.jsonl")
+    samples = read_zenoh_capture(run_dir / "zenoh.tsv")
     n = len(scenario.bus_names)
     expected_keys = {rx_key(prefix, b, n) for b in scenario.bus_names}
     expected_keys |= {tx_key(prefix, b, n) for b in scenario.bus_names}

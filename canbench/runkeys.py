@@ -18,6 +18,11 @@ def ecu_done(run_id: str, name: str) -> str:
     return f"bench/runs/{run_id}/ecus/{name}/done"
 
 
+def zenoh_capture_ready(run_id: str) -> str:
+    """Liveliness token of zn-capture, declared once its subscriber is in place."""
+    return f"bench/runs/{run_id}/capture/zenoh"
+
+
 def ecu_ready(run_id: str, name: str) -> str:
     """Liveliness token of an echo ECU bound to its bus, ready to answer."""
     return f"bench/runs/{run_id}/ecus/{name}/ready"

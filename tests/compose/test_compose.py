@@ -55,7 +55,8 @@ def test_smoke_scenario_passes_and_writes_reports():
     proc, run_dir = bench_run(REPO / "scenarios" / "smoke.yaml")
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
     assert run_dir is not None
-    for name in ("junit.xml", "metrics.json", "can.log", "zenoh.jsonl", "ecu-engine.json", "containers.log"):
+    for name in ("junit.xml", "metrics.json", "can.log", "zenoh.tsv", "report.html", "recording.mcap",
+                 "ecu-engine.json", "containers.log"):
         assert (run_dir / name).is_file(), name
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["schema_version"] == 1 and metrics["passed"] is True

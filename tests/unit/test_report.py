@@ -3,7 +3,6 @@ lost one frame): the MCAP recording reads back with the documented channels
 and decoded signals; the HTML page shows the verdict and the lost frame."""
 from __future__ import annotations
 
-import base64
 import json
 from pathlib import Path
 
@@ -21,13 +20,11 @@ def result(tmp_path):
     sc = scenario.load(REPO / "scenarios" / "smoke.yaml")
     (tmp_path / "can.log").write_text((REPO / "scenarios" / "traces" / "powertrain-2s.log").read_text())
     frames = oracle.read_candump(tmp_path / "can.log", "vcan0")
-    with open(tmp_path / "zenoh.jsonl", "w") as f:
+    with open(tmp_path / "zenoh.tsv", "w") as f:  # zn-capture's format
         for i, o in enumerate(frames):
             if i != 50:
-                f.write(json.dumps({"t_ns": o.t_ns + 400_000, "key": "vehicle/can/rx",
-                                    "payload": base64.b64encode(wire.encode(o.frame)).decode(),
-                                    "attachment": base64.b64encode(wire.encode_attachment(i, [o.t_ns])).decode()})
-                        + "\n")
+                f.write(f"{o.t_ns + 400_000}\tvehicle/can/rx\t{wire.encode(o.frame).hex()}\t"
+                        f"{wire.encode_attachment(i, [o.t_ns]).hex()}\n")
     r = run.analyse(sc, "synthetic", tmp_path, "vehicle/can", {}, None, 2.0)
     problems = checks.failing(r)
     r.metrics["verdicts"] = {f"test_check[{c}]": "failed" if c in problems else "passed" for c in checks.CHECKS}
