@@ -1,0 +1,143 @@
+"""Hostile input on the bridge's tx key: a seeded campaign of CAMPAIGN_PAYLOADS
+payloads (every length 0-64, a few large ones, frames with dlc > 8, reserved
+and unknown flag bits, out-of-range ids, remote frames with data, random
+bytes, mutations of valid frames, missing and garbage attachments), with a
+valid marker frame after every MARKER_EVERY payloads. What must hold:
+
+- exactly the payloads the bench's own decoder (canbench.wire, checked against
+  the same golden vectors as the C decoder) accepts reach the bus, in order;
+  nothing else ever does;
+- every refusal is counted under the reason the bench expects;
+- the bridge survives (its stats queryable answers, it exits 0 on SIGTERM) -
+  under the ASan/UBSan build too, since `make check-bridge` runs this file
+  against both builds.
+
+The stats queryable also gets garbage (selectors, parameters, payloads) and
+keeps answering. Everything goes to loopback; the campaign is bounded."""
+from __future__ import annotations
+
+import random
+import signal
+from collections import Counter
+
+import pytest
+import zenoh
+from conftest import wait_for, zenoh_session
+from test_bridge_host import start_candump, stop_candump
+
+from canbench import wire
+
+CAMPAIGN_PAYLOADS = 100_000
+MARKER_EVERY = 1000
+SEED = 20261123
+BATCH_LIMIT_FRAMES = 64  # ZN_BATCH_MAX_FRAMES: longer commands are refused as "length"
+
+
+def expected_outcome(payload: bytes, attachment: bytes | None) -> tuple[str, list[wire.Frame]]:
+    """The reason the bridge must give ("ok" if valid) and the frames it must write."""
+    if len(payload) > BATCH_LIMIT_FRAMES * wire.WIRE_SIZE:
+        return "length", []
+    try:
+        frames = wire.decode_batch(payload)
+    except wire.WireError as e:
+        return e.reason, []
+    if attachment is not None:
+        try:
+            meta = wire.decode_attachment(attachment)
+        except wire.WireError:
+            return "attachment", []
+        if meta.count != len(frames):
+            return "attachment", []
+    return "ok", frames
+
+
+def campaign(rng: random.Random):
+    """(payload, attachment) pairs; deterministic for a seed."""
+    valid = [wire.encode(wire.Frame(0x123, 4, b"\xde\xad\xbe\xef")),
+             wire.encode(wire.Frame(0x1ABCDEF0, 8, bytes(range(8)), extended=True)),
+             wire.encode(wire.Frame(0x7FF, 8, remote=True)), wire.encode(wire.Frame(0x0, 0))]
+    for length in range(65):  # every length 0-64 of random bytes
+        yield rng.randbytes(length), None
+    for length in (1000, 16 * 64, 16 * 65, 4096, 65536):  # a few large ones
+        yield rng.randbytes(length), None
+    targeted = [
+        lambda f: f[:4] + bytes([rng.randint(9, 255)]) + f[5:],                          # dlc > 8
+        lambda f: f[:5] + bytes([f[5] | rng.choice([0x04, 0x08, 0x80])]) + f[6:],       # unknown flag bits
+        lambda f: f[:6] + rng.randbytes(2).replace(b"\0\0", b"\0\1") + f[8:],           # reserved bytes
+        lambda f: (0x800 + rng.randint(0, 0xFFFF)).to_bytes(4, "little") + bytes([f[4], f[5] & ~1]) + f[6:],
+        lambda f: (0x20000000 | rng.randint(0, 1 << 28)).to_bytes(4, "little") + f[4:5] + b"\x01" + f[6:],
+        lambda f: wire.encode(wire.Frame(0x10, 2, remote=True))[:8] + rng.randbytes(8),  # remote with data
+    ]
+    n = 0
+    while True:
+        base = rng.choice(valid)
+        kind = rng.random()
+        if kind < 0.35:
+            payload = rng.choice(targeted)(base)
+        elif kind < 0.65:  # flip 1-3 random bits of 1-4 valid frames
+            batch = bytearray(b"".join(rng.choice(valid) for _ in range(rng.randint(1, 4))))
+            for _ in range(rng.randint(1, 3)):
+                batch[rng.randrange(len(batch))] ^= 1 << rng.randrange(8)
+            payload = bytes(batch)
+        elif kind < 0.85:
+            payload = rng.randbytes(rng.choice([16, 32, 48, rng.randint(0, 200)]))
+        else:  # a valid payload with a missing, wrong or garbage attachment
+            payload = b"".join(rng.choice(valid) for _ in range(rng.randint(1, 3)))
+            count = len(payload) // 16
+            yield payload, rng.choice([rng.randbytes(rng.randint(0, 40)),
+                                       wire.encode_attachment(7, [1] * (count + 1)),
+                                       b"\x02" + wire.encode_attachment(7, [1] * count)[1:]])
+            n += 1
+            continue
+        yield payload, None
+        n += 1
+
+
+@pytest.fixture
+def session(router):
+    s = zenoh_session(router.endpoint)
+    yield s
+    s.close()
+
+
+def test_hostile_commands_never_reach_the_bus_and_are_counted_by_reason(bus, bridge, session, tmp_path):
+    bridge.start("--can", "vcan0")
+    bridge.wait_ready(session)
+    dump, out = start_candump(bus, tmp_path / "can.log")
+    rng = random.Random(SEED)
+    # congestion control BLOCK: the campaign must arrive whole, never dropped by Zenoh
+    publisher = session.declare_publisher("vehicle/can/tx", congestion_control=zenoh.CongestionControl.BLOCK)
+    expected_bus: list[str] = []
+    reasons: Counter = Counter()
+    sent = 0
+    marker_id = 0x700
+    for payload, attachment in campaign(rng):
+        reason, frames = expected_outcome(payload, attachment)
+        reasons[reason] += 1
+        expected_bus += [f.candump().split(" ", 1)[1] for f in frames]
+        publisher.put(payload, attachment=attachment)
+        sent += 1
+        if sent % MARKER_EVERY == 0:  # valid frames that follow garbage still go through
+            marker = wire.Frame(marker_id, 2, (sent // MARKER_EVERY).to_bytes(2, "big"))
+            publisher.put(wire.encode(marker))
+            reasons["ok"] += 1
+            expected_bus.append(marker.candump().split(" ", 1)[1])
+        if sent >= CAMPAIGN_PAYLOADS:
+            break
+    total = sent + sent // MARKER_EVERY
+    stats = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and s["tx_samples"] >= total and s,
+                     f"the bridge to take all {total} commands", timeout=120)
+    wait_for(lambda: bridge.stats(session)["buses"][0]["tx_frames"] >= len(expected_bus),
+             "the valid frames written")
+    on_bus = stop_candump(dump, out)
+    assert on_bus == expected_bus, f"{len(on_bus)} frames on the bus, {len(expected_bus)} expected"
+    rejected = {k: v for k, v in stats["tx_rejected"].items() if v}
+    assert rejected == {k: v for k, v in reasons.items() if k != "ok"}, (rejected, reasons)
+    assert stats["can_tx_errors"] == 0
+    # garbage at the stats queryable: it keeps answering
+    for selector in ("vehicle/can/bridges/zenoh-node/stats?x=1;;;", "vehicle/can/bridges/*/stats?" + "a" * 2000):
+        list(session.get(selector, payload=rng.randbytes(512)))
+    assert bridge.stats(session)["buses"][0]["tx_samples"] == total
+    rc, log = bridge.stop(signal.SIGTERM)
+    assert rc == 0, log[-3000:]
+    assert "ERROR: AddressSanitizer" not in log and "runtime error" not in log
