@@ -183,6 +183,54 @@ def latency_regression(result: RunResult) -> list[str] | None:
     return problems
 
 
+def faults_injected(result: RunResult) -> list[str] | None:
+    """Every fault step of the scenario was injected (else the run proves nothing)."""
+    faults = result.metrics.get("faults")
+    if not result.scenario.faults:
+        return None
+    if not faults:
+        return ["no fault was injected"]
+    problems = list(faults["errors"])
+    if len(faults["windows"]) < len(result.scenario.faults):
+        problems.append(f"{len(faults['windows'])} of {len(result.scenario.faults)} fault steps ran")
+    return problems
+
+
+def recovery(result: RunResult) -> list[str] | None:
+    """After each fault, frames are bridged again within the scenario's recovery gate, per direction."""
+    gate = _expect(result, "recovery_s")
+    faults = result.metrics.get("faults")
+    if not gate or not faults:
+        return None
+    problems = []
+    for direction, attr in (("can_to_zenoh", "comparison"), ("zenoh_to_can", "zenoh_to_can")):
+        if direction not in gate:
+            continue
+        for b in result.buses:
+            c = getattr(b, attr)
+            if c is None:
+                continue
+            for window, seconds in zip(faults["windows"], c.recovery_s, strict=False):
+                what = f"{b.bus} {direction} after {window['action']} (ended at {window['end_s']} s)"
+                if seconds is None:
+                    problems.append(f"{what}: no frame bridged after the fault")
+                elif seconds > gate[direction]:
+                    problems.append(f"{what}: recovered in {seconds:.3f} s > gate {gate[direction]} s")
+    return problems
+
+
+def bridge_memory(result: RunResult) -> list[str] | None:
+    """The bridge's memory stayed under the gate (sampled every 0.5 s while faults run)."""
+    gate = _expect(result, "bridge_rss_mib")
+    faults = result.metrics.get("faults")
+    if not gate or not faults:
+        return None
+    peak = faults["bridge_rss_mib"]["max"]
+    if peak is None:
+        return ["no memory sample of the bridge"]
+    return [f"bridge memory peaked at {peak:.1f} MiB > gate {gate} MiB"] if peak > gate else []
+
+
 def only_expected_keys(result: RunResult) -> list[str] | None:
     """The bridge published on its own keys only."""
     return [f"samples on unexpected keys: {result.unexpected_keys}"] if result.unexpected_keys else []
@@ -198,6 +246,16 @@ def ecus_sent_their_traces(result: RunResult) -> list[str] | None:
     return problems
 
 
+def _since_last_restart(frames):
+    """The frames of the bridge's last incarnation: its counters and sequence numbers start
+    again at 0 when it restarts (a fault step), so compare only what came after that."""
+    start = 0
+    for i in range(1, len(frames)):
+        if 0 <= frames[i].seq < frames[i - 1].seq:
+            start = i
+    return frames[start:]
+
+
 def bridge_stats_agree(result: RunResult) -> list[str] | None:
     """The bridge's own counters agree with what the oracle saw."""
     if result.bridge_stats is None:
@@ -208,9 +266,10 @@ def bridge_stats_agree(result: RunResult) -> list[str] | None:
         if bus_stats is None:
             problems.append(f"no stats for {b.bus}")
             continue
-        if bus_stats["published_frames"] != len(b.zenoh_frames):
+        received = _since_last_restart(b.zenoh_frames)
+        if bus_stats["published_frames"] != len(received):
             problems.append(f"{b.bus}: bridge says it published {bus_stats['published_frames']} frames, "
-                            f"the capture received {len(b.zenoh_frames)}")
+                            f"the capture received {len(received)}")
         tx = b.zenoh_to_can
         if tx is not None:
             written = len(tx.matched) + len(tx.duplicates) + len(tx.corrupted) + len(tx.unexpected)
@@ -230,6 +289,9 @@ CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "latency_round_trip": latency_round_trip,
     "cycle_time": cycle_time,
     "latency_regression": latency_regression,
+    "faults_injected": faults_injected,
+    "recovery": recovery,
+    "bridge_memory": bridge_memory,
     "only_expected_keys": only_expected_keys,
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,

@@ -77,6 +77,10 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
                             "timeout": "2s", "retries": 60},
         }
         orchestrator_env["BENCH_CONSUMER"] = "tcp/router2:7447"
+    if sc.faults:
+        # fault steps drive Docker's API: the socket, for the orchestrator only (docs/faults.md)
+        services["orchestrator"]["volumes"] = ["/var/run/docker.sock:/var/run/docker.sock"]
+        services["orchestrator"]["group_add"] = ["${DOCKER_GID:-0}"]
     for e in sc.ecus:
         services[f"ecu-{e.name}"] = {
             "image": "canbench/ecu:${BENCH_TAG:-latest}",
@@ -85,6 +89,8 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
             "environment": ["BENCH_CAN_MODE", "RUN_ID"],
             "user": "${BENCH_UID:-0}:${BENCH_GID:-0}",
             "volumes": ["canbus:/run/ucan", "./reports:/reports", "${SCENARIO_DIR:-./scenarios}:/scenarios:ro"],
+            # bench-run does not expect an ECU that a fault step kills to exit cleanly
+            "labels": {"bench.fault-target": str(any(f.target == e.name for f in sc.faults)).lower()},
             "command": ["canbench", "ecu", "--scenario", scenario_in_container, "--name", e.name,
                         "--run-id", "${RUN_ID}", "--run-dir", "/reports/${RUN_ID}", "--router", "tcp/router:7447"],
         }

@@ -81,17 +81,19 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
     plan = schedule(ecu, scenario)
     sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
     errors_ms: list[float] = []
-    with can.Bus(interface="socketcan", channel=ecu.bus) as bus, open(sent_log, "w") as log:
+    # line-buffered and written just before each send: an ECU killed by a fault step leaves a
+    # log that accounts for every frame it put on the bus (the oracle relies on it)
+    with can.Bus(interface="socketcan", channel=ecu.bus) as bus, open(sent_log, "w", buffering=1) as log:
         log.write(SENT_LOG_HEADER)
         start = time.perf_counter()
         wall0 = time.time_ns() - int(start * 1e9)
         messages = [m for _, m in plan]
         # MessageSync sleeps until each message's offset: the recorded timing
         for (line, msg), synced in zip(plan, can.MessageSync(messages, timestamps=True, skip=3600), strict=True):
-            bus.send(synced)
             now = time.perf_counter()
-            errors_ms.append((now - start - msg.timestamp) * 1000)
             log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
+            bus.send(synced)
+            errors_ms.append((now - start - msg.timestamp) * 1000)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
             "sent": len(plan), "fidelity_ms": fidelity(errors_ms)}
 
@@ -104,7 +106,8 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
                for i in sorted(ecu.echo_ids)]
     received = answered = 0
     turnaround_ms: list[float] = []
-    with can.Bus(interface="socketcan", channel=ecu.bus, can_filters=filters) as bus, open(sent_log, "w") as log:
+    with can.Bus(interface="socketcan", channel=ecu.bus, can_filters=filters) as bus, \
+            open(sent_log, "w", buffering=1) as log:
         log.write(SENT_LOG_HEADER)
         ready = session.liveliness().declare_token(runkeys.ecu_ready(run_id, ecu.name))
         runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
@@ -120,11 +123,11 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
             can_id, data = ecu.answer(msg.arbitration_id, bytes(msg.data))
             answer = can.Message(arbitration_id=can_id, is_extended_id=msg.is_extended_id, data=data,
                                  dlc=msg.dlc, channel=ecu.bus)
-            bus.send(answer)
             now_ns = time.time_ns()
+            log.write(f"0\t{now_ns}\t{frame_of(answer).candump(ecu.bus)}\n")
+            bus.send(answer)
             answered += 1
             turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)
-            log.write(f"0\t{now_ns}\t{frame_of(answer).candump(ecu.bus)}\n")
         ready.undeclare()
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
             "turnaround_ms": fidelity(turnaround_ms)}

@@ -130,6 +130,8 @@ class Comparison:
     reordered: list[tuple[Observed, Observed]] = field(default_factory=list)  # (frame, frame it overtook)
     reordered_per_id: int = 0
     latency_ms: list[float] = field(default_factory=list)
+    lost_in_faults: list[Observed] = field(default_factory=list)  # lost inside a fault window: allowed, counted
+    recovery_s: list[float | None] = field(default_factory=list)  # per fault window: end -> first bridged frame
 
     def summary(self) -> dict:
         return {
@@ -137,6 +139,7 @@ class Comparison:
             "duplicates": len(self.duplicates), "corrupted": len(self.corrupted),
             "unexpected": len(self.unexpected), "reordered": len(self.reordered),
             "reordered_per_id": self.reordered_per_id, "latency": latency_stats(self.latency_ms),
+            "lost_in_faults": len(self.lost_in_faults), "recovery_s": self.recovery_s,
         }
 
 
@@ -225,6 +228,24 @@ def _classify(sent: list[Observed], received: list[Observed],
             previous = (s, r)
         c.latency_ms.append((r.t_ns - s.t_ns) / 1e6)
     return c, others
+
+
+FAULT_LEAD_NS = 1_000_000_000  # frames this long before a fault may still be in flight (queues, TCP buffers)
+
+
+def apply_fault_windows(c: Comparison, windows: list[tuple[int, int]]) -> None:
+    """Loss inside a fault window is the fault's, not the bridge's: a lost frame sent between
+    a fault's start (minus FAULT_LEAD_NS) and the first frame bridged after the fault's end
+    moves from lost to lost_in_faults. recovery_s per window: fault end -> arrival of that
+    first frame (None: nothing sent after the fault got through)."""
+    matched = sorted(c.matched, key=lambda p: p[0].t_ns)
+    allowed = []
+    for start_ns, end_ns in windows:
+        first = next(((s, r) for s, r in matched if s.t_ns >= end_ns), None)
+        c.recovery_s.append(round((first[1].t_ns - end_ns) / 1e9, 3) if first else None)
+        allowed.append((start_ns - FAULT_LEAD_NS, first[0].t_ns if first else end_ns))
+    c.lost_in_faults = [o for o in c.lost if any(a <= o.t_ns < b for a, b in allowed)]
+    c.lost = [o for o in c.lost if not any(a <= o.t_ns < b for a, b in allowed)]
 
 
 def cycle_times(frames: list[Observed]) -> dict[str, dict]:

@@ -155,8 +155,9 @@ def _timeline(result: RunResult) -> str:
         lost = b.comparison.lost + (b.zenoh_to_can.lost if b.zenoh_to_can else [])
         if lost:
             ax.plot([(o.t_ns - t0) / 1e9 for o in lost], [0] * len(lost), "rx", label=f"{b.bus} lost")
-    for window in result.metrics.get("faults", []):
-        ax.axvspan(window["start_s"], window["end_s"], color="orange", alpha=0.2)
+    for window in (result.metrics.get("faults") or {}).get("windows", []):
+        ax.axvspan((window["start_ns"] - t0) / 1e9, (window["end_ns"] - t0) / 1e9, color="orange", alpha=0.25)
+        ax.annotate(window["action"], ((window["start_ns"] - t0) / 1e9, 0), fontsize=7, rotation=90)
     ax.set_xlabel("s since first frame")
     ax.set_ylabel("frames per 100 ms")
     ax.legend(fontsize=8)

@@ -18,6 +18,7 @@ from . import oracle, runkeys, wire
 from .capture import CanCapture, ZenohCapture, read_zenoh_capture
 from .commands import Commander, tx_key
 from .commands import plan as command_plan
+from .faults import Injector
 from .scenario import Scenario
 
 METRICS_SCHEMA_VERSION = 1
@@ -96,9 +97,10 @@ def _answer_ids(scenario: Scenario) -> dict[str, set[int]]:
 
 
 def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can",
-            consumer: str | None = None, baseline: dict | None = None) -> RunResult:
+            consumer: str | None = None, baseline: dict | None = None, project: str | None = None) -> RunResult:
     """router: where the bench coordinates (ECUs, stats); consumer: where the capture and the
-    commands connect (the router by default; a far router or the bridge itself by topology)."""
+    commands connect (the router by default; a far router or the bridge itself by topology);
+    project: the compose project, for fault steps."""
     run_dir.mkdir(parents=True, exist_ok=True)
     session = runkeys.open_session(router)
     data = session if consumer in (None, router) else runkeys.open_session(consumer)
@@ -126,8 +128,23 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
         zenoh_capture = ZenohCapture(data, consumer or router, f"{prefix}/**", run_dir / "zenoh.tsv",
                                      runkeys.zenoh_capture_ready(run_id))
         commander = Commander(data, scenario, run_dir / "commands.tsv", prefix) if scenario.commands else None
+        injector = None
+        if scenario.faults:
+            if not project:
+                raise RuntimeError("this scenario has fault steps: they need the compose project (BENCH_PROJECT) "
+                                   "and Docker's socket, i.e. a run by make test / scripts/bench-run")
+
+            def ecu_killed(name: str) -> None:
+                log = run_dir / f"ecu-{name}.sent.tsv"
+                sent = sum(1 for line in open(log) if not line.startswith("#")) if log.exists() else 0
+                done[name] = {"name": name, "killed": True, "sent": sent}
+                if senders <= set(done):
+                    senders_done.set()
+            injector = Injector(project, scenario.faults, ecu_killed)
         ready = session.liveliness().declare_token(runkeys.capture_ready(run_id))
         started = time.monotonic()
+        if injector:
+            injector.start()
         all_keys = {rx_key(prefix, b, len(scenario.bus_names)) for b in scenario.bus_names}
         bridge_stats = None
         try:
@@ -150,6 +167,8 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
                     raise TimeoutError(f"commands not all put within duration_s + 30 s ({deadline:.0f} s)")
                 if commander.error:
                     raise RuntimeError(f"putting commands failed: {commander.error}")
+            if injector:
+                injector.wait_faults(deadline)
             traffic_s = time.monotonic() - started
             period_s = scenario.bridge.get("publish_period_ms", 0) / 1000
             if commander:
@@ -182,6 +201,8 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
             except TimeoutError:
                 pass  # reported as loss by the checks
         finally:
+            if injector:
+                injector.stop()
             ready.undeclare()
             done_sub.undeclare()
             can_capture.stop()
@@ -190,7 +211,8 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
         if data is not session:
             data.close()
         session.close()
-    return analyse(scenario, run_id, run_dir, prefix, done, bridge_stats, traffic_s, baseline)
+    return analyse(scenario, run_id, run_dir, prefix, done, bridge_stats, traffic_s, baseline,
+                   injector.summary() if injector else None)
 
 
 def _drain_commands(session, data, prefix: str, sent: int, scenario: Scenario, capture: ZenohCapture,
@@ -233,7 +255,8 @@ def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.O
 
 
 def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: dict[str, dict],
-            bridge_stats: dict | None, traffic_s: float, baseline: dict | None = None) -> RunResult:
+            bridge_stats: dict | None, traffic_s: float, baseline: dict | None = None,
+            faults: dict | None = None) -> RunResult:
     samples = read_zenoh_capture(run_dir / "zenoh.tsv")
     n = len(scenario.bus_names)
     expected_keys = {rx_key(prefix, b, n) for b in scenario.bus_names}
@@ -256,6 +279,11 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         comparison = oracle.compare(from_ecus, zenoh_frames)
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
+        if faults:
+            windows = [(w["start_ns"], w["end_ns"]) for w in faults["windows"]]
+            for c in (comparison, tx, round_trip):
+                if c is not None:
+                    oracle.apply_fault_windows(c, windows)
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
                                _cycle_times(from_ecus, comparison.matched), can_frames))
     result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys, baseline=baseline)
@@ -272,6 +300,7 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         "bridge_stats": bridge_stats,
         "unexpected_keys": unexpected_keys,
         "baseline_run_id": baseline.get("run_id") if baseline else None,
+        "faults": faults,
         "verdicts": {},
     }
     write_metrics(result)

@@ -105,6 +105,14 @@ class Commands:
 
 
 @dataclass(frozen=True)
+class Fault:
+    at_s: float
+    action: str
+    duration_s: float = 1.0
+    target: str = ""
+
+
+@dataclass(frozen=True)
 class Scenario:
     path: Path
     name: str
@@ -118,6 +126,7 @@ class Scenario:
     commands: list[Commands] = field(default_factory=list)
     consumer: str = "router"
     dbc: Path | None = None
+    faults: list[Fault] = field(default_factory=list)
 
     @property
     def bus_names(self) -> list[str]:
@@ -207,10 +216,17 @@ def load(path: str | Path) -> Scenario:
     consumer = doc.get("topology", {}).get("consumer", "router")
     if consumer == "bridge" and bridge.get("mode", "client") == "client":
         raise fail(["topology", "consumer"], "a consumer can connect to the bridge only in bridge.mode peer or router")
+    faults = []
+    for i, spec in enumerate(doc.get("faults", [])):
+        if (spec["action"] == "ecu_kill") != ("target" in spec):
+            raise fail(["faults", i], "ecu_kill needs target (an ECU name); other actions take none")
+        if "target" in spec and spec["target"] not in names:
+            raise fail(["faults", i, "target"], f"'{spec['target']}' is not one of the ECUs {sorted(names)}")
+        faults.append(Fault(spec["at_s"], spec["action"], spec.get("duration_s", 1.0), spec.get("target", "")))
     dbc = None
     if "dbc" in doc:
         dbc = (path.parent / doc["dbc"]).resolve()
         if not dbc.is_file():
             raise fail(["dbc"], f"no such file {dbc}")
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
-                    bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc)
+                    bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc, faults)

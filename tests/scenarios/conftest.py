@@ -22,6 +22,8 @@ def pytest_addoption(parser):
                     help="Zenoh router endpoint the bench coordinates through")
     group.addoption("--consumer", default=os.environ.get("BENCH_CONSUMER"),
                     help="endpoint the capture and the commands connect to (default: the router)")
+    group.addoption("--project", default=os.environ.get("BENCH_PROJECT") or None,
+                    help="the run's compose project (fault steps act on its containers)")
     group.addoption("--baseline", default=os.environ.get("BENCH_BASELINE") or None,
                     help="metrics.json (or its run directory) of a run to gate relative regressions against")
 
@@ -42,7 +44,7 @@ def scenario_run(bench_options, request):
         path = Path(bench_options.baseline)
         baseline = json.loads((path / "metrics.json" if path.is_dir() else path).read_text())
     result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router,
-                         consumer=bench_options.consumer, baseline=baseline)
+                         consumer=bench_options.consumer, baseline=baseline, project=bench_options.project)
     request.config._bench_result = result
     return result
 

@@ -126,3 +126,24 @@ def test_round_trip_matches_answers_among_other_traffic():
                enumerate([wire.Frame(0x555, 0)] + [a.frame for a in answers if a.index != 4])]
     c = match_subset(answers, traffic)
     assert len(c.matched) == 9 and [o.index for o in c.lost] == [4] and not c.unexpected
+
+
+def test_loss_inside_a_fault_window_is_the_faults_loss_outside_is_the_bridges():
+    from canbench.oracle import FAULT_LEAD_NS, apply_fault_windows
+    sent = stream(50)  # one frame per ms
+    fault_start, fault_end = 20_000_000 + FAULT_LEAD_NS, 25_000_000 + FAULT_LEAD_NS
+    shifted = [Observed(s.frame, s.t_ns + FAULT_LEAD_NS, s.index, line=s.line) for s in sent]
+    kept = [s for s in shifted if not 18 <= s.index < 27 and s.index != 40]  # 18..26 in the window, 40 not
+    c = compare(shifted, [Observed(s.frame, s.t_ns + 200_000, i, key="k", seq=i) for i, s in enumerate(kept)])
+    apply_fault_windows(c, [(fault_start, fault_end)])
+    assert [o.index for o in c.lost] == [40]
+    assert [o.index for o in c.lost_in_faults] == list(range(18, 27))
+    assert c.recovery_s == [pytest.approx(0.0022, abs=1e-4)]  # frame 27, 2 ms after the end, + 0.2 ms
+
+
+def test_no_frame_after_the_fault_is_no_recovery():
+    from canbench.oracle import apply_fault_windows
+    sent = stream(30)
+    c = compare(sent, received([s.frame for s in sent[:10]]))
+    apply_fault_windows(c, [(10_000_000, 12_000_000)])
+    assert c.recovery_s == [None] and c.lost  # everything after the fault stays lost

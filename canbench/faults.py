@@ -1,0 +1,141 @@
+"""Fault steps of a scenario, injected from the orchestrator through Docker's
+API (the docker socket is mounted into the orchestrator only, and only for
+scenarios with faults; see docs/faults.md for what that privilege means).
+
+Each step acts on a service of the run's compose project (found by the
+compose labels) at `at_s` seconds after the traffic starts:
+
+  router_restart  graceful restart (SIGTERM, then start)
+  router_kill     SIGKILL, start again after duration_s
+  router_pause    frozen for duration_s (sessions time out after the lease)
+  router_replace  SIGKILL and a new instance after duration_s (new Zenoh id)
+  bridge_term     SIGTERM to the bridge, start again after duration_s
+  bridge_kill     SIGKILL to the bridge, start again after duration_s
+  ecu_kill        the ECU `target` vanishes for good
+
+Every step records its window (wall clock ns, like the captures) so the
+oracle can tell loss inside a fault window from loss outside it. The bridge's
+memory use is sampled all along."""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+from .scenario import Fault
+
+ACTION_SERVICE = {"router_restart": "router", "router_kill": "router", "router_pause": "router",
+                  "router_replace": "router", "bridge_term": "bridge", "bridge_kill": "bridge"}
+RSS_SAMPLE_S = 0.5
+
+
+@dataclass
+class Window:
+    action: str
+    service: str
+    start_ns: int
+    end_ns: int = 0
+    error: str = ""
+
+    def as_dict(self, t0_ns: int) -> dict:
+        return {"action": self.action, "service": self.service, "start_s": round((self.start_ns - t0_ns) / 1e9, 3),
+                "end_s": round((self.end_ns - t0_ns) / 1e9, 3), "start_ns": self.start_ns, "end_ns": self.end_ns,
+                "error": self.error}
+
+
+@dataclass
+class Injector:
+    """Runs the scenario's fault steps in a thread; samples the bridge's memory in another."""
+    project: str
+    faults: list[Fault]
+    on_ecu_killed: object = None  # callable(name) so the orchestrator stops waiting for it
+    windows: list[Window] = field(default_factory=list)
+    rss_samples: list[tuple[int, float]] = field(default_factory=list)  # (ns, MiB)
+    errors: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        import docker  # only fault scenarios need Docker's API
+        self.client = docker.from_env()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+
+    def container(self, service: str):
+        found = self.client.containers.list(all=True, filters={"label": [
+            f"com.docker.compose.project={self.project}", f"com.docker.compose.service={service}"]})
+        if not found:
+            raise RuntimeError(f"no container of service {service} in project {self.project}")
+        return found[0]
+
+    def start(self) -> None:
+        self.t0_ns = time.time_ns()
+        t0 = time.monotonic()
+        self._threads = [threading.Thread(target=self._run, args=(t0,), daemon=True, name="faults"),
+                         threading.Thread(target=self._sample_rss, daemon=True, name="rss")]
+        for t in self._threads:
+            t.start()
+
+    def _run(self, t0: float) -> None:
+        for fault in sorted(self.faults, key=lambda f: f.at_s):
+            if self._stop.wait(max(0.0, t0 + fault.at_s - time.monotonic())):
+                return  # the run ended first
+            service = fault.target and f"ecu-{fault.target}" or ACTION_SERVICE[fault.action]
+            window = Window(fault.action, service, time.time_ns())
+            self.windows.append(window)
+            try:
+                self._inject(fault, self.container(service))
+            except Exception as e:  # noqa: BLE001 - reported as the bench's failure, never lost in a thread
+                window.error = f"{type(e).__name__}: {e}"
+                self.errors.append(f"{fault.action} on {service}: {window.error}")
+            window.end_ns = time.time_ns()
+
+    def _inject(self, fault: Fault, c) -> None:
+        hold = fault.duration_s
+        if fault.action == "router_restart":
+            c.restart(timeout=10)
+        elif fault.action in ("router_kill", "router_replace", "bridge_kill"):
+            c.kill()
+            time.sleep(hold)  # the fault's length, as the scenario specifies
+            c.start()
+        elif fault.action == "bridge_term":
+            c.stop(timeout=10)
+            time.sleep(hold)
+            c.start()
+        elif fault.action == "router_pause":
+            c.pause()
+            time.sleep(hold)
+            c.unpause()
+        elif fault.action == "ecu_kill":
+            c.kill()
+            if callable(self.on_ecu_killed):
+                self.on_ecu_killed(fault.target)
+        else:
+            raise ValueError(f"unknown fault action {fault.action}")
+
+    def _sample_rss(self) -> None:
+        while not self._stop.wait(RSS_SAMPLE_S):
+            try:
+                stats = self.container("bridge").stats(stream=False)
+                usage = stats.get("memory_stats", {})
+                rss = usage.get("stats", {}).get("rss", usage.get("stats", {}).get("anon", usage.get("usage", 0)))
+                if rss:
+                    self.rss_samples.append((time.time_ns(), rss / 2**20))
+            except Exception:  # noqa: BLE001 - the bridge may be down during its own fault
+                continue
+
+    def wait_faults(self, timeout_s: float) -> None:
+        """Until every fault step has run (and restarted what it stopped)."""
+        self._threads[0].join(timeout=timeout_s)
+        if self._threads[0].is_alive():
+            raise TimeoutError(f"fault steps still running after {timeout_s:.0f} s")
+
+    def stop(self) -> None:
+        self._stop.set()
+        for t in self._threads:
+            t.join(timeout=30)
+
+    def summary(self) -> dict:
+        rss = [m for _, m in self.rss_samples]
+        return {"windows": [w.as_dict(self.t0_ns) for w in self.windows], "errors": self.errors,
+                "bridge_rss_mib": {"max": round(max(rss), 2) if rss else None, "samples": len(rss),
+                                   "first": round(rss[0], 2) if rss else None,
+                                   "last": round(rss[-1], 2) if rss else None}}
