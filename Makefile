@@ -126,11 +126,11 @@ KERNEL_LANE_BRIDGE_TESTS := every_frame_kind or invalid_commands or sigterm
 check-kernel: ucan firmware zenohd
 	@if [ "$$(BENCH_CAN=auto scripts/detect-can)" = kernel ]; then \
 	   echo "kernel lane: native kernel vcan"; \
-	   UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) BENCH_CAN=kernel $(PYTEST) -q tests/bus tests/bridge -k "$(KERNEL_LANE_BRIDGE_TESTS) or not bridge"; \
+	   UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) BENCH_CAN=kernel $(PYTEST) -q tests/bus tests/bridge/test_bridge_host.py -k "$(KERNEL_LANE_BRIDGE_TESTS) or not bridge"; \
 	 else \
 	   echo "kernel lane: Debian's kernel in QEMU (ucan/vm/vcan-vm), no kernel vcan on this host"; \
 	   ucan/vm/vcan-vm -- env UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZENOHD=$(ZENOHD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node \
-	     $(PYTEST) -p no:cacheprovider -q tests/bus tests/bridge -k "$(KERNEL_LANE_BRIDGE_TESTS) or not bridge"; \
+	     $(PYTEST) -p no:cacheprovider -q tests/bus tests/bridge/test_bridge_host.py -k "$(KERNEL_LANE_BRIDGE_TESTS) or not bridge"; \
 	 fi
 
 # The bench must catch a broken bridge: each seeded fault fails exactly its checks.

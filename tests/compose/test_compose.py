@@ -77,6 +77,17 @@ def test_failing_gate_fails_the_run_on_that_check_only():
     assert leftovers(run_dir) == []
 
 
+def test_fault_scenario_with_unmeetable_recovery_gate_fails_on_recovery_only():
+    proc, run_dir = bench_run(DATA / "recovery-gate-too-tight.yaml")
+    assert proc.returncode != 0, proc.stdout[-4000:]
+    cases = junit_cases(run_dir)
+    assert [name for name, outcome in cases.items() if outcome == "failed"] == ["test_check[recovery]"], cases
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["faults"]["windows"][0]["action"] == "router_kill"
+    assert "recovered in" in metrics["problems"]["recovery"][0]
+    assert leftovers(run_dir) == []
+
+
 def test_invalid_scenario_stops_with_exit_2_and_file_line():
     proc, run_dir = bench_run(DATA / "unknown-key.yaml")
     assert proc.returncode == 2
