@@ -108,8 +108,10 @@ def cmd_ecu(args) -> int:
     run_dir = Path(args.run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     summary = ecu.run(sc, args.name, args.run_id, run_dir, args.router, args.timeout)
-    print(f"ecu {args.name}: sent {summary['sent']} frames, send-time error p50 "
-          f"{summary['fidelity_ms']['p50']} ms p99 {summary['fidelity_ms']['p99']} ms")
+    timing = summary.get("fidelity_ms") or summary.get("turnaround_ms") or {}
+    what = "turnaround" if "turnaround_ms" in summary else "send-time error"
+    print(f"ecu {args.name} ({summary['role']}): sent {summary['sent']} frames, {what} p50 "
+          f"{timing.get('p50')} ms p99 {timing.get('p99')} ms")
     return 0
 
 

@@ -366,6 +366,8 @@ static int put_sample(struct bus *b, uint8_t *payload, size_t len, const uint8_t
 	case FAULT_WRONGKEY:
 		return zn_put(b->misrouted, payload, len, att, att_len);
 	case FAULT_NONE:
+	case FAULT_TXDROP: /* Zenoh -> CAN faults: tx_fault() */
+	case FAULT_TXFLIP:
 		break;
 	}
 	return zn_put(b->pub, payload, len, att, att_len);
