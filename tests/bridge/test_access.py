@@ -84,7 +84,7 @@ def run_access_scenario(bus, bridge, router: Router, creds: dict[str, dict], tmp
         bus.run(["cansend", "vcan0", "200#01"])
         wait_for(lambda: rx, "the reader receiving rx")
         on_bus = stop_candump(dump, out)
-        assert on_bus == [f"100#{i:02X}" for i in range(COMMANDS)] + ["200#01"]
+        assert on_bus == [f"vcan0 100#{i:02X}" for i in range(COMMANDS)] + ["vcan0 200#01"]
         assert bridge.stats(sessions["commander"])["buses"][0]["tx_samples"] == COMMANDS  # intruder's never arrived
         sub.undeclare()
     finally:
