@@ -2,6 +2,7 @@
 
   canbench run SCENARIO                    run one scenario in compose (scripts/bench-run)
   canbench open [RUN]                      the HTML report of a run (default reports/latest)
+  canbench view [--auto-subscribe ...]     bridges and ROS 2 topics on a Zenoh network, in Rerun
   canbench compare OLD NEW                 diff two runs' metrics.json; exit 1 on a regression
   canbench summarise TRACE                 per-id counts, cycle times, jitter and bus load of a trace
   canbench scaffold TRACE --name N         a scenario replaying a trace, gates derived from it
@@ -27,6 +28,11 @@ from .errors import BenchError, InputError
 from .trace import read_trace
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def _add_view_arguments(p) -> None:
+    from .viewer_args import add_arguments
+    add_arguments(p)
 
 
 def cmd_validate(args) -> int:
@@ -163,6 +169,11 @@ def cmd_open(args) -> int:
     return 0
 
 
+def cmd_view(args) -> int:
+    from . import viewer  # Rerun is only needed here
+    return viewer.run(args)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="canbench", description=__doc__.split("\n")[0])
     ap.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -210,6 +221,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("run", nargs="?", type=Path)
     p.add_argument("--print-only", action="store_true", help="print the path, do not start a browser")
     p.set_defaults(func=cmd_open)
+    p = sub.add_parser("view", help="bridges and ROS 2 topics on a Zenoh network (or a recording) in Rerun")
+    _add_view_arguments(p)
+    p.set_defaults(func=cmd_view)
     args = ap.parse_args(argv)
     try:
         return args.func(args)

@@ -1,0 +1,18 @@
+"""Command-line arguments of `canbench view` (kept apart so the CLI does not import Rerun)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def add_arguments(p) -> None:
+    p.add_argument("source", nargs="?", type=Path, help="a bench recording (.mcap) instead of a live network")
+    p.add_argument("--zenoh-mode", choices=["client", "peer"], default="client")
+    p.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT",
+                   help=f"repeatable (default {DEFAULT_ENDPOINT})")
+    p.add_argument("--auto-subscribe", action="store_true", help="every discovered topic with a logger")
+    p.add_argument("-t", "--topic", action="append", default=[], help="a ROS 2 topic to subscribe (repeatable)")
+    p.add_argument("--dbc", type=Path, help="decode CAN signals with this DBC (cantools)")
+    p.add_argument("--save", type=Path, help="write an .rrd file instead of spawning the Rerun viewer")
+    p.add_argument("--duration", type=float, default=0, help="stop after this many seconds (0: until Ctrl-C)")
