@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from .faults import disruptive, last_bridge_restart_ns
 from .oracle import describe
 from .run import RunResult
 
@@ -210,7 +211,7 @@ def recovery(result: RunResult) -> list[str] | None:
             c = getattr(b, attr)
             if c is None:
                 continue
-            for window, seconds in zip(faults["windows"], c.recovery_s, strict=False):
+            for window, seconds in zip(disruptive(faults["windows"]), c.recovery_s, strict=False):
                 what = f"{b.bus} {direction} after {window['action']} (ended at {window['end_s']} s)"
                 if seconds is None:
                     problems.append(f"{what}: no frame bridged after the fault")
@@ -272,7 +273,9 @@ def bridge_stats_agree(result: RunResult) -> list[str] | None:
                             f"the capture received {len(received)}")
         tx = b.zenoh_to_can
         if tx is not None:
-            written = len(tx.matched) + len(tx.duplicates) + len(tx.corrupted) + len(tx.unexpected)
+            restarted_ns = last_bridge_restart_ns((result.metrics.get("faults") or {}).get("windows", []))
+            written = sum(1 for r in [r for _, r in tx.matched] + tx.duplicates + [r for _, r, _ in tx.corrupted]
+                          + tx.unexpected if r.t_ns >= restarted_ns)
             if bus_stats["tx_frames"] != written:
                 problems.append(f"{b.bus}: bridge says it wrote {bus_stats['tx_frames']} frames to CAN, "
                                 f"the bus carried {written} from it")

@@ -29,6 +29,17 @@ ACTION_SERVICE = {"router_restart": "router", "router_kill": "router", "router_p
 RSS_SAMPLE_S = 0.5
 
 
+def disruptive(windows: list[dict]) -> list[dict]:
+    """The windows of faults that can interrupt bridging (router, bridge); an ECU vanishing
+    only ends that ECU's traffic, so loss around it is never excused."""
+    return [w for w in windows if w["action"] != "ecu_kill"]
+
+
+def last_bridge_restart_ns(windows: list[dict]) -> int:
+    """When the bridge's last incarnation was started (0: it never restarted)."""
+    return max((w["end_ns"] for w in windows if w["action"].startswith("bridge_")), default=0)
+
+
 @dataclass
 class Window:
     action: str

@@ -18,7 +18,7 @@ from . import oracle, runkeys, wire
 from .capture import CanCapture, ZenohCapture, read_zenoh_capture
 from .commands import Commander, tx_key
 from .commands import plan as command_plan
-from .faults import Injector
+from .faults import Injector, disruptive
 from .scenario import Scenario
 
 METRICS_SCHEMA_VERSION = 1
@@ -280,7 +280,7 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
         if faults:
-            windows = [(w["start_ns"], w["end_ns"]) for w in faults["windows"]]
+            windows = [(w["start_ns"], w["end_ns"]) for w in disruptive(faults["windows"])]
             for c in (comparison, tx, round_trip):
                 if c is not None:
                     oracle.apply_fault_windows(c, windows)
