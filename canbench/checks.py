@@ -152,8 +152,10 @@ def cycle_time(result: RunResult) -> list[str] | None:
             if can["count"] < gate.get("min_frames", 5):
                 continue
             expected = explicit.get(int(ident, 16), can["cycle_p50_ms"])
-            if not zen or zen["count"] < 2:
-                problems.append(f"{b.bus} id {ident}: no cycle on Zenoh ({zen['count'] if zen else 0} frames)")
+            if not zen:
+                continue  # nothing of this id arrived: integrity reports that
+            if zen["count"] < 2:
+                problems.append(f"{b.bus} id {ident}: no cycle on Zenoh (1 frame)")
                 continue
             if tolerance is not None and abs(zen["cycle_p50_ms"] - expected) > expected * tolerance / 100:
                 problems.append(f"{b.bus} id {ident}: median cycle {zen['cycle_p50_ms']:.2f} ms on Zenoh, expected "
@@ -247,14 +249,11 @@ def ecus_sent_their_traces(result: RunResult) -> list[str] | None:
     return problems
 
 
-def _since_last_restart(frames):
-    """The frames of the bridge's last incarnation: its counters and sequence numbers start
-    again at 0 when it restarts (a fault step), so compare only what came after that."""
-    start = 0
-    for i in range(1, len(frames)):
-        if 0 <= frames[i].seq < frames[i - 1].seq:
-            start = i
-    return frames[start:]
+def _since_last_restart(result: RunResult, frames):
+    """The frames of the bridge's last incarnation: its counters start again at 0 when a fault
+    step restarts it, so compare only what arrived after that."""
+    restarted_ns = last_bridge_restart_ns((result.metrics.get("faults") or {}).get("windows", []))
+    return [f for f in frames if f.t_ns >= restarted_ns]
 
 
 def bridge_stats_agree(result: RunResult) -> list[str] | None:
@@ -267,7 +266,7 @@ def bridge_stats_agree(result: RunResult) -> list[str] | None:
         if bus_stats is None:
             problems.append(f"no stats for {b.bus}")
             continue
-        received = _since_last_restart(b.zenoh_frames)
+        received = _since_last_restart(result, b.zenoh_frames)
         if bus_stats["published_frames"] != len(received):
             problems.append(f"{b.bus}: bridge says it published {bus_stats['published_frames']} frames, "
                             f"the capture received {len(received)}")

@@ -25,6 +25,7 @@ from .scenario import Ecu, Scenario
 from .trace import read_trace
 from .wire import Frame
 
+SEND_TIMEOUT_S = 5.0
 ECHO_POLL_S = 0.05  # how often the echo loop looks at its stop flag while the bus is quiet
 
 
@@ -83,19 +84,41 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
     errors_ms: list[float] = []
     # line-buffered and written just before each send: an ECU killed by a fault step leaves a
     # log that accounts for every frame it put on the bus (the oracle relies on it)
-    with can.Bus(interface="socketcan", channel=ecu.bus) as bus, open(sent_log, "w", buffering=1) as log:
+    # our own copies of the last frame's id come back (CAN_RAW_RECV_OWN_MSGS, filtered to that id):
+    # the ECU says done only once the bus has carried everything it sent
+    last = plan[-1][1] if plan else None
+    own = [{"can_id": last.arbitration_id, "can_mask": 0x1FFFFFFF, "extended": last.is_extended_id}] if last else None
+    with can.Bus(interface="socketcan", channel=ecu.bus, receive_own_messages=bool(own), can_filters=own) as bus, \
+            open(sent_log, "w", buffering=1) as log:
         log.write(SENT_LOG_HEADER)
-        start = time.perf_counter()
+        # MessageSync times messages relative to the first one: wait out the first offset here
+        first_s = plan[0][1].timestamp if plan else 0.0
+        time.sleep(first_s)  # the scenario's start offset (pacing, not synchronisation)
+        start = time.perf_counter() - first_s
         wall0 = time.time_ns() - int(start * 1e9)
         messages = [m for _, m in plan]
         # MessageSync sleeps until each message's offset: the recorded timing
         for (line, msg), synced in zip(plan, can.MessageSync(messages, timestamps=True, skip=3600), strict=True):
             now = time.perf_counter()
             log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
-            bus.send(synced)
+            bus.send(synced, timeout=SEND_TIMEOUT_S)  # a busy bus makes a sender wait, as on a real one
             errors_ms.append((now - start - msg.timestamp) * 1000)
+        if last is not None:
+            _wait_own_copies(bus, last, sum(1 for _, m in plan if m.arbitration_id == last.arbitration_id
+                                            and m.is_extended_id == last.is_extended_id))
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
             "sent": len(plan), "fidelity_ms": fidelity(errors_ms)}
+
+
+def _wait_own_copies(bus: can.BusABC, last: can.Message, expected: int) -> None:
+    seen = 0
+    deadline = time.monotonic() + SEND_TIMEOUT_S
+    while seen < expected:
+        msg = bus.recv(timeout=max(0.0, deadline - time.monotonic()))
+        if msg is None:
+            raise TimeoutError(f"the bus carried {seen} of the {expected} frames with id "
+                               f"{last.arbitration_id:X} this ECU sent (within {SEND_TIMEOUT_S} s)")
+        seen += msg.arbitration_id == last.arbitration_id and not msg.is_rx
 
 
 def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
@@ -125,7 +148,7 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
                                  dlc=msg.dlc, channel=ecu.bus)
             now_ns = time.time_ns()
             log.write(f"0\t{now_ns}\t{frame_of(answer).candump(ecu.bus)}\n")
-            bus.send(answer)
+            bus.send(answer, timeout=SEND_TIMEOUT_S)
             answered += 1
             turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)
         ready.undeclare()
@@ -147,7 +170,9 @@ def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, 
             runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
             summary = replay(ecu, scenario, run_dir)
         stop_sub.undeclare()
-        (run_dir / f"ecu-{ecu.name}.json").write_text(json.dumps(summary, indent=2))
+        tmp = run_dir / f".ecu-{ecu.name}.json.tmp"
+        tmp.write_text(json.dumps(summary, indent=2))
+        tmp.replace(run_dir / f"ecu-{ecu.name}.json")  # whole or absent: the orchestrator may read it any time
         session.put(runkeys.ecu_done(run_id, name), json.dumps(summary))
         return summary
     finally:

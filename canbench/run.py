@@ -153,6 +153,15 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
             deadline = scenario.duration_s + 30
             # progress while the traffic runs; the wait itself is on the ECUs' done messages
             while not senders_done.wait(PROGRESS_EVERY_S) and time.monotonic() - started < deadline:
+                # an ECU's done message can be lost while a fault step has the router down;
+                # its summary file (written whole before the message) says the same
+                for name in senders - set(done):
+                    summary_file = run_dir / f"ecu-{name}.json"
+                    if summary_file.exists():
+                        done[name] = json.loads(summary_file.read_text())
+                if senders <= set(done):
+                    senders_done.set()
+                    break
                 progress(f"{time.monotonic() - started:5.1f} s of up to {scenario.duration_s:g} s: "
                          f"{len(set(done) & senders)}/{len(senders)} ECUs done, "
                          f"{zenoh_capture.frames_on(all_keys)} frames on Zenoh"
