@@ -127,10 +127,25 @@ static void test_batches(void)
 	CHECK(zenoh_decode_can_batch(buf, 48, NULL, 0, &count) == ZN_WIRE_ERR_DLC && count == 0);
 }
 
+/* can_msgs/msg/Frame in CDR: the bytes pycdr2 (the bench's decoder) writes for the same message */
+static void test_ros2_frame(void)
+{
+	can_message_t m = { .identifier = 0x18DAF110, .extd = 1, .data_length_code = 3, .data = { 0xDE, 0xAD, 0xBE } };
+	uint8_t buf[64], want[64];
+	size_t want_len = unhex("0001000000f1536515cd5b07060000007663616e3000000010f1da1800010003deadbe0000000000", want,
+				sizeof(want));
+	int len = zn_ros2_encode_can_frame(&m, 1700000000123456789LL, "vcan0", buf, sizeof(buf));
+	CHECK(len == (int)want_len && memcmp(buf, want, want_len) == 0);
+	CHECK(zn_ros2_encode_can_frame(&m, 0, "vcan0", buf, want_len - 1) == -1); /* never past the buffer */
+	m.rtr = 1; /* remote: no data bytes in the array */
+	CHECK(zn_ros2_encode_can_frame(&m, 0, "vcan0", buf, sizeof(buf)) == (int)want_len && buf[want_len - 8] == 0);
+}
+
 int main(void)
 {
 	test_golden_vectors();
 	test_encoder();
 	test_batches();
+	test_ros2_frame();
 	CHECK_DONE("test_serialize");
 }

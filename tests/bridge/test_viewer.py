@@ -1,9 +1,11 @@
-"""The viewer against the real network: zenohd, the bridge on the bus, and a
-ROS 2 publisher speaking rmw_zenoh's conventions (liveliness token, data key
-with the RIHS01 hash, CDR). `canbench view --save` records what it discovers;
-the test reads the .rrd back with Rerun's own reader and finds the CAN frames
-(raw and DBC-decoded), the ROS 2 scalars, and the unknown type listed, not
-fatal. Readiness: the viewer's liveliness token and stats queryable."""
+"""The viewer against the real network: zenohd, the bridge on the bus (with
+its ROS 2 output on /vehicle/can), and a ROS 2 publisher speaking rmw_zenoh's
+conventions (liveliness token, data key with the RIHS01 hash, CDR).
+`canbench view --save` records what it discovers; the test reads the .rrd
+back with Rerun's own reader and finds the CAN frames (raw and DBC-decoded),
+the same frames through the bridge's can_msgs/msg/Frame topic (discovered by
+@ros2_lv, decoded from CDR), the ROS 2 scalars, and the unknown type listed,
+not fatal. Readiness: the viewer's liveliness token and stats queryable."""
 from __future__ import annotations
 
 import json
@@ -47,7 +49,7 @@ def read_rrd(path) -> dict[str, list]:
 
 
 def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, session, tmp_path):
-    bridge.start("--can", "vcan0", "--publish-period-ms", "0")
+    bridge.start("--can", "vcan0", "--publish-period-ms", "0", "--ros2-topic", "/vehicle/can")
     bridge.wait_ready(session)
     zid = str(session.info.zid())
     temp_hash = ros2.type_hash("sensor_msgs/msg/Temperature")
@@ -63,14 +65,15 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
                               stderr=subprocess.PIPE, text=True)
     try:
         key = ros2.data_key(0, "/cabin/temperature", "sensor_msgs/msg/Temperature", temp_hash)
-        wait_for(lambda: (s := viewer_stats(session)) and key in s["subscriptions"] and s["bridges"],
-                 "the viewer subscribed to the discovered topic and seeing the bridge")
+        can_key = ros2.data_key(0, "/vehicle/can", "can_msgs/msg/Frame", ros2.type_hash("can_msgs/msg/Frame"))
+        wait_for(lambda: (s := viewer_stats(session)) and {key, can_key} <= set(s["subscriptions"]) and s["bridges"],
+                 "the viewer subscribed to the discovered topics and seeing the bridge")
         publisher = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         for value in TEMPERATURES:
             publisher.put(ros2.Temperature(temperature=value).serialize())
         for frame in (ENGINE_SPEED_FRAME, "18DAF110#R", "7FF#"):
             bus.run(["cansend", "vcan0", frame])
-        wait_for(lambda: viewer_stats(session)["logged"] >= len(TEMPERATURES) + 3, "the viewer logging it all")
+        wait_for(lambda: viewer_stats(session)["logged"] >= len(TEMPERATURES) + 2 * 3, "the viewer logging it all")
         viewer.send_signal(subprocess.signal.SIGINT)
         out, err = viewer.communicate(timeout=30)
     finally:
@@ -84,6 +87,11 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
     assert logged["/can/rx/vcan0/0C0/raw"] == ["0C0#C1E803000000000B"]
     assert logged["/can/rx/vcan0/0C0/EngineSpeed"] == [250.0]
     assert "/can/rx/vcan0/18DAF110/raw" in logged and "/can/rx/vcan0/7FF/raw" in logged
+    # the bridge's ROS 2 output, found through @ros2_lv and decoded from CDR: the same frames
+    assert logged["/ros2/vehicle/can/0C0/raw"] == ["0C0#C1E803000000000B"]
+    assert logged["/ros2/vehicle/can/0C0/EngineSpeed"] == [250.0]
+    assert logged["/ros2/vehicle/can/18DAF110/raw"] == ["18DAF110#R"]
+    assert "/vehicle/can [can_msgs/msg/Frame]" in " ".join(logged["/discovery/ros2"])
     discovery = " ".join(logged["/discovery/ros2"])
     assert "/cabin/temperature [sensor_msgs/msg/Temperature]" in discovery
     assert "/odom [nav_msgs/msg/Odometry] (no logger)" in discovery

@@ -55,6 +55,8 @@ typedef struct {
 	uint32_t rx_queue_frames;	       /* frames buffered between CAN reader and publisher */
 	char zenoh_config_file[ZN_ENDPOINTS_MAX]; /* optional JSON5 (TLS, auth) */
 	bool compression;			  /* CONFIG_ZENOH_COMPRESSION: compress the Zenoh transport */
+	char ros2_topic[ZN_NAME_MAX]; /* CONFIG_ZENOH_ROS2_TOPIC: also publish can_msgs/msg/Frame here ("" = off) */
+	uint32_t ros2_domain;	      /* CONFIG_ZENOH_ROS2_DOMAIN: ROS_DOMAIN_ID of that topic */
 } zenoh_node_config_t;
 
 /* Fills cfg with the Kconfig defaults (CONFIG_* from sdkconfig). */

@@ -51,6 +51,16 @@ zn_wire_result_t zenoh_decode_can_frame(const uint8_t *buf, size_t len, can_mess
 zn_wire_result_t zenoh_decode_can_batch(const uint8_t *buf, size_t len, can_message_t *msgs, size_t max_msgs,
 					size_t *count);
 
+/* ROS 2 can_msgs/msg/Frame in CDR (XCDR1, little endian, with the 4-byte
+ * encapsulation header), as rmw_zenoh carries it: header.stamp = stamp_ns,
+ * header.frame_id = frame_id, id, is_rtr, is_extended, is_error (0), dlc,
+ * data[8]. Returns the length written, or -1 if buf is too small. */
+int zn_ros2_encode_can_frame(const can_message_t *msg, int64_t stamp_ns, const char *frame_id, uint8_t *buf,
+			     size_t len);
+#define ZN_ROS2_FRAME_TYPE "can_msgs::msg::dds_::Frame_"
+/* REP-2011 hash of can_msgs/msg/Frame (computed as rosidl does; canbench/ros2.py checks the method) */
+#define ZN_ROS2_FRAME_HASH "RIHS01_0cdc7d15657573ee6ff151e5cc1943888301e370d957e2c077a154f4755fd976"
+
 /* Stable lower-case name of a result ("length", "dlc", ...), for logs and stats keys. */
 const char *zenoh_wire_reason(zn_wire_result_t result);
 

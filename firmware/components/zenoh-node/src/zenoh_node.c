@@ -10,6 +10,7 @@
 #include "zenoh_node.h"
 
 #include <assert.h>
+#include <ctype.h>
 #include <inttypes.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -72,6 +73,11 @@ struct bus {
 	size_t held_len, held_att_len;
 #endif
 	zn_token_t *token;
+	/* ROS 2 output (cfg.ros2_topic): can_msgs/msg/Frame on the rmw_zenoh data key */
+	char ros_topic[ZN_KEY_MAX], ros_key[ZN_KEY_MAX];
+	zn_publisher_t *ros_pub;
+	zn_token_t *ros_token;
+	uint64_t ros_seq;
 	zn_thread_t *reader, *publisher;
 	/* rx queue: ring of rx_entry, guarded by lock */
 	zn_mutex_t *lock;
@@ -97,6 +103,8 @@ static struct {
 	uint64_t reconnects;
 	int connected, ever_connected;
 	char router_ids[512]; /* routers at the last poll; written by init, then by the monitor only */
+	uint8_t gid_seed[16];  /* from the session id: ROS 2 GIDs */
+	zn_token_t *ros_node_token;
 } node;
 
 static const char *const mode_names[] = { "client", "peer", "router" };
@@ -198,6 +206,10 @@ void zenoh_node_default_config(zenoh_node_config_t *cfg)
 #ifdef CONFIG_ZENOH_COMPRESSION
 	cfg->compression = CONFIG_ZENOH_COMPRESSION;
 #endif
+#ifdef CONFIG_ZENOH_ROS2_TOPIC
+	copy_str(cfg->ros2_topic, sizeof(cfg->ros2_topic), CONFIG_ZENOH_ROS2_TOPIC);
+	cfg->ros2_domain = CONFIG_ZENOH_ROS2_DOMAIN;
+#endif
 }
 
 static int valid_key_chunk(const char *s)
@@ -242,6 +254,16 @@ esp_err_t zenoh_node_check_config(const zenoh_node_config_t *cfg, char *err, siz
 			if (strcmp(cfg->buses[i], cfg->buses[j]) == 0)
 				BAD("CAN bus '%s' given twice", cfg->buses[i]);
 	}
+	if (cfg->ros2_topic[0]) {
+		size_t n = strlen(cfg->ros2_topic);
+		if (cfg->ros2_topic[0] != '/' || n < 2 || cfg->ros2_topic[n - 1] == '/')
+			BAD("ROS 2 topic '%s' must be absolute, like /vehicle/can", cfg->ros2_topic);
+		for (const char *c = cfg->ros2_topic; *c; c++)
+			if (!(isalnum((unsigned char)*c) || *c == '_' || *c == '/') || (c[0] == '/' && c[1] == '/'))
+				BAD("ROS 2 topic '%s': only letters, digits, '_' and single '/'", cfg->ros2_topic);
+	}
+	if (cfg->ros2_domain > 232)
+		BAD("ROS 2 domain %" PRIu32 " is not 0..232", cfg->ros2_domain);
 	const zn_qos_t *qos[2] = { &cfg->rx_qos, &cfg->tx_qos };
 	for (int i = 0; i < 2; i++)
 		if (qos[i]->priority < 1 || qos[i]->priority > 7)
@@ -380,6 +402,25 @@ static int put_sample(struct bus *b, uint8_t *payload, size_t len, const uint8_t
 #endif
 
 /* Publishes frames[0..n) (consecutive sequence numbers) as one sample. */
+/* One can_msgs/msg/Frame sample per CAN frame, with rmw_zenoh's attachment: int64
+ * sequence number, int64 source time (ns), the publisher's GID (length 16, bytes). */
+static void publish_ros2(struct bus *b, const struct rx_entry *frames, size_t n)
+{
+	uint8_t cdr[64 + ZN_NAME_MAX];
+	uint8_t att[8 + 8 + 1 + 16];
+	for (size_t i = 0; i < n; i++) {
+		int len = zn_ros2_encode_can_frame(&frames[i].msg, frames[i].rx_time_ns, b->name, cdr, sizeof(cdr));
+		if (len < 0)
+			continue;
+		put_u64_le(att, ++b->ros_seq);
+		put_u64_le(att + 8, (uint64_t)frames[i].rx_time_ns);
+		att[16] = 16;
+		for (int g = 0; g < 16; g++) /* a GID unique to this bus's publisher within the node */
+			att[17 + g] = (uint8_t)(node.gid_seed[g] ^ (g == 15 ? b->index : 0));
+		zn_put(b->ros_pub, cdr, (size_t)len, att, sizeof(att));
+	}
+}
+
 static void publish(struct bus *b, const struct rx_entry *frames, size_t n)
 {
 	static_assert(ZN_BATCH_MAX_FRAMES * ZENOH_CAN_WIRE_SIZE <= 16384, "batch payload bound");
@@ -404,6 +445,8 @@ static void publish(struct bus *b, const struct rx_entry *frames, size_t n)
 	} else {
 		COUNT(b->n.publish_errors);
 	}
+	if (b->ros_pub)
+		publish_ros2(b, frames, n);
 }
 
 /* Publishes taken[0..n) as samples of consecutive sequence numbers, at most max frames each. */
@@ -673,6 +716,19 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 		zn_log("E", "cannot declare %s / %s", b->rx_key, b->tx_key);
 		return ESP_FAIL;
 	}
+	if (cfg->ros2_topic[0]) {
+		if (cfg->bus_count == 1)
+			copy_str(b->ros_topic, sizeof(b->ros_topic), cfg->ros2_topic);
+		else
+			snprintf(b->ros_topic, sizeof(b->ros_topic), "%s/%s", cfg->ros2_topic, b->name);
+		/* <domain>/<topic without the leading '/'>/<DDS type>/<type hash> */
+		snprintf(b->ros_key, sizeof(b->ros_key), "%" PRIu32 "/%s/%s/%s", cfg->ros2_domain, b->ros_topic + 1,
+			 ZN_ROS2_FRAME_TYPE, ZN_ROS2_FRAME_HASH);
+		if (zn_declare_publisher(node.session, b->ros_key, &cfg->rx_qos, &b->ros_pub) != 0) {
+			zn_log("E", "cannot declare the ROS 2 publisher %s", b->ros_key);
+			return ESP_FAIL;
+		}
+	}
 #ifdef ZN_SEEDED_FAULTS
 	if (fault.kind == FAULT_WRONGKEY) {
 		char key[ZN_KEY_MAX + 16];
@@ -681,6 +737,38 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 			return ESP_FAIL;
 	}
 #endif
+	return ESP_OK;
+}
+
+/* rmw_zenoh's liveliness tokens: the node, and one publisher per bus, so ROS 2 tools
+ * list them and subscribers match (docs/viewer.md has the format). */
+static esp_err_t declare_ros2_tokens(const zenoh_node_config_t *cfg, const char *zid)
+{
+	char ros_node[ZN_NAME_MAX], key[2 * ZN_KEY_MAX], topic[ZN_KEY_MAX];
+	copy_str(ros_node, sizeof(ros_node), cfg->node_name);
+	for (char *c = ros_node; *c; c++)
+		if (!isalnum((unsigned char)*c))
+			*c = '_'; /* ROS node names: letters, digits, '_' */
+	for (int g = 0; g < 16; g++) {
+		unsigned v = 0;
+		sscanf(zid + 2 * g, "%2x", &v);
+		node.gid_seed[g] = (uint8_t)v;
+	}
+	snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/0/NN/%%/%%/%s", cfg->ros2_domain, zid, ros_node);
+	if (zn_declare_token(node.session, key, &node.ros_node_token) != 0)
+		return ESP_FAIL;
+	for (size_t i = 0; i < cfg->bus_count; i++) {
+		struct bus *b = &node.buses[i];
+		copy_str(topic, sizeof(topic), b->ros_topic);
+		for (char *c = topic; *c; c++)
+			if (*c == '/')
+				*c = '%';
+		snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/%zu/MP/%%/%%/%s/%s/%s/%s/::,10:,:,:,,", cfg->ros2_domain,
+			 zid, i + 1, ros_node, topic, ZN_ROS2_FRAME_TYPE, ZN_ROS2_FRAME_HASH);
+		if (zn_declare_token(node.session, key, &b->ros_token) != 0)
+			return ESP_FAIL;
+		zn_log("I", "ROS 2: %s as can_msgs/msg/Frame on %s", b->ros_topic, b->ros_key);
+	}
 	return ESP_OK;
 }
 
@@ -744,6 +832,8 @@ esp_err_t zenoh_node_init(const zenoh_node_config_t *cfg)
 	}
 	char zid[64] = "";
 	zn_session_id(node.session, zid, sizeof(zid));
+	if (cfg->ros2_topic[0] && declare_ros2_tokens(cfg, zid) != ESP_OK)
+		return ESP_FAIL;
 	zn_log("I", "ready: zid %s, mode %s, publish period %" PRIu32 " ms, stats on %s", zid, mode_names[cfg->mode],
 	       cfg->publish_period_ms, node.stats_key);
 	return ESP_OK;
@@ -754,11 +844,20 @@ void zenoh_node_stop(void)
 	if (!node.running)
 		return;
 	/* withdraw the tokens first: nobody should send commands to a bridge on its way out */
-	for (size_t i = 0; i < node.cfg.bus_count; i++)
+	for (size_t i = 0; i < node.cfg.bus_count; i++) {
 		if (node.buses[i].token) {
 			zn_undeclare_token(node.buses[i].token);
 			node.buses[i].token = NULL;
 		}
+		if (node.buses[i].ros_token) {
+			zn_undeclare_token(node.buses[i].ros_token);
+			node.buses[i].ros_token = NULL;
+		}
+	}
+	if (node.ros_node_token) {
+		zn_undeclare_token(node.ros_node_token);
+		node.ros_node_token = NULL;
+	}
 	zn_mutex_lock(node.stop_lock);
 	node.stopping = 1;
 	zn_cond_signal(node.stop_cond);
@@ -776,6 +875,8 @@ void zenoh_node_stop(void)
 		struct bus *b = &node.buses[i];
 		zn_undeclare_subscriber(b->sub);
 		zn_undeclare_publisher(b->pub);
+		if (b->ros_pub)
+			zn_undeclare_publisher(b->ros_pub);
 #ifdef ZN_SEEDED_FAULTS
 		zn_undeclare_publisher(b->misrouted);
 #endif

@@ -106,3 +106,40 @@ const char *zenoh_wire_reason(zn_wire_result_t result)
 	}
 	return "unknown";
 }
+
+int zn_ros2_encode_can_frame(const can_message_t *msg, int64_t stamp_ns, const char *frame_id, uint8_t *buf,
+			     size_t len)
+{
+	size_t id_len = strlen(frame_id) + 1; /* CDR strings carry their NUL */
+	size_t pad = (4 - (8 + 4 + id_len) % 4) % 4;
+	size_t need = 4 + 8 + 4 + id_len + pad + 4 + 4 + 8;
+	if (!msg || !buf || len < need)
+		return -1;
+	uint8_t *p = buf;
+	static const uint8_t encapsulation[4] = { 0x00, 0x01, 0x00, 0x00 }; /* CDR little endian */
+	memcpy(p, encapsulation, 4);
+	p += 4;
+	int64_t sec = stamp_ns / 1000000000;
+	uint32_t nsec = (uint32_t)(stamp_ns % 1000000000);
+	uint32_t words[2] = { (uint32_t)(int32_t)sec, nsec };
+	for (int w = 0; w < 2; w++)
+		for (int i = 0; i < 4; i++)
+			*p++ = (uint8_t)(words[w] >> (8 * i));
+	for (int i = 0; i < 4; i++)
+		*p++ = (uint8_t)(id_len >> (8 * i));
+	memcpy(p, frame_id, id_len);
+	p += id_len;
+	memset(p, 0, pad);
+	p += pad;
+	for (int i = 0; i < 4; i++)
+		*p++ = (uint8_t)(msg->identifier >> (8 * i));
+	*p++ = msg->rtr ? 1 : 0;
+	*p++ = msg->extd ? 1 : 0;
+	*p++ = 0; /* is_error: the bridge never forwards error frames */
+	*p++ = msg->data_length_code;
+	memset(p, 0, 8);
+	if (!msg->rtr)
+		memcpy(p, msg->data, msg->data_length_code <= 8 ? msg->data_length_code : 8);
+	p += 8;
+	return (int)(p - buf);
+}
