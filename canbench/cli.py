@@ -76,6 +76,7 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
     elif sc.consumer == "far_router":
         services["router2"] = {
             "image": "${ROUTER_IMAGE:-canbench/router:latest}",
+            "init": True,
             "command": ["--config", "/etc/zenohd/zenohd.json5"],
             "volumes": ["./images/router/zenohd-far.json5:/etc/zenohd/zenohd.json5:ro"],
             "depends_on": {"router": {"condition": "service_healthy"}},

@@ -27,6 +27,7 @@ from .scenario import Fault
 ACTION_SERVICE = {"router_restart": "router", "router_kill": "router", "router_pause": "router",
                   "router_replace": "router", "bridge_term": "bridge", "bridge_kill": "bridge"}
 RSS_SAMPLE_S = 0.5
+STOP_TIMEOUT_S = 5  # graceful stops get this long before Docker kills
 
 
 def disruptive(windows: list[dict]) -> list[dict]:
@@ -102,13 +103,13 @@ class Injector:
     def _inject(self, fault: Fault, c) -> None:
         hold = fault.duration_s
         if fault.action == "router_restart":
-            c.restart(timeout=10)
+            c.restart(timeout=STOP_TIMEOUT_S)
         elif fault.action in ("router_kill", "router_replace", "bridge_kill"):
             c.kill()
             time.sleep(hold)  # the fault's length, as the scenario specifies
             c.start()
         elif fault.action == "bridge_term":
-            c.stop(timeout=10)
+            c.stop(timeout=STOP_TIMEOUT_S)
             time.sleep(hold)
             c.start()
         elif fault.action == "router_pause":
