@@ -35,7 +35,7 @@ ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus test clean preflight base images \
+        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge test clean preflight base images \
         shell logs
 
 help:
@@ -96,7 +96,7 @@ check-firmware: firmware firmware-asan
 	ctest --test-dir $(FW_ASAN_BUILD) --output-on-failure
 
 check-python:
-	$(PYTHON) -m ruff check canbench tests ucan/bench
+	$(PYTHON) -m ruff check canbench tests ucan/bench firmware/bench
 	$(PYTHON) -m mypy --ignore-missing-imports canbench
 	$(PYTEST) -q -m unit tests/unit
 
@@ -147,9 +147,13 @@ check: check-python check-ucan check-firmware check-bus check-kernel check-bridg
 bench-bus: ucan
 	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD)
 
-# Benchmarks for nightly runs, never part of check. Today: the userspace bus
-# (docs/userspace-bus.md); the bridge benchmark against a Python reference is to come.
-bench: bench-bus
+# zenoh-node against the Python reference bridge, same run, same bus/router/capture
+# (README's performance table is generated from it: BENCH_README=1).
+bench-bridge: ucan firmware zenohd
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py $(if $(BENCH_README),--update-readme)
+
+# Benchmarks for nightly runs, never part of check (docs/userspace-bus.md, docs/benchmark.md).
+bench: bench-bus bench-bridge
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }
