@@ -34,7 +34,8 @@ def main() -> None:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     session = open_session(args.router)
-    threads, tokens = [], []
+    threads: list[threading.Thread] = []
+    keep: list[object] = []  # subscribers and tokens live as long as the bridge
     for name in buses:
         key = f"{args.prefix}/rx" if len(buses) == 1 else f"{args.prefix}/{name}/rx"
         tx_key = key[:-2] + "tx"
@@ -49,7 +50,7 @@ def main() -> None:
             except (wire.WireError, can.CanError):
                 pass  # the reference counts nothing: it is the naive baseline
 
-        tokens.append(session.declare_subscriber(tx_key, on_command))
+        keep.append(session.declare_subscriber(tx_key, on_command))
 
         def forward(bus: can.BusABC = bus, pub: zenoh.Publisher = pub) -> None:
             while not stop.is_set():
@@ -57,7 +58,7 @@ def main() -> None:
                 if msg is not None and not msg.is_error_frame:
                     pub.put(wire.encode(frame_of(msg)))
         threads.append(threading.Thread(target=forward, daemon=True))
-        tokens.append(session.liveliness().declare_token(f"{args.prefix}/bridges/python-ref/{name}/client"))
+        keep.append(session.liveliness().declare_token(f"{args.prefix}/bridges/python-ref/{name}/client"))
     for t in threads:
         t.start()
     stop.wait()
