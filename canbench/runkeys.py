@@ -39,6 +39,8 @@ def open_session(endpoint: str) -> zenoh.Session:
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("connect/timeout_ms", "-1")  # wait for the router rather than fail
+    # back within a second of a router restart (fault steps), like the bridge's own retry
+    conf.insert_json5("connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}")
     return zenoh.open(conf)
 
 

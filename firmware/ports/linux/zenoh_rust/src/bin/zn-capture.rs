@@ -71,6 +71,8 @@ fn main() {
     set(&mut config, "mode", format!("{:?}", args.mode));
     set(&mut config, "scouting/multicast/enabled", "false".into());
     set(&mut config, "connect/endpoints", format!("[{:?}]", args.connect));
+    // back within a second of a router restart (the bench's fault steps)
+    set(&mut config, "connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}".into());
     let file = std::fs::File::create(&args.out).unwrap_or_else(|e| {
         eprintln!("zn-capture: {}: {e}", args.out);
         std::process::exit(2)
