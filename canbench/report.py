@@ -74,7 +74,7 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
             for o in b.bus_frames:
                 emit(f"/can/{b.bus}", "canbench.CanFrame", o.t_ns, _frame_json(b.bus, o))
                 if dbc is not None and not o.frame.remote:
-                    signals = _decode(dbc, o.frame)
+                    signals = decode_signals(dbc, o.frame)
                     if signals:
                         emit(f"/signals/{b.bus}/{signals[0]}", "canbench.Signals", o.t_ns, signals[1])
             for o in b.zenoh_frames:
@@ -88,7 +88,8 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
         writer.finish()
 
 
-def _decode(dbc, frame) -> tuple[str, dict] | None:
+def decode_signals(dbc, frame) -> tuple[str, dict] | None:
+    """(message name, numeric signals) of a frame the DBC describes, else None."""
     try:
         message = dbc.get_message_by_frame_id(frame.can_id)
     except KeyError:

@@ -28,7 +28,7 @@ import rerun as rr
 import zenoh
 
 from . import ros2, wire
-from .report import load_dbc
+from .report import decode_signals, load_dbc
 from .viewer_args import DEFAULT_ENDPOINT
 
 
@@ -51,8 +51,7 @@ def log_can_frames(base: str, frames: list[wire.Frame], dbc) -> None:
         ident = f"{f.can_id:08X}" if f.extended else f"{f.can_id:03X}"
         rr.log(f"{base}/{ident}/raw", rr.TextLog(f.candump(base.rsplit("/", 1)[-1]).split(" ", 1)[1]))
         if dbc is not None and not f.remote:
-            from .report import _decode
-            decoded = _decode(dbc, f)
+            decoded = decode_signals(dbc, f)
             if decoded:
                 for name, value in decoded[1].items():
                     _scalar(f"{base}/{ident}/{name}", value)

@@ -267,6 +267,14 @@ def router(bus):
 
 
 @pytest.fixture
+def session(router):
+    """A Zenoh client session on the test's router."""
+    s = zenoh_session(router.endpoint)
+    yield s
+    s.close()
+
+
+@pytest.fixture
 def bridge(bus, router):
     b = Bridge(bus, router)
     yield b

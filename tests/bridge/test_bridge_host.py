@@ -57,13 +57,6 @@ class Collector:
         return self.frames()
 
 
-@pytest.fixture
-def session(router):
-    s = zenoh_session(router.endpoint)
-    yield s
-    s.close()
-
-
 def start_candump(bus, path):
     before = bus.receivers()
     out = open(path, "w")

@@ -20,9 +20,8 @@ import random
 import signal
 from collections import Counter
 
-import pytest
 import zenoh
-from conftest import wait_for, zenoh_session
+from conftest import wait_for
 from test_bridge_host import start_candump, stop_candump
 
 from canbench import wire
@@ -91,13 +90,6 @@ def campaign(rng: random.Random):
             continue
         yield payload, None
         n += 1
-
-
-@pytest.fixture
-def session(router):
-    s = zenoh_session(router.endpoint)
-    yield s
-    s.close()
 
 
 def test_hostile_commands_never_reach_the_bus_and_are_counted_by_reason(bus, bridge, session, tmp_path):

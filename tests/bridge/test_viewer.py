@@ -14,7 +14,7 @@ import sys
 
 import pytest
 import zenoh
-from conftest import REPO, wait_for, zenoh_session
+from conftest import REPO, wait_for
 
 from canbench import ros2
 
@@ -22,13 +22,6 @@ rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip instal
 
 TEMPERATURES = [20.5, 21.0, 21.5]
 ENGINE_SPEED_FRAME = "0C0#C1E803000000000B"  # EngineSpeed 0x03E8 * 0.25 = 250 rpm
-
-
-@pytest.fixture
-def session(router):
-    s = zenoh_session(router.endpoint)
-    yield s
-    s.close()
 
 
 def viewer_stats(session) -> dict | None:
