@@ -35,8 +35,8 @@ ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge test clean preflight base images \
-        shell logs
+        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture test clean preflight base images \
+        shell logs soak
 
 help:
 	@echo "make test       run the bench's scenarios against the bridge (the main job; SCENARIO=file)"
@@ -49,6 +49,7 @@ help:
 	@echo "make fuzz       bounded libFuzzer runs (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
 	@echo "make bench      benchmarks, ratios against baselines measured in the same run (not part of check)"
 	@echo "make check-kernel  the real-kernel lane alone (kernel vcan natively, or in QEMU)"
+	@echo "make soak       one hour at ~50 % bus load with router restarts (nightly; SOAK_SCENARIO=file)"
 	@echo "make clean      remove $(BUILD)/ (not the cache in $(CACHE))"
 
 ucan:
@@ -152,8 +153,15 @@ bench-bus: ucan
 bench-bridge: ucan firmware zenohd
 	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py $(if $(BENCH_README),--update-readme)
 
+# The bench's captures at >= 100k frames/s: zn-flood (a paced Rust publisher, same zenoh and
+# target dir as the port, so only its own crate compiles) into zn-capture; cangen into candump -L.
+ZN_FLOOD := $(CARGO_TARGET)/release/zn-flood
+bench-capture: ucan firmware zenohd
+	CARGO_TARGET_DIR=$(CARGO_TARGET) cargo build --release --manifest-path firmware/bench/zn-flood/Cargo.toml
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_capture.py --zn-flood $(ZN_FLOOD) --zn-capture $(FW_BUILD)/zn-capture
+
 # Benchmarks for nightly runs, never part of check (docs/userspace-bus.md, docs/benchmark.md).
-bench: bench-bus bench-bridge
+bench: bench-bus bench-bridge bench-capture
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }
@@ -171,6 +179,11 @@ test: images
 	@status=0; for s in $(SCENARIO); do scripts/bench-run $$s || status=1; done; \
 	 if [ $$status -eq 0 ]; then echo "make test: all scenarios passed"; else echo "make test: FAILED (see above; reports/latest)"; fi; \
 	 exit $$status
+
+# Nightly soak: one hour, memory slope and descriptor growth gated (docs/faults.md).
+SOAK_SCENARIO ?= scenarios/nightly/soak.yaml
+soak: images
+	@scripts/bench-run $(SOAK_SCENARIO)
 
 shell: images
 	docker run --rm -it -v $(CURDIR)/scenarios:/scenarios:ro -v $(CURDIR)/reports:/reports canbench/orchestrator:$(BENCH_TAG) bash

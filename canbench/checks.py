@@ -223,15 +223,36 @@ def recovery(result: RunResult) -> list[str] | None:
 
 
 def bridge_memory(result: RunResult) -> list[str] | None:
-    """The bridge's memory stayed under the gate (sampled every 0.5 s while faults run)."""
-    gate = _expect(result, "bridge_rss_mib")
+    """The bridge's memory stayed under the gate (sampled every 0.5 s while faults run) and,
+    in a soak, did not keep growing."""
+    gate, slope_gate = _expect(result, "bridge_rss_mib"), _expect(result, "bridge_rss_slope_mib_per_h")
     faults = result.metrics.get("faults")
-    if not gate or not faults:
+    if (not gate and slope_gate is None) or not faults:
         return None
-    peak = faults["bridge_rss_mib"]["max"]
-    if peak is None:
+    rss = faults["bridge_rss_mib"]
+    if rss["max"] is None:
         return ["no memory sample of the bridge"]
-    return [f"bridge memory peaked at {peak:.1f} MiB > gate {gate} MiB"] if peak > gate else []
+    problems = []
+    if gate and rss["max"] > gate:
+        problems.append(f"bridge memory peaked at {rss['max']:.1f} MiB > gate {gate} MiB")
+    if slope_gate is not None:
+        if rss["slope_mib_per_h"] is None:
+            problems.append(f"too few memory samples ({rss['samples']}) for a slope")
+        elif rss["slope_mib_per_h"] > slope_gate:
+            problems.append(f"bridge memory grows {rss['slope_mib_per_h']} MiB/h > gate {slope_gate} MiB/h")
+    return problems
+
+
+def bridge_fds(result: RunResult) -> list[str] | None:
+    """The bridge's open file descriptors did not grow over the run (soak)."""
+    gate = _expect(result, "bridge_fd_growth")
+    faults = result.metrics.get("faults")
+    if gate is None or not faults:
+        return None
+    fds = faults["bridge_fds"]
+    if fds["growth"] is None:
+        return [f"too few descriptor samples ({fds['samples']}) to tell growth"]
+    return [f"bridge descriptors grew by {fds['growth']} > gate {gate}"] if fds["growth"] > gate else []
 
 
 def only_expected_keys(result: RunResult) -> list[str] | None:
@@ -298,6 +319,7 @@ CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "faults_injected": faults_injected,
     "recovery": recovery,
     "bridge_memory": bridge_memory,
+    "bridge_fds": bridge_fds,
     "only_expected_keys": only_expected_keys,
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import yaml
 
-from . import authoring, compare, ecu, scenario, tracegen
+from . import authoring, compare, ecu, faults, scenario, tracegen
 from .errors import BenchError, InputError
 from .trace import read_trace
 
@@ -59,7 +59,7 @@ def bus_spec(bus: dict) -> str:
     return bus["name"] + (":" + ",".join(opts) if opts else "")
 
 
-def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
+def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: bool = False) -> dict:
     bridge_env = {"ZENOH_NODE_CAN": ",".join(sc.bus_names), "ZENOH_PUBLISH_PERIOD_MS": "0"}
     bridge_env.update({env: str(sc.bridge[key]) for key, env in BRIDGE_ENV.items() if key in sc.bridge})
     orchestrator_env = {"SCENARIO": scenario_in_container}
@@ -84,6 +84,24 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
                             "timeout": "2s", "retries": 60},
         }
         orchestrator_env["BENCH_CONSUMER"] = "tcp/router2:7447"
+    if viewer:
+        # `canbench view --save` records the run next to its reports (make test VIEWER=1)
+        dbc = ["--dbc", str(Path(scenario_in_container).parent / sc.dbc.relative_to(sc.path.parent))] if sc.dbc else []
+        services["viewer"] = {
+            "image": "canbench/orchestrator:${BENCH_TAG:-latest}",
+            "network_mode": "service:bus",
+            "depends_on": {"router": {"condition": "service_healthy"}},
+            "user": "${BENCH_UID:-0}:${BENCH_GID:-0}",
+            "volumes": ["./reports:/reports", "${SCENARIO_DIR:-./scenarios}:/scenarios:ro"],
+            "command": ["canbench", "view", "--zenoh-connect", "tcp/router:7447", "--auto-subscribe", *dbc,
+                        "--save", "/reports/${RUN_ID}/traffic.rrd"],
+        }
+        orchestrator_env["BENCH_VIEWER"] = "1"
+    if any(f.action == "partition" for f in sc.faults):
+        # the bridge gets a listener of its own on the router: the partition drops that port only
+        services["router"] = {"command": ["--config", "/etc/zenohd/zenohd.json5", "--listen", "tcp/0.0.0.0:7447",
+                                          "--listen", f"tcp/0.0.0.0:{faults.PARTITION_PORT}"]}
+        bridge_env["ZENOH_ROUTER_ADDRESS"] = f"tcp/router:{faults.PARTITION_PORT}"
     if sc.faults:
         # fault steps drive Docker's API: the socket, for the orchestrator only (docs/faults.md)
         services["orchestrator"]["volumes"] = ["/var/run/docker.sock:/var/run/docker.sock"]
@@ -106,7 +124,8 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str) -> dict:
 
 def cmd_compose_override(args) -> int:
     sc = scenario.load(args.scenario)
-    yaml.safe_dump(compose_override(sc, args.container_path or str(args.scenario)), sys.stdout, sort_keys=False)
+    yaml.safe_dump(compose_override(sc, args.container_path or str(args.scenario), args.viewer), sys.stdout,
+                   sort_keys=False)
     return 0
 
 
@@ -185,6 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     p = sub.add_parser("compose-override", help="compose override: bus, bridge settings, one service per ECU")
     p.add_argument("scenario", type=Path)
     p.add_argument("--container-path", help="the scenario's path inside the containers")
+    p.add_argument("--viewer", action="store_true", help="add a viewer service recording traffic.rrd")
     p.set_defaults(func=cmd_compose_override)
     p = sub.add_parser("ecu", help="run one emulated ECU")
     p.add_argument("--scenario", type=Path, required=True)

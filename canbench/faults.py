@@ -12,12 +12,18 @@ compose labels) at `at_s` seconds after the traffic starts:
   bridge_term     SIGTERM to the bridge, start again after duration_s
   bridge_kill     SIGKILL to the bridge, start again after duration_s
   ecu_kill        the ECU `target` vanishes for good
+  partition       the bridge's link to the router black-holed for duration_s (iptables
+                  DROP in the router's network namespace, on the bridge's own listener)
+  can_flood       cangen floods `bus` as fast as the bus takes it for duration_s
+                  (at most max_frames; id `id`, data counting up)
 
 Every step records its window (wall clock ns, like the captures) so the
 oracle can tell loss inside a fault window from loss outside it. The bridge's
-memory use is sampled all along."""
+memory use and open file descriptors are sampled all along."""
 from __future__ import annotations
 
+import statistics
+import subprocess
 import threading
 import time
 from dataclasses import dataclass, field
@@ -25,8 +31,13 @@ from dataclasses import dataclass, field
 from .scenario import Fault
 
 ACTION_SERVICE = {"router_restart": "router", "router_kill": "router", "router_pause": "router",
-                  "router_replace": "router", "bridge_term": "bridge", "bridge_kill": "bridge"}
+                  "router_replace": "router", "bridge_term": "bridge", "bridge_kill": "bridge",
+                  "partition": "router", "can_flood": "orchestrator"}
 RSS_SAMPLE_S = 0.5
+FD_SAMPLE_S = 5.0  # docker exec costs ~0.1 s of CPU: fds change slowly, memory is cheap to read
+# Partition scenarios connect the bridge to this second listener of the router, so a rule
+# on it cuts the bridge's link and nothing else (the capture shares the bridge's netns).
+PARTITION_PORT = 7446
 STOP_TIMEOUT_S = 5  # graceful stops get this long before Docker kills
 
 
@@ -63,6 +74,7 @@ class Injector:
     on_ecu_killed: object = None  # callable(name) so the orchestrator stops waiting for it
     windows: list[Window] = field(default_factory=list)
     rss_samples: list[tuple[int, float]] = field(default_factory=list)  # (ns, MiB)
+    fd_samples: list[tuple[int, int]] = field(default_factory=list)  # (ns, open fds)
     errors: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -94,7 +106,7 @@ class Injector:
             window = Window(fault.action, service, time.time_ns())
             self.windows.append(window)
             try:
-                self._inject(fault, self.container(service))
+                self._inject(fault, None if fault.action == "can_flood" else self.container(service))
             except Exception as e:  # noqa: BLE001 - reported as the bench's failure, never lost in a thread
                 window.error = f"{type(e).__name__}: {e}"
                 self.errors.append(f"{fault.action} on {service}: {window.error}")
@@ -116,6 +128,14 @@ class Injector:
             c.pause()
             time.sleep(hold)
             c.unpause()
+        elif fault.action == "partition":
+            self._iptables(c, "-I")
+            try:
+                time.sleep(hold)
+            finally:
+                self._iptables(c, "-D")
+        elif fault.action == "can_flood":
+            self._flood(fault)
         elif fault.action == "ecu_kill":
             c.kill()
             if callable(self.on_ecu_killed):
@@ -123,8 +143,35 @@ class Injector:
         else:
             raise ValueError(f"unknown fault action {fault.action}")
 
+    def _iptables(self, router, op: str) -> None:
+        """Insert (-I) or delete (-D) the partition's rules in the router's network namespace,
+        from a throw-away container of the bus image (it has iptables): the router's image and
+        privileges stay as they are."""
+        rules = [f"INPUT -p tcp --dport {PARTITION_PORT} -j DROP", f"OUTPUT -p tcp --sport {PARTITION_PORT} -j DROP"]
+        script = " && ".join(f"iptables {op} {r}" for r in rules)
+        self.client.containers.run(self.container("bus").image.id, ["-c", script], entrypoint="sh", user="0",
+                                   network_mode=f"container:{router.id}", cap_add=["NET_ADMIN"], remove=True)
+
+    @staticmethod
+    def _flood(fault: Fault) -> None:
+        """cangen with no gap (-g 0) ignoring ENOBUFS (-i): all the bus takes, bounded in count and time."""
+        proc = subprocess.Popen(["cangen", fault.bus, "-g", "0", "-i", "-I", f"{fault.can_id:03X}", "-L", "8",
+                                 "-D", "i", "-n", str(fault.max_frames)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            proc.wait(timeout=fault.duration_s)
+        except subprocess.TimeoutExpired:
+            proc.terminate()
+            proc.wait(timeout=STOP_TIMEOUT_S)
+        if proc.returncode not in (0, -15):
+            raise RuntimeError(f"cangen exited {proc.returncode}: {proc.stderr.read().decode().strip()}")
+
     def _sample_rss(self) -> None:
+        next_fd_sample = 0.0
         while not self._stop.wait(RSS_SAMPLE_S):
+            if time.monotonic() >= next_fd_sample:
+                next_fd_sample = time.monotonic() + FD_SAMPLE_S
+                self._sample_fds()
             try:
                 stats = self.container("bridge").stats(stream=False)
                 usage = stats.get("memory_stats", {})
@@ -133,6 +180,14 @@ class Injector:
                     self.rss_samples.append((time.time_ns(), rss / 2**20))
             except Exception:  # noqa: BLE001 - the bridge may be down during its own fault
                 continue
+
+    def _sample_fds(self) -> None:
+        try:  # the bridge is PID 1 of its container (bench-can execs it) and runs as the exec's user
+            code, out = self.container("bridge").exec_run(["sh", "-c", "ls /proc/1/fd | wc -l"])
+            if code == 0:
+                self.fd_samples.append((time.time_ns(), int(out)))
+        except Exception:  # noqa: BLE001 - the bridge may be down during its own fault
+            pass
 
     def wait_faults(self, timeout_s: float) -> None:
         """Until every fault step has run (and restarted what it stopped)."""
@@ -147,7 +202,30 @@ class Injector:
 
     def summary(self) -> dict:
         rss = [m for _, m in self.rss_samples]
+        fds = [n for _, n in self.fd_samples]
         return {"windows": [w.as_dict(self.t0_ns) for w in self.windows], "errors": self.errors,
                 "bridge_rss_mib": {"max": round(max(rss), 2) if rss else None, "samples": len(rss),
                                    "first": round(rss[0], 2) if rss else None,
-                                   "last": round(rss[-1], 2) if rss else None}}
+                                   "last": round(rss[-1], 2) if rss else None,
+                                   "slope_mib_per_h": rss_slope_mib_per_h(self.rss_samples)},
+                "bridge_fds": {"max": max(fds) if fds else None, "samples": len(fds),
+                               "growth": fd_growth(fds)},
+                "series": {"rss": [(round((t - self.t0_ns) / 1e9, 2), round(m, 3)) for t, m in self.rss_samples],
+                           "fds": [(round((t - self.t0_ns) / 1e9, 2), n) for t, n in self.fd_samples]}}
+
+
+def rss_slope_mib_per_h(samples: list[tuple[int, float]]) -> float | None:
+    """Least-squares slope of memory over time, skipping the first tenth (start-up allocations)."""
+    kept = samples[len(samples) // 10:]
+    if len(kept) < 10:
+        return None
+    slope = statistics.linear_regression([t / 3.6e12 for t, _ in kept], [m for _, m in kept]).slope
+    return round(slope, 3)
+
+
+def fd_growth(fds: list[int]) -> int | None:
+    """Open descriptors: median of the last quarter minus median of the first (reconnects come and go)."""
+    if len(fds) < 8:
+        return None
+    quarter = len(fds) // 4
+    return int(statistics.median(fds[-quarter:]) - statistics.median(fds[:quarter]))

@@ -165,6 +165,32 @@ def _timeline(result: RunResult) -> str:
     return _png(fig)
 
 
+def _bridge_resources(result: RunResult) -> str:
+    """The bridge's memory and open descriptors over the run (sampled in fault scenarios and soaks)."""
+    series = (result.metrics.get("faults") or {}).get("series") or {}
+    if not series.get("rss"):
+        return ""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (mem, fds) = plt.subplots(1, 2, figsize=(11, 3))
+    mem.plot([t for t, _ in series["rss"]], [m for _, m in series["rss"]])
+    mem.set_xlabel("s since traffic start")
+    mem.set_ylabel("bridge memory (MiB)")
+    slope = result.metrics["faults"]["bridge_rss_mib"].get("slope_mib_per_h")
+    mem.set_title("memory" + (f" (slope {slope} MiB/h)" if slope is not None else ""))
+    if series.get("fds"):
+        fds.step([t for t, _ in series["fds"]], [n for _, n in series["fds"]], where="post")
+    fds.set_xlabel("s since traffic start")
+    fds.set_ylabel("open descriptors")
+    fds.set_title("descriptors")
+    for ax in (mem, fds):
+        ax.grid(alpha=0.3)
+        for window in result.metrics["faults"]["windows"]:
+            ax.axvspan(window["start_s"], window["end_s"], color="orange", alpha=0.25)
+    return "<h2>Bridge resources</h2>" + _png(fig)
+
+
 def _table(header: list[str], rows: list[list]) -> str:
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c if str(c).startswith('<') else html.escape(str(c))}</td>"
@@ -216,8 +242,8 @@ def write_html(result: RunResult, path: Path) -> None:
         fid = e.get("fidelity_ms") or e.get("turnaround_ms") or {}
         ecu_rows.append([name, e.get("role", "replay"), e.get("bus"), e.get("sent"), _ms(fid.get("p50")),
                          _ms(fid.get("p99")), _ms(fid.get("max"))])
-    files = [f for f in ("metrics.json", "junit.xml", "recording.mcap", "can.log", "zenoh.tsv", "commands.tsv",
-                         "containers.log") if (path.parent / f).exists() or f == "containers.log"]
+    files = [f for f in ("metrics.json", "junit.xml", "recording.mcap", "traffic.rrd", "can.log", "zenoh.tsv",
+                         "commands.tsv", "containers.log") if (path.parent / f).exists() or f == "containers.log"]
     files += sorted(p.name for p in path.parent.glob("ecu-*"))
     links = " · ".join(f'<a href="{f}">{f}</a>' for f in files)
     passed = m.get("passed")
@@ -236,6 +262,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
          "p99 ms", "max ms"], lat_rows)}
 {_latency_plots(series)}
 <h2>Timeline</h2>{_timeline(result)}
+{_bridge_resources(result)}
 <h2>Per id</h2>
 {_table(["bus", "id", "on bus", "on Zenoh", "lost", "bus cycle p50 ms", "Zenoh cycle p50 ms", "Zenoh max gap ms"],
         id_rows)}

@@ -97,10 +97,12 @@ def _answer_ids(scenario: Scenario) -> dict[str, set[int]]:
 
 
 def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can",
-            consumer: str | None = None, baseline: dict | None = None, project: str | None = None) -> RunResult:
+            consumer: str | None = None, baseline: dict | None = None, project: str | None = None,
+            wait_viewer: bool = False) -> RunResult:
     """router: where the bench coordinates (ECUs, stats); consumer: where the capture and the
     commands connect (the router by default; a far router or the bridge itself by topology);
-    project: the compose project, for fault steps."""
+    project: the compose project, for fault steps; wait_viewer: a `canbench view` records the
+    run (make test VIEWER=1), the traffic starts once its token says it subscribes."""
     run_dir.mkdir(parents=True, exist_ok=True)
     session = runkeys.open_session(router)
     data = session if consumer in (None, router) else runkeys.open_session(consumer)
@@ -109,6 +111,8 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
         runkeys.wait_token(data, f"{prefix}/bridges/**", BRIDGE_READY_TIMEOUT_S)
         for e in scenario.echoes:
             runkeys.wait_token(session, runkeys.ecu_ready(run_id, e.name), BRIDGE_READY_TIMEOUT_S)
+        if wait_viewer:
+            runkeys.wait_token(session, "canbench/viewers/*", BRIDGE_READY_TIMEOUT_S)
         done: dict[str, dict] = {}
         senders_done = threading.Event()
         echoes_done = threading.Event()

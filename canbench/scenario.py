@@ -109,7 +109,10 @@ class Fault:
     at_s: float
     action: str
     duration_s: float = 1.0
-    target: str = ""
+    target: str = ""     # ecu_kill: the ECU
+    bus: str = ""        # can_flood: the bus (default: the first)
+    can_id: int = 0x7F0  # can_flood: the flood's identifier
+    max_frames: int = 1_000_000  # can_flood: stops at this count even if duration_s has not passed
 
 
 @dataclass(frozen=True)
@@ -222,7 +225,20 @@ def load(path: str | Path) -> Scenario:
             raise fail(["faults", i], "ecu_kill needs target (an ECU name); other actions take none")
         if "target" in spec and spec["target"] not in names:
             raise fail(["faults", i, "target"], f"'{spec['target']}' is not one of the ECUs {sorted(names)}")
-        faults.append(Fault(spec["at_s"], spec["action"], spec.get("duration_s", 1.0), spec.get("target", "")))
+        if "bus" in spec and spec["bus"] not in buses:
+            raise fail(["faults", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
+        if spec["action"] != "can_flood" and ({"bus", "id", "max_frames"} & set(spec)):
+            raise fail(["faults", i], "bus, id and max_frames belong to can_flood only")
+        if "every_s" in spec and spec["every_s"] <= spec.get("duration_s", 1.0):
+            raise fail(["faults", i, "every_s"], "must be longer than duration_s (steps would overlap)")
+        # a repeated step (soak): at at_s, at_s + every_s, ... up to until_s (default: duration_s)
+        until = spec.get("until_s", doc["duration_s"]) if "every_s" in spec else spec["at_s"]
+        at = spec["at_s"]
+        while at <= until:
+            faults.append(Fault(at, spec["action"], spec.get("duration_s", 1.0), spec.get("target", ""),
+                                spec.get("bus", doc["buses"][0]["name"]), int(spec.get("id", "7F0"), 16),
+                                spec.get("max_frames", 1_000_000)))
+            at += spec.get("every_s", float("inf"))
     dbc = None
     if "dbc" in doc:
         dbc = (path.parent / doc["dbc"]).resolve()

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import queue
+import signal
 import threading
 import time
 from collections.abc import Callable
@@ -90,6 +91,19 @@ LOGGERS: dict[str, Callable] = {
     "sensor_msgs/msg/Imu": _log_imu,
     "can_msgs/msg/Frame": _log_can_frame,
 }
+
+
+def read_rrd(path: Path) -> dict[str, list]:
+    """entity path -> the values logged there (scalars or text), read back with Rerun's own
+    reader: what tests and nightly scripts check a recording with."""
+    from rerun.chunk import RrdReader
+    out: dict[str, list] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        for column in ("Scalars:scalars", "TextLog:text"):
+            if column in batch.schema.names:
+                out.setdefault(str(chunk.entity_path), []).extend(v[0] for v in batch.column(column).to_pylist())
+    return out
 
 
 # ---- live viewer ----
@@ -226,6 +240,10 @@ def view_mcap(path: Path, dbc) -> int:
     return count
 
 
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
 def run(args) -> int:
     rr.init("canbench-view", spawn=False)
     if args.save:
@@ -237,6 +255,8 @@ def run(args) -> int:
         print(f"canbench view: {view_mcap(args.source, dbc)} messages from {args.source}")
         rr.disconnect()
         return 0
+    # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete
+    signal.signal(signal.SIGTERM, _interrupt)
     session = open_session(args.zenoh_mode, args.zenoh_connect)
     viewer = Viewer(session, args.topic, args.auto_subscribe, dbc)
     viewer.start()

@@ -29,18 +29,6 @@ def viewer_stats(session) -> dict | None:
     return json.loads(replies[0].ok.payload.to_bytes()) if replies else None
 
 
-def read_rrd(path) -> dict[str, list]:
-    """entity path -> values logged there (scalars or text)."""
-    from rerun.chunk import RrdReader
-    out: dict[str, list] = {}
-    for chunk in RrdReader(path).stream().to_chunks():
-        batch = chunk.to_record_batch()
-        for column in ("Scalars:scalars", "TextLog:text"):
-            if column in batch.schema.names:
-                out.setdefault(str(chunk.entity_path), []).extend(v[0] for v in batch.column(column).to_pylist())
-    return out
-
-
 def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, session, tmp_path):
     bridge.start("--can", "vcan0", "--publish-period-ms", "0", "--ros2-topic", "/vehicle/can")
     bridge.wait_ready(session)
@@ -75,6 +63,7 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
         for t in tokens:
             t.undeclare()
     assert viewer.returncode == 0, err[-3000:]
+    from canbench.viewer import read_rrd
     logged = read_rrd(rrd)
     assert logged["/ros2/cabin/temperature/temperature"] == TEMPERATURES
     assert logged["/can/rx/vcan0/0C0/raw"] == ["0C0#C1E803000000000B"]

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from canbench import wire
+
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data" / "compose"
 RUN_TIMEOUT_S = 300
@@ -20,12 +22,12 @@ RUN_TIMEOUT_S = 300
 pytestmark = pytest.mark.compose
 
 
-def bench_run(scenario: Path) -> tuple[subprocess.CompletedProcess, Path | None]:
+def bench_run(scenario: Path, **env: str) -> tuple[subprocess.CompletedProcess, Path | None]:
     if subprocess.run(["docker", "image", "inspect", f"canbench/orchestrator:{os.environ.get('BENCH_TAG', 'latest')}"],
                       capture_output=True).returncode != 0:
         pytest.skip("bench images not built (make images)")
     proc = subprocess.run([str(REPO / "scripts" / "bench-run"), str(scenario)], capture_output=True, text=True,
-                          timeout=RUN_TIMEOUT_S, cwd=REPO)
+                          timeout=RUN_TIMEOUT_S, cwd=REPO, env={**os.environ, **env})
     marker = "(reports in "
     run_dir = next((line.split(marker)[1].rstrip(")") for line in proc.stdout.splitlines() if marker in line), None)
     return proc, REPO / run_dir if run_dir else None
@@ -90,6 +92,29 @@ def test_fault_scenario_with_unmeetable_recovery_gate_fails_on_recovery_only():
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["faults"]["windows"][0]["action"] == "router_kill"
     assert "recovered in" in metrics["problems"]["recovery"][0]
+    assert leftovers(run_dir) == []
+
+
+def test_viewer_records_the_scenarios_traffic():
+    """make test VIEWER=1: `canbench view --save` in the compose project records what crossed
+    the bridge; read back with Rerun's reader it holds every captured frame and its DBC signals."""
+    viewer = pytest.importorskip("canbench.viewer", reason="reading .rrd needs rerun-sdk (pip install -e '.[viewer]')")
+    proc, run_dir = bench_run(REPO / "scenarios" / "smoke.yaml", VIEWER="1")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    logged = viewer.read_rrd(run_dir / "traffic.rrd")
+    on_zenoh: dict[str, int] = {}
+    for line in (run_dir / "zenoh.tsv").read_text().splitlines():
+        _, key, payload, _ = line.split("\t")
+        if not key.endswith("/rx"):
+            continue
+        for f in wire.decode_batch(bytes.fromhex(payload)):
+            ident = f"{f.can_id:08X}" if f.extended else f"{f.can_id:03X}"
+            on_zenoh[ident] = on_zenoh.get(ident, 0) + 1
+    recorded = {path.split("/")[4]: len(v) for path, v in logged.items()
+                if path.startswith("/can/rx/vcan0/") and path.endswith("/raw")}
+    assert recorded == on_zenoh
+    assert len(logged["/can/rx/vcan0/0C0/EngineSpeed"]) == on_zenoh["0C0"]  # DBC-decoded
+    assert any("vehicle/can/bridges/" in line for line in logged["/discovery/bridges"])
     assert leftovers(run_dir) == []
 
 

@@ -24,6 +24,8 @@ def pytest_addoption(parser):
                     help="endpoint the capture and the commands connect to (default: the router)")
     group.addoption("--project", default=os.environ.get("BENCH_PROJECT") or None,
                     help="the run's compose project (fault steps act on its containers)")
+    group.addoption("--viewer", action="store_true", default=bool(os.environ.get("BENCH_VIEWER")),
+                    help="a viewer records the run (traffic.rrd): wait for it before the traffic starts")
     group.addoption("--baseline", default=os.environ.get("BENCH_BASELINE") or None,
                     help="metrics.json (or its run directory) of a run to gate relative regressions against")
 
@@ -44,7 +46,8 @@ def scenario_run(bench_options, request):
         path = Path(bench_options.baseline)
         baseline = json.loads((path / "metrics.json" if path.is_dir() else path).read_text())
     result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router,
-                         consumer=bench_options.consumer, baseline=baseline, project=bench_options.project)
+                         consumer=bench_options.consumer, baseline=baseline, project=bench_options.project,
+                         wait_viewer=bench_options.viewer)
     request.config._bench_result = result
     return result
 

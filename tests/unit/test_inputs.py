@@ -73,6 +73,10 @@ def test_good_trace_keeps_line_numbers(tmp_path):
     ({"commands": "\n  - bus: vcan0"}, 12, "give either trace or messages"),
     ({"topology": "\n  consumer: bridge"}, 12, "only in bridge.mode peer or router"),
     ({"expect": "\n  cycle_time: {tolerance_pct: -5}"}, 10, "cycle_time.tolerance_pct"),
+    ({"faults": "\n  - {at_s: 1, action: router_restart, id: '7F0'}"}, 12, "belong to can_flood only"),
+    ({"faults": "\n  - {at_s: 1, action: can_flood, bus: vcan7}"}, 12, "'vcan7' is not one of the buses"),
+    ({"faults": "\n  - {at_s: 1, action: partition, duration_s: 5, every_s: 5}"}, 12, "longer than duration_s"),
+    ({"faults": "\n  - {at_s: 1, action: unplug}"}, 12, "'unplug' is not one of"),
 ])
 def test_bad_scenarios_name_file_line_and_field(tmp_path, overrides, line, fragment):
     write(tmp_path, "trace.log", GOOD_TRACE)
@@ -98,6 +102,28 @@ def test_cli_exit_code_2_and_one_line(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith(f"canbench: {path}:2: ")
 
 
+def test_repeated_fault_steps_expand_until_their_end(tmp_path):
+    write(tmp_path, "trace.log", GOOD_TRACE)
+    path = write(tmp_path, "s.yaml", scenario_text(duration_s="100", faults=(
+        "\n  - {at_s: 10, action: router_restart, every_s: 30}"
+        "\n  - {at_s: 5, action: can_flood, duration_s: 2, id: '123', max_frames: 50}")))
+    sc = scenario.load(path)
+    assert [(f.at_s, f.action) for f in sc.faults] == [(10, "router_restart"), (40, "router_restart"),
+                                                       (70, "router_restart"), (100, "router_restart"),
+                                                       (5, "can_flood")]
+    flood = sc.faults[-1]
+    assert (flood.bus, flood.can_id, flood.max_frames, flood.duration_s) == ("vcan0", 0x123, 50, 2)
+
+
+def test_partition_gives_the_bridge_its_own_router_listener(tmp_path):
+    write(tmp_path, "trace.log", GOOD_TRACE)
+    path = write(tmp_path, "s.yaml", scenario_text(faults="\n  - {at_s: 1, action: partition, duration_s: 2}"))
+    services = cli.compose_override(scenario.load(path), "/scenarios/s.yaml")["services"]
+    assert "tcp/0.0.0.0:7446" in services["router"]["command"]
+    assert services["bridge"]["environment"]["ZENOH_ROUTER_ADDRESS"] == "tcp/router:7446"
+    assert services["orchestrator"]["volumes"] == ["/var/run/docker.sock:/var/run/docker.sock"]
+
+
 def test_shipped_scenarios_are_valid():
-    for path in sorted(Path(__file__).resolve().parents[2].glob("scenarios/*.yaml")):
+    for path in sorted(Path(__file__).resolve().parents[2].glob("scenarios/**/*.yaml")):
         assert cli.main(["validate", str(path)]) == 0

@@ -1,0 +1,89 @@
+//! zn-flood: publishes COUNT samples shaped like the bridge's (16-byte frame,
+//! 8-byte sequence attachment) on KEY at RATE samples/s (0 = as fast as it
+//! can), then exits. A benchmark load: bounded in count, loopback or the
+//! bench's own router only, multicast scouting off.
+//!
+//!   zn-flood --connect tcp/127.0.0.1:7447 --key bench/flood --count 300000 --rate 100000
+//!
+//! Prints "<samples> samples in <seconds> s" on stdout when done.
+use std::time::{Duration, Instant};
+
+use zenoh::qos::CongestionControl;
+use zenoh::{Config, Wait};
+
+/// Paces in slices this long: sleeping per sample would cap the rate at the timer's resolution.
+const SLICE: Duration = Duration::from_millis(1);
+
+fn usage() -> ! {
+    eprintln!("usage: zn-flood --connect ENDPOINT --key KEY --count N [--rate SAMPLES_PER_S] [--block]");
+    std::process::exit(2);
+}
+
+fn main() {
+    let (mut connect, mut key, mut count, mut rate, mut block) = (String::new(), String::new(), 0u64, 0u64, false);
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        if flag == "--block" {
+            block = true;
+            continue;
+        }
+        let value = it.next().unwrap_or_else(|| usage());
+        match flag.as_str() {
+            "--connect" => connect = value,
+            "--key" => key = value,
+            "--count" => count = value.parse().unwrap_or_else(|_| usage()),
+            "--rate" => rate = value.parse().unwrap_or_else(|_| usage()),
+            _ => usage(),
+        }
+    }
+    if connect.is_empty() || key.is_empty() || count == 0 {
+        usage();
+    }
+    let mut config = Config::default();
+    config.insert_json5("mode", "\"client\"").unwrap();
+    config.insert_json5("scouting/multicast/enabled", "false").unwrap();
+    config.insert_json5("connect/endpoints", &format!("[{connect:?}]")).unwrap();
+    let session = zenoh::open(config).wait().unwrap_or_else(|e| {
+        eprintln!("zn-flood: cannot open a Zenoh session to {connect}: {e}");
+        std::process::exit(1)
+    });
+    let publisher = session
+        .declare_publisher(key.clone())
+        .congestion_control(if block { CongestionControl::Block } else { CongestionControl::Drop })
+        .wait()
+        .unwrap_or_else(|e| {
+            eprintln!("zn-flood: cannot declare a publisher on {key}: {e}");
+            std::process::exit(1)
+        });
+    let per_slice = if rate == 0 { u64::MAX } else { (rate as f64 * SLICE.as_secs_f64()).ceil() as u64 };
+    let start = Instant::now();
+    let mut seq = 0u64;
+    let mut slice_end = start + SLICE;
+    while seq < count {
+        let mut in_slice = 0;
+        while in_slice < per_slice && seq < count {
+            // the bridge's wire format: id (LE u32), dlc, flags, 2 reserved, 8 data bytes
+            let mut frame = [0u8; 16];
+            frame[0..4].copy_from_slice(&0x123u32.to_le_bytes());
+            frame[4] = 8;
+            frame[8..16].copy_from_slice(&seq.to_le_bytes());
+            if let Err(e) = publisher.put(frame.to_vec()).attachment(seq.to_le_bytes().to_vec()).wait() {
+                eprintln!("zn-flood: put {seq}: {e}");
+                std::process::exit(1);
+            }
+            seq += 1;
+            in_slice += 1;
+        }
+        if rate != 0 {
+            let now = Instant::now();
+            if slice_end > now {
+                std::thread::sleep(slice_end - now);
+            }
+            slice_end += SLICE;
+        }
+    }
+    let elapsed = start.elapsed().as_secs_f64();
+    println!("{count} samples in {elapsed:.3} s");
+    drop(publisher);
+    let _ = session.close().wait();
+}
