@@ -60,11 +60,25 @@ def candump_frames(out: str) -> list[str]:
 
 
 def start_pycan(bus: Bus, *args: str) -> subprocess.Popen:
-    proc = bus.python("recv", *args)
+    return start_pycan_proc(bus, "recv", *args)
+
+
+def start_pycan_proc(bus: Bus, *args: str) -> subprocess.Popen:
+    proc = bus.python(*args)
     assert proc.stdout is not None
     line = proc.stdout.readline().strip()
     assert line == "ready", proc.stderr.read() if proc.stderr else line
     return proc
+
+
+def start_pycan_readers(bus: Bus, *specs: dict) -> subprocess.Popen:
+    """Several python-can readers (each its own can.Bus) in one process: see pycan_helper."""
+    return start_pycan_proc(bus, "readers", "--specs", json.dumps(specs))
+
+
+def pycan_reader_messages(proc: subprocess.Popen, *counts: int) -> list[list[dict]]:
+    msgs = pycan_messages(proc, sum(counts))
+    return [[m for m in msgs if m["reader"] == i] for i in range(len(counts))]
 
 
 def pycan_messages(proc: subprocess.Popen, count: int) -> list[dict]:
@@ -141,15 +155,11 @@ def test_pycan_filters_rtr_eff_inverted_and_join(bus):
     sff_only = [{"can_id": 0x123, "can_mask": 0x7FF | 0x80000000 | 0x40000000}]  # EFF|RTR in mask
     inverted = [{"can_id": 0x123 | 0x20000000, "can_mask": 0x7FF}]  # CAN_INV_FILTER
     joined = [{"can_id": 0x100, "can_mask": 0x700}, {"can_id": 0x010, "can_mask": 0x0F0}]
-    readers = [
-        start_pycan(bus, "--count", "1", "--filters", json.dumps(sff_only)),
-        start_pycan(bus, "--count", "3", "--filters", json.dumps(inverted)),
-        start_pycan(bus, "--count", "1", "--filters", json.dumps(joined), "--join"),
-    ]
+    readers = start_pycan_readers(bus, {"count": 1, "filters": sff_only}, {"count": 3, "filters": inverted},
+                                  {"count": 1, "filters": joined, "join": True})
     for frame in ["123#R", "12345123#01", "123#01", "124#02", "110#03", "777#04"]:
         bus.run(["cansend", "vcan0", frame])
-    got = [[(m["id"], m["ext"], m["rtr"]) for m in pycan_messages(r, n)]
-           for r, n in zip(readers, (1, 3, 1), strict=True)]
+    got = [[(m["id"], m["ext"], m["rtr"]) for m in msgs] for msgs in pycan_reader_messages(readers, 1, 3, 1)]
     assert got[0] == [(0x123, False, False)]
     # inverted: everything whose low 11 bits are not 0x123 (the EFF and RTR 0x123 frames match, so are out)
     assert got[1] == [(0x124, False, False), (0x110, False, False), (0x777, False, False)]
@@ -215,12 +225,11 @@ def test_fd_frames_need_fd_mtu_interface(bus):
 
 
 def test_error_frames_only_reach_readers_with_an_error_mask(bus):
-    plain = start_pycan(bus, "--count", "1")
-    with_mask = start_pycan(bus, "--count", "2", "--errors")
+    readers = start_pycan_readers(bus, {"count": 1}, {"count": 2, "errors": True})
     bus.run(["cansend", "vcan0", "20000004#0004000000000000"])  # CAN_ERR_CRTL, rx warning
     bus.run(["cansend", "vcan0", "111#11"])
-    assert [m["id"] for m in pycan_messages(plain, 1)] == [0x111]
-    msgs = pycan_messages(with_mask, 2)
+    plain, msgs = pycan_reader_messages(readers, 1, 2)
+    assert [m["id"] for m in plain] == [0x111]
     assert msgs[0]["err"] and msgs[0]["id"] == 0x4 and not msgs[1]["err"]
 
 

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import KERNEL_VCAN, REPO, Bus
+from conftest import KERNEL_VCAN, REPO, Bus, ensure_kernel_vcan
 
 PROBE = Path(__file__).with_name("differential.py")
 sys.path.insert(0, str(PROBE.parent))
@@ -56,8 +56,7 @@ def differences(a: dict, b: dict) -> list[str]:
 def kernel_result(tmp_path_factory) -> dict:
     if KERNEL_VCAN:
         for name in ("vcan0", "vcan1"):
-            subprocess.run(["ip", "link", "add", "dev", name, "type", "vcan"], capture_output=True)
-            subprocess.run(["ip", "link", "set", "up", name], check=True)
+            ensure_kernel_vcan(name, 72)
         env = {k: v for k, v in os.environ.items() if k != "LD_PRELOAD"}
         return json.loads(subprocess.run([sys.executable, str(PROBE)], env=env, capture_output=True, text=True,
                                          check=True).stdout)
