@@ -41,6 +41,12 @@ def bound_can_receivers() -> int:
     return kernel_can_receivers()
 
 
+# candump -r: a deep receive queue, so the bench's own capture rides out a flood or a
+# moment without CPU (the hub sizes a reader's queue from SO_RCVBUF; the kernel caps it at
+# rmem_max unless the capture has CAP_NET_ADMIN). 64 MiB is ~900k frames on the hub.
+CAPTURE_RCVBUF = 64 << 20
+
+
 class CanCapture:
     """candump -L of the given interfaces into a file."""
 
@@ -48,7 +54,8 @@ class CanCapture:
         self.path = path
         before = bound_can_receivers()
         self.out = open(path, "w")
-        self.proc = subprocess.Popen(["candump", "-L", *interfaces], stdout=self.out, stderr=subprocess.PIPE)
+        self.proc = subprocess.Popen(["candump", "-L", "-r", str(CAPTURE_RCVBUF), *interfaces], stdout=self.out,
+                                     stderr=subprocess.PIPE)
         wait_until(lambda: bound_can_receivers() >= before + len(interfaces) or self.proc.poll() is not None,
                    10, "candump bound to the bus")
         if self.proc.poll() is not None:

@@ -105,14 +105,17 @@ class Injector:
             service = fault.target and f"ecu-{fault.target}" or ACTION_SERVICE[fault.action]
             window = Window(fault.action, service, time.time_ns())
             self.windows.append(window)
+            exact = None
             try:
-                self._inject(fault, None if fault.action == "can_flood" else self.container(service))
+                exact = self._inject(fault, None if fault.action == "can_flood" else self.container(service))
             except Exception as e:  # noqa: BLE001 - reported as the bench's failure, never lost in a thread
                 window.error = f"{type(e).__name__}: {e}"
                 self.errors.append(f"{fault.action} on {service}: {window.error}")
             window.end_ns = time.time_ns()
+            if exact:  # when the fault really began and ended, not when the Docker calls returned
+                window.start_ns, window.end_ns = exact
 
-    def _inject(self, fault: Fault, c) -> None:
+    def _inject(self, fault: Fault, c) -> tuple[int, int] | None:
         hold = fault.duration_s
         if fault.action == "router_restart":
             c.restart(timeout=STOP_TIMEOUT_S)
@@ -129,11 +132,12 @@ class Injector:
             time.sleep(hold)
             c.unpause()
         elif fault.action == "partition":
-            self._iptables(c, "-I")
+            cut_ns = self._iptables(c, "-I")
             try:
                 time.sleep(hold)
             finally:
-                self._iptables(c, "-D")
+                healed_ns = self._iptables(c, "-D")
+            return cut_ns, healed_ns
         elif fault.action == "can_flood":
             self._flood(fault)
         elif fault.action == "ecu_kill":
@@ -142,15 +146,18 @@ class Injector:
                 self.on_ecu_killed(fault.target)
         else:
             raise ValueError(f"unknown fault action {fault.action}")
+        return None
 
-    def _iptables(self, router, op: str) -> None:
+    def _iptables(self, router, op: str) -> int:
         """Insert (-I) or delete (-D) the partition's rules in the router's network namespace,
         from a throw-away container of the bus image (it has iptables): the router's image and
-        privileges stay as they are."""
+        privileges stay as they are. Returns when the rules took effect (wall clock ns, printed
+        by the container: its start and removal take a fraction of a second either side)."""
         rules = [f"INPUT -p tcp --dport {PARTITION_PORT} -j DROP", f"OUTPUT -p tcp --sport {PARTITION_PORT} -j DROP"]
-        script = " && ".join(f"iptables {op} {r}" for r in rules)
-        self.client.containers.run(self.container("bus").image.id, ["-c", script], entrypoint="sh", user="0",
-                                   network_mode=f"container:{router.id}", cap_add=["NET_ADMIN"], remove=True)
+        script = " && ".join([*(f"iptables {op} {r}" for r in rules), "date +%s%N"])
+        out = self.client.containers.run(self.container("bus").image.id, ["-c", script], entrypoint="sh", user="0",
+                                         network_mode=f"container:{router.id}", cap_add=["NET_ADMIN"], remove=True)
+        return int(out.decode().split()[-1])
 
     @staticmethod
     def _flood(fault: Fault) -> None:
@@ -159,12 +166,12 @@ class Injector:
                                  "-D", "i", "-n", str(fault.max_frames)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         try:
-            proc.wait(timeout=fault.duration_s)
+            _, err = proc.communicate(timeout=fault.duration_s)
         except subprocess.TimeoutExpired:
             proc.terminate()
-            proc.wait(timeout=STOP_TIMEOUT_S)
+            _, err = proc.communicate(timeout=STOP_TIMEOUT_S)
         if proc.returncode not in (0, -15):
-            raise RuntimeError(f"cangen exited {proc.returncode}: {proc.stderr.read().decode().strip()}")
+            raise RuntimeError(f"cangen exited {proc.returncode}: {err.decode().strip()}")
 
     def _sample_rss(self) -> None:
         next_fd_sample = 0.0

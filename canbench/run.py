@@ -46,6 +46,7 @@ class BusResult:
     round_trip: oracle.Comparison | None = None
     cycle_times: dict = field(default_factory=dict)  # id -> {"can": stats, "zenoh": stats}
     bus_frames: list[oracle.Observed] = field(default_factory=list)  # the whole bus capture
+    ecu_frames_not_captured: int = 0  # frames an ECU logged as sent that the bus capture lacks
 
 
 @dataclass
@@ -253,11 +254,14 @@ def _drain_commands(session, data, prefix: str, sent: int, scenario: Scenario, c
         pass
 
 
-def _sent_by_ecus(run_dir: Path, bus: str) -> Counter:
-    """What the ECUs on this bus say they sent (their send logs), by frame content."""
+def _sent_by_others(run_dir: Path, bus: str, can_frames: list[oracle.Observed], flood_ids: set[int]) -> Counter:
+    """What others than the bridge put on this bus, by frame content: what the ECUs say they
+    sent (their send logs), and the frames of a can_flood step (by its id, the flood's alone)."""
     out: Counter = Counter()
     for log in sorted(run_dir.glob("ecu-*.sent.tsv")):
         out.update(oracle.frame_key(r.frame) for r in oracle.read_sent_log(log) if r.bus == bus)
+    out.update(oracle.frame_key(o.frame) for o in can_frames
+               if o.frame.can_id in flood_ids and not o.frame.extended)
     return out
 
 
@@ -288,7 +292,9 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         tx = None
         from_ecus = can_frames
         if scenario.commands:
-            tx, from_ecus = oracle.compare_commands(bus_commands, can_frames, _sent_by_ecus(run_dir, bus))
+            flood_ids = {f.can_id for f in scenario.faults if f.action == "can_flood" and f.bus == bus}
+            tx, from_ecus = oracle.compare_commands(bus_commands, can_frames,
+                                                    _sent_by_others(run_dir, bus, can_frames, flood_ids))
         comparison = oracle.compare(from_ecus, zenoh_frames)
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
@@ -297,8 +303,10 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             for c in (comparison, tx, round_trip):
                 if c is not None:
                     oracle.apply_fault_windows(c, windows)
+        captured = Counter(oracle.frame_key(o.frame) for o in can_frames)
+        not_captured = sum((_sent_by_others(run_dir, bus, [], set()) - captured).values())
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
-                               _cycle_times(from_ecus, comparison.matched), can_frames))
+                               _cycle_times(from_ecus, comparison.matched), can_frames, not_captured))
     result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys, baseline=baseline)
     result.metrics = {
         "schema_version": METRICS_SCHEMA_VERSION,

@@ -239,6 +239,13 @@ def load(path: str | Path) -> Scenario:
                                 spec.get("bus", doc["buses"][0]["name"]), int(spec.get("id", "7F0"), 16),
                                 spec.get("max_frames", 1_000_000)))
             at += spec.get("every_s", float("inf"))
+    # flood frames are told from the bridge's writes by their id (standard): it must be the flood's alone
+    senders: list[Ecu | Commands] = [*ecus, *commands]
+    used_ids = {m.can_id for x in senders for m in x.messages if not m.extended}
+    for i, f in enumerate(faults):
+        if f.action == "can_flood" and f.can_id in used_ids:
+            raise fail(["faults", i], f"can_flood id {f.can_id:03X} is sent by an ECU or a command too; "
+                       "give the flood an id of its own")
     dbc = None
     if "dbc" in doc:
         dbc = (path.parent / doc["dbc"]).resolve()

@@ -77,6 +77,8 @@ def test_good_trace_keeps_line_numbers(tmp_path):
     ({"faults": "\n  - {at_s: 1, action: can_flood, bus: vcan7}"}, 12, "'vcan7' is not one of the buses"),
     ({"faults": "\n  - {at_s: 1, action: partition, duration_s: 5, every_s: 5}"}, 12, "longer than duration_s"),
     ({"faults": "\n  - {at_s: 1, action: unplug}"}, 12, "'unplug' is not one of"),
+    ({"commands": "\n  - bus: vcan0\n    run_s: 1\n    messages: [{id: '7F0', cycle_ms: 10}]",
+      "faults": "\n  - {at_s: 1, action: can_flood}"}, 16, "can_flood id 7F0 is sent by an ECU or a command too"),
 ])
 def test_bad_scenarios_name_file_line_and_field(tmp_path, overrides, line, fragment):
     write(tmp_path, "trace.log", GOOD_TRACE)
