@@ -26,10 +26,14 @@ BENCH_BASE     := canbench/base:bookworm
 COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 BENCH_CAN_MODE ?= $(shell scripts/detect-can)
 BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
-IMAGE_SOURCES  := images ucan firmware canbench tests/scenarios tests/data pyproject.toml .dockerignore
-# content hash of everything the images are built from: unchanged sources, no rebuild
-BENCH_TAG      ?= $(shell { git ls-files -s $(IMAGE_SOURCES); git diff HEAD -- $(IMAGE_SOURCES); \
+IMAGE_SOURCES  := images ucan firmware ':!firmware/bench' ':!ucan/bench' canbench tests/scenarios tests/data pyproject.toml .dockerignore
+# content hash of everything the images are built from: unchanged sources, no rebuild.
+# Computed once per make run (:=), so the images built and the images tested are the same
+# even if a file changes meanwhile.
+ifndef BENCH_TAG
+BENCH_TAG      := $(shell { git ls-files -s $(IMAGE_SOURCES); git diff HEAD -- $(IMAGE_SOURCES); \
                    git ls-files -o --exclude-standard $(IMAGE_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-12)
+endif
 SCENARIO       ?= $(wildcard scenarios/*.yaml)
 ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
@@ -143,7 +147,7 @@ check-faults: ucan firmware zenohd
 
 # The bench itself in compose, as make test runs it.
 check-compose: images
-	$(PYTEST) -q tests/compose
+	BENCH_REQUIRE_IMAGES=1 $(PYTEST) -q tests/compose
 
 check: check-python check-ucan check-firmware check-bus check-kernel check-bridge check-faults fuzz check-compose
 	@echo "make check: all project tests passed"

@@ -14,7 +14,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import oracle, runkeys, wire
+from . import oracle, ros2, runkeys, wire
 from .capture import CanCapture, ZenohCapture, read_zenoh_capture
 from .commands import Commander, tx_key
 from .commands import plan as command_plan
@@ -114,6 +114,9 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
             runkeys.wait_token(session, runkeys.ecu_ready(run_id, e.name), BRIDGE_READY_TIMEOUT_S)
         if wait_viewer:
             runkeys.wait_token(session, "canbench/viewers/*", BRIDGE_READY_TIMEOUT_S)
+            wanted = set(ros2_data_keys(scenario))
+            runkeys.wait_until(lambda: wanted <= viewer_subscriptions(session), BRIDGE_READY_TIMEOUT_S,
+                               "the viewer subscribed to the bridge's ROS 2 topic", step_s=0.1)
         done: dict[str, dict] = {}
         senders_done = threading.Event()
         echoes_done = threading.Event()
@@ -252,6 +255,25 @@ def _drain_commands(session, data, prefix: str, sent: int, scenario: Scenario, c
                            "the echoes' answers to reach the capture")
     except TimeoutError:
         pass
+
+
+def ros2_data_keys(scenario: Scenario) -> list[str]:
+    """The data keys of the bridge's ROS 2 output (bridge.ros2_topic), one per bus."""
+    topic = scenario.bridge.get("ros2_topic")
+    if not topic:
+        return []
+    topics = [topic] if len(scenario.bus_names) == 1 else [f"{topic}/{b}" for b in scenario.bus_names]
+    frame = "can_msgs/msg/Frame"
+    return [ros2.data_key(scenario.bridge.get("ros2_domain", 0), t, frame, ros2.type_hash(frame)) for t in topics]
+
+
+def viewer_subscriptions(session) -> set[str]:
+    """What the viewers on the network subscribe to (their stats queryables)."""
+    out: set[str] = set()
+    for reply in session.get("canbench/viewers/*/stats"):
+        if reply.ok:
+            out |= set(json.loads(reply.ok.payload.to_bytes()).get("subscriptions", []))
+    return out
 
 
 def _sent_by_others(run_dir: Path, bus: str, can_frames: list[oracle.Observed], flood_ids: set[int]) -> Counter:
