@@ -21,6 +21,7 @@ from pathlib import Path
 import can
 
 from . import runkeys, tracegen
+from .oracle import percentile
 from .scenario import Ecu, Scenario
 from .trace import read_trace
 from .wire import Frame
@@ -63,16 +64,9 @@ def frame_of(msg: can.Message) -> Frame:
 
 
 def fidelity(errors_ms: list[float]) -> dict:
-    return {"p50": round(percentile(errors_ms, 0.5), 3), "p99": round(percentile(errors_ms, 0.99), 3),
+    return {"p50": round(percentile(errors_ms, 0.5) or 0.0, 3), "p99": round(percentile(errors_ms, 0.99) or 0.0, 3),
             "max": round(max(errors_ms, default=0.0), 3),
             "mean": round(statistics.fmean(errors_ms), 3) if errors_ms else 0.0}
-
-
-def percentile(values: list[float], q: float) -> float:
-    if not values:
-        return 0.0
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
 
 
 SENT_LOG_HEADER = "# trace_line\tsend_time_ns\tframe (candump form)\n"
