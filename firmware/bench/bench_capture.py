@@ -35,6 +35,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "ucan" / "bench"))
+from bench_bridge import free_port  # noqa: E402  (this directory: the script's own)
 from bench_bus import start_hub  # noqa: E402
 
 from canbench.capture import CAPTURE_RCVBUF  # noqa: E402
@@ -46,13 +47,6 @@ CAN_RATES_PER_MS = (100, 150)  # paced; then unpaced
 ZENOH_COUNT = 600_000
 CAN_COUNT = 500_000
 SETTLE_S = 10.0
-
-
-def free_port() -> int:
-    import socket
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def wait_lines(path: Path, expected: int) -> int:
