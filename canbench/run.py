@@ -276,15 +276,18 @@ def viewer_subscriptions(session) -> set[str]:
     return out
 
 
-def _sent_by_others(run_dir: Path, bus: str, can_frames: list[oracle.Observed], flood_ids: set[int]) -> Counter:
-    """What others than the bridge put on this bus, by frame content: what the ECUs say they
-    sent (their send logs), and the frames of a can_flood step (by its id, the flood's alone)."""
+def _sent_by_ecus(run_dir: Path, bus: str) -> Counter:
+    """What the ECUs on this bus say they sent (their send logs), by frame content."""
     out: Counter = Counter()
     for log in sorted(run_dir.glob("ecu-*.sent.tsv")):
         out.update(oracle.frame_key(r.frame) for r in oracle.read_sent_log(log) if r.bus == bus)
-    out.update(oracle.frame_key(o.frame) for o in can_frames
-               if o.frame.can_id in flood_ids and not o.frame.extended)
     return out
+
+
+def _flood_frames(scenario: Scenario, bus: str, can_frames: list[oracle.Observed]) -> Counter:
+    """The frames of the bus's can_flood steps, by content (told by their id, the flood's alone)."""
+    ids = {f.can_id for f in scenario.faults if f.action == "can_flood" and f.bus == bus}
+    return Counter(oracle.frame_key(o.frame) for o in can_frames if o.frame.can_id in ids and not o.frame.extended)
 
 
 def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.Observed, oracle.Observed]]) -> dict:
@@ -313,10 +316,11 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         bus_commands = [c for b, c in commands if b == bus]
         tx = None
         from_ecus = can_frames
+        sent_by_ecus = _sent_by_ecus(run_dir, bus)
         if scenario.commands:
-            flood_ids = {f.can_id for f in scenario.faults if f.action == "can_flood" and f.bus == bus}
+            # every bus frame not from an ECU or a flood is the bridge's
             tx, from_ecus = oracle.compare_commands(bus_commands, can_frames,
-                                                    _sent_by_others(run_dir, bus, can_frames, flood_ids))
+                                                    sent_by_ecus + _flood_frames(scenario, bus, can_frames))
         comparison = oracle.compare(from_ecus, zenoh_frames)
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
@@ -325,8 +329,7 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             for c in (comparison, tx, round_trip):
                 if c is not None:
                     oracle.apply_fault_windows(c, windows)
-        captured = Counter(oracle.frame_key(o.frame) for o in can_frames)
-        not_captured = sum((_sent_by_others(run_dir, bus, [], set()) - captured).values())
+        not_captured = sum((sent_by_ecus - Counter(oracle.frame_key(o.frame) for o in can_frames)).values())
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
                                _cycle_times(from_ecus, comparison.matched), can_frames, not_captured))
     result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys, baseline=baseline)
