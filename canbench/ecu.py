@@ -91,21 +91,32 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
         start = time.perf_counter() - first_s
         wall0 = time.time_ns() - int(start * 1e9)
         messages = [m for _, m in plan]
+        seen = 0
         # MessageSync sleeps until each message's offset: the recorded timing
         for (line, msg), synced in zip(plan, can.MessageSync(messages, timestamps=True, skip=3600), strict=True):
             now = time.perf_counter()
             log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
             bus.send(synced, timeout=SEND_TIMEOUT_S)  # a busy bus makes a sender wait, as on a real one
             errors_ms.append((now - start - msg.timestamp) * 1000)
+            if last is not None:  # read the copies as they come: a long run would overflow the socket
+                seen += _own_copies(bus, last, timeout=0.0)
         if last is not None:
             _wait_own_copies(bus, last, sum(1 for _, m in plan if m.arbitration_id == last.arbitration_id
-                                            and m.is_extended_id == last.is_extended_id))
+                                            and m.is_extended_id == last.is_extended_id), seen)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
             "sent": len(plan), "fidelity_ms": fidelity(errors_ms)}
 
 
-def _wait_own_copies(bus: can.BusABC, last: can.Message, expected: int) -> None:
+def _own_copies(bus: can.BusABC, last: can.Message, timeout: float) -> int:
+    """Own copies of the last frame's id read now (at most one wait of `timeout`)."""
     seen = 0
+    while (msg := bus.recv(timeout=timeout)) is not None:
+        seen += msg.arbitration_id == last.arbitration_id and not msg.is_rx
+        timeout = 0.0
+    return seen
+
+
+def _wait_own_copies(bus: can.BusABC, last: can.Message, expected: int, seen: int) -> None:
     deadline = time.monotonic() + SEND_TIMEOUT_S
     while seen < expected:
         msg = bus.recv(timeout=max(0.0, deadline - time.monotonic()))
