@@ -57,6 +57,19 @@ def rss_mib(pid: int) -> float:
     return 0.0
 
 
+def stop(proc: subprocess.Popen, close_stdin: bool = False) -> None:
+    """SIGTERM (or end of stdin for zn-capture), then SIGKILL after 10 s."""
+    if close_stdin:
+        proc.stdin.close()
+    else:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
 def count_frames(path: Path) -> int:
     if not path.exists():
         return 0
@@ -130,14 +143,7 @@ class Bench:
             time.sleep(0.1)  # polling the capture file, bounded
         cpu = cpu_s(bridge.pid) - cpu0
         for p in (bridge, capture, router, hub):
-            if p is capture:
-                p.stdin.close()
-            else:
-                p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+            stop(p, close_stdin=p is capture)
         session.close()
         received = count_frames(capture_file)
         return {"system": system, "buses": buses, "offered": offered, "offered_fps": round(offered / offered_s),

@@ -25,7 +25,6 @@ import json
 import os
 import platform
 import re
-import signal
 import subprocess
 import sys
 import tempfile
@@ -35,7 +34,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "ucan" / "bench"))
-from bench_bridge import free_port  # noqa: E402  (this directory: the script's own)
+from bench_bridge import free_port, stop  # noqa: E402  (this directory: the script's own)
 from bench_bus import start_hub  # noqa: E402
 
 from canbench.capture import CAPTURE_RCVBUF  # noqa: E402
@@ -63,18 +62,6 @@ def wait_lines(path: Path, expected: int) -> int:
             break
         time.sleep(0.1)  # polling the capture file, bounded by SETTLE_S
     return lines
-
-
-def stop(proc: subprocess.Popen, close_stdin: bool = False) -> None:
-    if close_stdin:
-        proc.stdin.close()
-    else:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def zenoh_run(args, workdir: Path, rate: int, block: bool) -> dict:
