@@ -39,7 +39,7 @@ ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture test clean preflight base images \
+        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -158,17 +158,33 @@ bench-bus: ucan
 # zenoh-node against the Python reference bridge, same run, same bus/router/capture
 # (README's performance table is generated from it: BENCH_README=1).
 bench-bridge: ucan firmware zenohd
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py $(if $(BENCH_README),--update-readme)
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py --can-load $(CAN_LOAD) --out $(BENCH_OUT) $(if $(BENCH_README),--update-readme)
 
 # The bench's captures at >= 100k frames/s: zn-flood (a paced Rust publisher, same zenoh and
 # target dir as the port, so only its own crate compiles) into zn-capture; cangen into candump -L.
 ZN_FLOOD := $(CARGO_TARGET)/release/zn-flood
-bench-capture: ucan firmware zenohd
+bench-capture: ucan firmware zenohd zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_capture.py --zn-flood $(ZN_FLOOD) --zn-capture $(FW_BUILD)/zn-capture --out $(BENCH_OUT)
+
+# Latency and throughput of every path through the bridge next to the bus alone, raw Zenoh and
+# the Python reference; instructions per frame under callgrind (BENCH_RECORD=1 appends them to
+# docs/callgrind-history.csv). can-load (ucan/tests) is the stamped CAN load and echo ECU.
+CAN_LOAD := $(UCAN_BUILD)/can-load
+
+zn-flood:
 	CARGO_TARGET_DIR=$(CARGO_TARGET) cargo build --release --manifest-path firmware/bench/zn-flood/Cargo.toml
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_capture.py --zn-flood $(ZN_FLOOD) --zn-capture $(FW_BUILD)/zn-capture
+
+# One output directory per make run: all benchmarks of `make bench` write side by side.
+BENCH_OUT := reports/bench/$(shell date -u +%Y%m%d-%H%M%S)
+BENCH_TOOLS = --zn-flood $(ZN_FLOOD) --can-load $(CAN_LOAD) --zn-capture $(FW_BUILD)/zn-capture --out $(BENCH_OUT)
+bench-paths: ucan firmware zenohd zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_paths.py $(BENCH_TOOLS) $(if $(BENCH_QUICK),--quick)
+
+bench-callgrind: ucan firmware zenohd zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_callgrind.py $(BENCH_TOOLS) $(if $(BENCH_RECORD),--record)
 
 # Benchmarks for nightly runs, never part of check (docs/userspace-bus.md, docs/benchmark.md).
-bench: bench-bus bench-bridge bench-capture
+bench: bench-bus bench-bridge bench-capture bench-paths bench-callgrind
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }

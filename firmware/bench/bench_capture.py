@@ -161,6 +161,7 @@ def main() -> int:
     ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
     ap.add_argument("--zn-flood", required=True)
     ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
+    ap.add_argument("--out", help="output directory (default reports/bench/capture-<run-id>)")
     args = ap.parse_args()
     results = []
     with tempfile.TemporaryDirectory(prefix="bench-capture-") as tmp:
@@ -187,7 +188,7 @@ def main() -> int:
     machine = f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
     md = "\n".join([table(results), "", *summary, "", machine])
     run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out = REPO / "reports" / "bench" / f"capture-{run_id}"
+    out = Path(args.out) if args.out else REPO / "reports" / "bench" / f"capture-{run_id}"
     out.mkdir(parents=True, exist_ok=True)
     (out / "capture.json").write_text(json.dumps({"results": results, "machine": machine}, indent=2) + "\n")
     (out / "capture.md").write_text(md + "\n")

@@ -434,3 +434,17 @@ def test_pycan_notifier_delivers_to_listeners(bus):
         bus.run(["cansend", "vcan0", frame])
     out, err = proc.communicate(timeout=WAIT_S)
     assert out.strip() == "True [257, 258, 259]", err
+
+
+def test_hub_busy_poll_option_keeps_order_and_refuses_bad_values(bus):
+    require_userspace(bus, "the hub's -s option")
+    bus.stop_hub()
+    bus.start_hub("-s", "200", "vcan0")
+    assert bus.hub.poll() is None
+    dump = start_candump(bus, "-L", "vcan0", count=3)
+    for frame in ("123#01", "124#02", "125#03"):
+        bus.run(["cansend", "vcan0", frame])
+    out, _ = stop(dump)
+    assert candump_frames(out) == ["vcan0 123#01", "vcan0 124#02", "vcan0 125#03"]
+    bad = bus.run([bus.tool("ucan-hub"), "-d", str(bus.workdir / "other"), "-s", "soon", "vcan0"], check=False)
+    assert bad.returncode == 2 and "-s 'soon' is not 0..1000000 microseconds" in bad.stderr

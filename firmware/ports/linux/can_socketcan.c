@@ -76,16 +76,25 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = control };
 	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
 
-	for (;;) {
-		int rc = poll(&pfd, 1, timeout_ms);
-		if (rc == 0)
-			return ESP_ERR_TIMEOUT;
-		if (rc < 0)
-			return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+	for (int polled = 0;;) {
+		/* read first, poll only when nothing is queued: under load a frame costs one syscall */
 		mh.msg_controllen = sizeof(control);
 		ssize_t n = recvmsg(can->fd, &mh, MSG_DONTWAIT);
-		if (n < 0)
-			return errno == EAGAIN || errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+		if (n < 0) {
+			if (errno != EAGAIN && errno != EINTR)
+				return ESP_FAIL;
+			if (polled)
+				return ESP_ERR_TIMEOUT;
+			int rc = poll(&pfd, 1, timeout_ms);
+			if (rc == 0)
+				return ESP_ERR_TIMEOUT;
+			if (rc < 0)
+				return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+			polled = 1;
+			continue;
+		}
+		if (n == 0)
+			return ESP_FAIL; /* end of file: not a CAN socket any more */
 		if (n != sizeof(frame) || (frame.can_id & CAN_ERR_FLAG))
 			continue; /* error frames and anything unexpected are not bridged */
 		*rx_time_ns = zn_realtime_ns();

@@ -5,8 +5,15 @@
 //!
 //!   zn-flood --connect tcp/127.0.0.1:7447 --key bench/flood --count 300000 --rate 100000
 //!
+//! The frame's 8 data bytes are the sequence number, or with --stamp-data the
+//! send time (ns since the epoch, strictly increasing) and there is no
+//! attachment (a valid command for the bridge's tx key): the stamp survives
+//! the trip through the bridge and the CAN bus, so every capture point reads
+//! the latency from the frame itself. --id sets the CAN id (hex, default 123),
+//! --mode client|peer the Zenoh mode (default client).
+//!
 //! Prints "<samples> samples in <seconds> s" on stdout when done.
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use zenoh::qos::CongestionControl;
 use zenoh::{Config, Wait};
@@ -15,16 +22,24 @@ use zenoh::{Config, Wait};
 const SLICE: Duration = Duration::from_millis(1);
 
 fn usage() -> ! {
-    eprintln!("usage: zn-flood --connect ENDPOINT --key KEY --count N [--rate SAMPLES_PER_S] [--block]");
+    eprintln!(
+        "usage: zn-flood --connect ENDPOINT --key KEY --count N [--rate SAMPLES_PER_S] [--block] [--stamp-data] \
+         [--id HEX] [--mode client|peer]"
+    );
     std::process::exit(2);
 }
 
 fn main() {
     let (mut connect, mut key, mut count, mut rate, mut block) = (String::new(), String::new(), 0u64, 0u64, false);
+    let (mut stamp_data, mut can_id, mut mode) = (false, 0x123u32, "client".to_string());
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         if flag == "--block" {
             block = true;
+            continue;
+        }
+        if flag == "--stamp-data" {
+            stamp_data = true;
             continue;
         }
         let value = it.next().unwrap_or_else(|| usage());
@@ -33,6 +48,8 @@ fn main() {
             "--key" => key = value,
             "--count" => count = value.parse().unwrap_or_else(|_| usage()),
             "--rate" => rate = value.parse().unwrap_or_else(|_| usage()),
+            "--id" => can_id = u32::from_str_radix(&value, 16).unwrap_or_else(|_| usage()),
+            "--mode" if value == "client" || value == "peer" => mode = value,
             _ => usage(),
         }
     }
@@ -40,7 +57,11 @@ fn main() {
         usage();
     }
     let mut config = Config::default();
-    config.insert_json5("mode", "\"client\"").unwrap();
+    config.insert_json5("mode", &format!("{mode:?}")).unwrap();
+    if mode == "peer" {
+        // a peer listens (other peers link to it directly); loopback only
+        config.insert_json5("listen/endpoints", "[\"tcp/127.0.0.1:0\"]").unwrap();
+    }
     config.insert_json5("scouting/multicast/enabled", "false").unwrap();
     config.insert_json5("connect/endpoints", &format!("[{connect:?}]")).unwrap();
     let session = zenoh::open(config).wait().unwrap_or_else(|e| {
@@ -58,16 +79,27 @@ fn main() {
     let per_slice = if rate == 0 { u64::MAX } else { (rate as f64 * SLICE.as_secs_f64()).ceil() as u64 };
     let start = Instant::now();
     let mut seq = 0u64;
+    let mut last_stamp = 0u64;
     let mut slice_end = start + SLICE;
     while seq < count {
         let mut in_slice = 0;
         while in_slice < per_slice && seq < count {
             // the bridge's wire format: id (LE u32), dlc, flags, 2 reserved, 8 data bytes
             let mut frame = [0u8; 16];
-            frame[0..4].copy_from_slice(&0x123u32.to_le_bytes());
+            frame[0..4].copy_from_slice(&can_id.to_le_bytes());
             frame[4] = 8;
-            frame[8..16].copy_from_slice(&seq.to_le_bytes());
-            if let Err(e) = publisher.put(frame.to_vec()).attachment(seq.to_le_bytes().to_vec()).wait() {
+            let data = if stamp_data {
+                let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+                last_stamp = now.max(last_stamp + 1);
+                last_stamp
+            } else {
+                seq
+            };
+            frame[8..16].copy_from_slice(&data.to_le_bytes());
+            let put = publisher.put(frame.to_vec());
+            // a stamped frame is its own identity, and a bare payload is a valid bridge command
+            let put = if stamp_data { put } else { put.attachment(seq.to_le_bytes().to_vec()) };
+            if let Err(e) = put.wait() {
                 eprintln!("zn-flood: put {seq}: {e}");
                 std::process::exit(1);
             }

@@ -320,7 +320,12 @@ esp_err_t zenoh_node_submit(size_t bus_index, const can_message_t *msg, int64_t 
 	e->msg = *msg;
 	e->rx_time_ns = rx_time_ns;
 	e->seq = seq;
-	zn_cond_signal(b->nonempty);
+	/* Wake the publisher only when it has something to do: it sleeps on an empty queue
+	 * (immediate mode) or until its period ends or a batch is full (batching mode).
+	 * A wakeup per frame would cost two context switches per frame for nothing. */
+	size_t wake_at = node.cfg.publish_period_ms ? node.cfg.batch_max_frames : 1;
+	if (b->len == wake_at)
+		zn_cond_signal(b->nonempty);
 	zn_mutex_unlock(b->lock);
 	return ESP_OK;
 }

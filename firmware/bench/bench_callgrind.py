@@ -1,0 +1,191 @@
+#!/usr/bin/env python3
+"""Instructions per frame of zenoh-node's C path (make bench-callgrind, part of
+make bench): a deterministic cost, unlike times on a shared machine.
+
+The release bridge runs under valgrind --tool=callgrind with the userspace hub,
+zenohd on loopback and zn-capture, three times for the same wall time: idle,
+FRAMES frames CAN -> Zenoh (can-load, one bus, paced), FRAMES commands
+Zenoh -> CAN (zn-flood). Per frame: callgrind's inclusive counts of the node's
+functions give each stage of the C path: CAN read (the port + the preload's
+message from the hub), the component's own code (queue, encode, batching),
+put (the Rust Zenoh port and the zenoh crate, on the calling thread), the
+command path; and the whole process minus the idle run gives everything a
+frame costs in user space, Zenoh's runtime threads included. Kernel
+instructions are not counted (callgrind sees user space only; bench-bridge
+reports the kernel's share of the CPU time).
+
+Writes callgrind.json and callgrind.md into --out; with --record appends one
+line per run to docs/callgrind-history.csv (commit, date, instructions per
+frame), so the cost is tracked across commits. Loopback only, bounded."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "firmware" / "bench"))
+sys.path.insert(0, str(REPO))
+from bench_bridge import free_port, stop  # noqa: E402
+from bench_paths import candump_stamps, zenoh_stamps  # noqa: E402
+
+from canbench.runkeys import open_session, wait_token  # noqa: E402
+
+FRAMES = 5000
+RATE = 1000  # frames/s: slow enough for the bridge under valgrind (about 50x slower) to keep up
+HISTORY = REPO / "docs" / "callgrind-history.csv"
+# stage -> (function whose inclusive count it is, per frame of which direction)
+STAGES = {
+    "can_read": ("zn_can_receive", "rx"),
+    "reader_loop": ("reader_thread", "rx"),
+    "put": ("zn_put", "rx"),
+    "publisher_loop": ("publisher_thread", "rx"),
+    "command": ("on_command", "tx"),
+    "can_write": ("zn_can_transmit", "tx"),
+}
+
+
+def inclusive_counts(callgrind_out: Path) -> dict[str, int]:
+    """Inclusive instruction counts per function name, from callgrind_annotate."""
+    text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(callgrind_out)],
+                          capture_output=True, text=True, check=True).stdout
+    counts: dict[str, int] = {}
+    for line in text.splitlines():
+        m = re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+(\S+):(\S+)", line)
+        if m:
+            name = m.group(3).split("'")[0]
+            counts[name] = counts.get(name, 0) + int(m.group(1).replace(",", ""))
+    return counts
+
+
+def program_total(callgrind_out: Path) -> int:
+    for line in callgrind_out.read_text().splitlines():
+        if line.startswith("totals:") or line.startswith("summary:"):
+            return int(line.split()[1])
+    raise ValueError(f"{callgrind_out}: no totals")
+
+
+def run(args, work: Path, rx_frames: int, tx_frames: int) -> tuple[dict[str, int], int]:
+    """One bridge under callgrind for FRAMES / RATE seconds of load (or idle): inclusive counts and total."""
+    build = Path(args.ucan_build)
+    env = dict(os.environ, UCAN_DIR=str(work), LD_PRELOAD=str(build / "libucan-preload.so"))
+    procs: list[subprocess.Popen] = []
+
+    def spawn(cmd, **kw) -> subprocess.Popen:
+        p = subprocess.Popen([str(c) for c in cmd], **kw)
+        procs.append(p)
+        return p
+    try:
+        spawn([build / "ucan-hub", "-d", work, "vcan0"], stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10
+        while not (work / "hub.sock").exists() and time.monotonic() < deadline:
+            time.sleep(0.01)  # the hub's socket file is its readiness
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        spawn([args.zenohd, "--no-multicast-scouting", "-l", endpoint], stdout=subprocess.DEVNULL,
+              stderr=subprocess.DEVNULL)
+        session = open_session(endpoint)
+        zn_out, can_out = work / "zenoh.tsv", work / "can.log"
+        capture = spawn([args.zn_capture, "--connect", endpoint, "--key", "vehicle/can/rx", "--ready-token",
+                         "bench/capture", "--out", zn_out], stdin=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        wait_token(session, "bench/capture", 20)
+        candump = spawn(["candump", "-L", "vcan0"], env=env, stdout=open(can_out, "w"), stderr=subprocess.DEVNULL)
+        out = work / "callgrind.out"
+        bridge = spawn(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", args.bridge,
+                        "--router", endpoint, "--can", "vcan0", "--publish-period-ms", "0"],
+                       env=env, stdout=open(work / "bridge.log", "w"), stderr=subprocess.STDOUT)
+        wait_token(session, "vehicle/can/bridges/**", 180)
+        t0 = time.monotonic()
+        if rx_frames:
+            spawn([args.can_load, "send", "vcan0", "100", RATE, rx_frames], env=env,
+                  stdout=subprocess.DEVNULL).wait()
+        if tx_frames:
+            spawn([args.zn_flood, "--connect", endpoint, "--key", "vehicle/can/tx", "--count", tx_frames,
+                   "--rate", RATE, "--stamp-data", "--id", "321"], stdout=subprocess.DEVNULL).wait()
+        end = time.monotonic() + 120
+        while time.monotonic() < end and (len(zenoh_stamps(zn_out, 0x100)) < rx_frames
+                                          or len(candump_stamps(can_out, 0x321)) < tx_frames):
+            time.sleep(0.2)  # the bridge under valgrind works off its backlog; bounded
+        rx, tx = len(zenoh_stamps(zn_out, 0x100)), len(candump_stamps(can_out, 0x321))
+        # the idle run lasts as long as a loaded one: Zenoh's timers cost the same in both
+        idle_left = FRAMES / RATE - (time.monotonic() - t0)
+        if idle_left > 0:
+            time.sleep(idle_left)  # a duration to measure, not a synchronisation
+        stop(bridge)
+        session.close()
+        if rx != rx_frames or tx != tx_frames:
+            sys.exit(f"bench-callgrind: the bridge forwarded {rx} of {rx_frames} frames to Zenoh and {tx} of "
+                     f"{tx_frames} commands to CAN:\n" + (work / "bridge.log").read_text()[-2000:])
+        stop(candump)
+        stop(capture, close_stdin=True)
+        return inclusive_counts(out), program_total(out)
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                stop(p)
+
+
+def measure(args) -> dict:
+    runs = {}
+    for name, rx, tx in (("idle", 0, 0), ("rx", FRAMES, 0), ("tx", 0, FRAMES)):
+        with tempfile.TemporaryDirectory(prefix="bench-callgrind-") as tmp:
+            runs[name] = run(args, Path(tmp), rx, tx)
+    per_frame = {}
+    for stage, (fn, direction) in STAGES.items():
+        counts = runs[direction][0]
+        if fn not in counts:
+            sys.exit(f"bench-callgrind: no callgrind count for {fn} (symbols stripped?)")
+        per_frame[stage] = round(counts[fn] / FRAMES)
+    per_frame["component_rx"] = per_frame["reader_loop"] - per_frame["can_read"] \
+        + per_frame["publisher_loop"] - per_frame["put"]
+    idle_total = runs["idle"][1]
+    per_frame["process_rx"] = round((runs["rx"][1] - idle_total) / FRAMES)
+    per_frame["process_tx"] = round((runs["tx"][1] - idle_total) / FRAMES)
+    return {"frames": FRAMES, "rate": RATE, "instructions_per_frame": per_frame}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
+    ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
+    ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
+    ap.add_argument("--zn-flood", required=True)
+    ap.add_argument("--can-load", required=True)
+    ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
+    ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
+    ap.add_argument("--record", action="store_true", help=f"append this run to {HISTORY.relative_to(REPO)}")
+    args = ap.parse_args()
+    run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
+    out.mkdir(parents=True, exist_ok=True)
+    result = measure(args)
+    commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True).stdout.strip() or "unknown"
+    result.update(run_id=run_id, commit=commit)
+    (out / "callgrind.json").write_text(json.dumps(result, indent=1))
+    ipf = result["instructions_per_frame"]
+    md = ["| stage | function (inclusive) | instructions per frame |", "|---|---|---|"]
+    md += [f"| {stage} | {fn} | {ipf[stage]} |" for stage, (fn, _) in STAGES.items()]
+    md.append(f"| component_rx | reader + publisher loops minus CAN read and put | {ipf['component_rx']} |")
+    md.append(f"| process_rx | whole process, CAN -> Zenoh run minus idle run | {ipf['process_rx']} |")
+    md.append(f"| process_tx | whole process, Zenoh -> CAN run minus idle run | {ipf['process_tx']} |")
+    text = f"callgrind {run_id} at {commit}: {FRAMES} frames each way at {RATE} frames/s\n\n" + "\n".join(md)
+    (out / "callgrind.md").write_text(text + "\n")
+    print(text)
+    if args.record:
+        new = not HISTORY.exists()
+        with open(HISTORY, "a") as f:
+            if new:
+                f.write("run_id,commit," + ",".join(ipf) + "\n")
+            f.write(f"{run_id},{commit}," + ",".join(str(v) for v in ipf.values()) + "\n")
+        print(f"appended to {HISTORY.relative_to(REPO)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,383 @@
+#!/usr/bin/env python3
+"""Path benchmark (make bench-paths, part of make bench): latency and
+throughput of every path through zenoh-node, next to the paths without it,
+in one run on one machine (docs/benchmark.md).
+
+Every load frame carries its send time in its 8 data bytes (can-load and
+zn-flood --stamp-data), so each capture point (zn-capture's receive stamp,
+candump's SO_TIMESTAMP) gives a latency per frame and loss is counted by stamp.
+
+- Latency p50/p90/p99/max at 10, 50 and 90 % of one 1 Mbit/s bus (900, 4500,
+  8100 frames/s), LATENCY_S each, per bridge mode (client via zenohd, peer
+  with a direct link, bridge as router) and path: CAN -> Zenoh, Zenoh -> CAN,
+  round trip (Zenoh -> bridge -> CAN -> echo ECU -> CAN -> bridge -> Zenoh);
+  CAN -> Zenoh also in batching mode (--publish-period-ms BATCH_MS).
+  Side by side: the bus alone (can-load -> hub -> candump), raw Zenoh
+  (zn-flood -> zenohd -> zn-capture, the floor) and the Python reference
+  bridge (client mode). Bridge CPU % and peak RSS at each level.
+- Zenoh -> CAN and round-trip throughput: offered 9k, 18k, 36k, ... frames/s
+  (one bus) until frames are lost; the highest lossless rate per system.
+
+Writes paths.json, paths.md, latency_cdf.png and throughput.png into --out.
+Loopback only; every load is bounded in frames and time."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "firmware" / "bench"))
+sys.path.insert(0, str(REPO))
+from bench_bridge import cpu_s, free_port, rss_mib, stop  # noqa: E402
+
+from canbench.runkeys import open_session, wait_token  # noqa: E402
+
+BUS_FPS = 9000  # one saturated 1 Mbit/s bus of 8-byte frames
+LOADS = {"10%": 900, "50%": 4500, "90%": 8100}
+LATENCY_S = 2.0
+MODES = ("client", "peer", "router")
+THROUGHPUT_RATES = (9000, 18000, 36000, 72000, 144000)
+THROUGHPUT_S = 1.0
+SETTLE_S = 5.0
+CAN_TO_ZENOH_ID, COMMAND_ID, ECHO_ID = 0x100, 0x321, 0x322
+BATCH_MS = 10  # zenoh-node's batching mode: one sample per bus every 10 ms
+
+
+def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]:
+    """(send stamp, receive ns) per frame in a zn-capture TSV (batched samples hold several frames)."""
+    out = []
+    if not path.exists():
+        return out
+    for line in open(path):
+        parts = line.rstrip("\n").split("\t")
+        if len(parts) != 4:
+            continue
+        recv, payload = int(parts[0]), bytes.fromhex(parts[2])
+        for i in range(0, len(payload) - 15, 16):
+            frame = payload[i:i + 16]
+            if can_id is None or int.from_bytes(frame[0:4], "little") & 0x1FFFFFFF == can_id:
+                out.append((int.from_bytes(frame[8:16], "little"), recv))
+    return out
+
+
+def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
+    """(send stamp, bus receive ns) per frame with can_id in a candump -L log."""
+    out = []
+    if not path.exists():
+        return out
+    want = f"{can_id:03X}#"
+    for line in open(path):
+        parts = line.split()
+        if len(parts) == 3 and parts[2].startswith(want):
+            sec, usec = parts[0].strip("()").split(".")
+            data = bytes.fromhex(parts[2].split("#", 1)[1])
+            if len(data) == 8:
+                out.append((int.from_bytes(data, "little"), int(sec) * 1_000_000_000 + int(usec) * 1000))
+    return out
+
+
+def latency_summary(stamps: list[tuple[int, int]], sent: int) -> dict:
+    lat = sorted((recv - sent_ns) / 1000 for sent_ns, recv in stamps)
+    unique = len({s for s, _ in stamps})
+    result = {"sent": sent, "received": unique, "duplicates": len(stamps) - unique, "lost": sent - unique}
+    if lat:
+        q = statistics.quantiles(lat, n=100, method="inclusive") if len(lat) > 1 else [lat[0]] * 99
+        result.update(p50_us=round(q[49], 1), p90_us=round(q[89], 1), p99_us=round(q[98], 1),
+                      max_us=round(lat[-1], 1))
+        # the CDF, thinned to at most 200 points for the plot
+        step = max(1, len(lat) // 200)
+        result["cdf_us"] = [round(v, 1) for v in lat[::step]]
+    return result
+
+
+class Rig:
+    """A private hub, optionally zenohd, optionally a bridge; the processes of one measurement."""
+
+    def __init__(self, args, workdir: Path):
+        self.args, self.workdir = args, workdir
+        build = Path(args.ucan_build)
+        self.hub_bin = build / "ucan-hub"
+        self.env = dict(os.environ, UCAN_DIR=str(workdir), LD_PRELOAD=str(build / "libucan-preload.so"))
+        self.procs: list[subprocess.Popen] = []
+        self.bridge: subprocess.Popen | None = None
+        self.endpoint = ""
+
+    def spawn(self, cmd, **kw) -> subprocess.Popen:
+        p = subprocess.Popen([str(c) for c in cmd], **kw)
+        self.procs.append(p)
+        return p
+
+    def start(self, bridge: str | None, mode: str = "client") -> None:
+        self.spawn([self.hub_bin, "-d", self.workdir, "vcan0"], stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 10
+        while not (self.workdir / "hub.sock").exists() and time.monotonic() < deadline:
+            time.sleep(0.01)  # the hub's socket file is its readiness
+        router = f"tcp/127.0.0.1:{free_port()}"
+        if mode != "router":
+            self.spawn([self.args.zenohd, "--no-multicast-scouting", "-l", router],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.endpoint = router
+        if bridge is None:
+            return
+        log = open(self.workdir / "bridge.log", "w")
+        if bridge == "python-ref":
+            cmd = [sys.executable, "-m", "canbench.refbridge", "--router", router, "--can", "vcan0"]
+        else:
+            period = bridge.removeprefix("zenoh-node").removeprefix("-batch") or "0"
+            cmd = [self.args.bridge, "--mode", mode, "--can", "vcan0", "--publish-period-ms", period]
+            if mode == "client":
+                cmd += ["--router", router]
+            else:  # peer and router: the captures and loads link to the bridge itself
+                listen = f"tcp/127.0.0.1:{free_port()}"
+                cmd += ["--listen", listen] + (["--router", router] if mode == "peer" else [])
+                self.endpoint = listen
+        self.bridge = self.spawn(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
+        with self.session() as s:
+            try:
+                wait_token(s, "vehicle/can/bridges/**", 30)
+            except TimeoutError:
+                sys.exit(f"{bridge} ({mode}) did not come up:\n" + (self.workdir / "bridge.log").read_text()[-2000:])
+
+    @contextmanager
+    def session(self):
+        s = open_session(self.endpoint)
+        try:
+            yield s
+        finally:
+            s.close()
+
+    def zn_capture(self, key: str, out: Path) -> subprocess.Popen:
+        token = f"bench/capture/{out.stem}"
+        p = self.spawn([self.args.zn_capture, "--connect", self.endpoint, "--key", key, "--ready-token", token,
+                        "--out", out], stdin=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        with self.session() as s:
+            wait_token(s, token, 20)
+        return p
+
+    def candump(self, out: Path) -> subprocess.Popen:
+        p = self.spawn(["candump", "-L", "-r", str(64 << 20), "vcan0"], env=self.env, stdout=open(out, "w"),
+                       stderr=subprocess.DEVNULL)
+        # candump has no readiness signal: a probe frame seen in its log says it is reading
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            subprocess.run(["cansend", "vcan0", "7FF#"], env=self.env, check=True)
+            if out.stat().st_size:
+                return p
+            time.sleep(0.05)  # bounded retry of the probe
+        raise TimeoutError("candump did not start reading")
+
+    def can_load(self, *args) -> subprocess.Popen:
+        return self.spawn([self.args.can_load, *map(str, args)], env=self.env, stdout=subprocess.PIPE)
+
+    def zn_flood(self, key: str, rate: int, count: int, can_id: int) -> subprocess.Popen:
+        return self.spawn([self.args.zn_flood, "--connect", self.endpoint, "--key", key, "--count", count,
+                           "--rate", rate, "--stamp-data", "--id", f"{can_id:X}"], stdout=subprocess.PIPE)
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            if p.poll() is None:
+                stop(p, close_stdin=p.stdin is not None)
+
+
+def wait_for(count_fn, expected: int) -> None:
+    """Until expected frames arrived, or nothing more arrived for a second (bounded by SETTLE_S)."""
+    end, last, last_change = time.monotonic() + SETTLE_S, -1, time.monotonic()
+    while time.monotonic() < end:
+        n = count_fn()
+        if n >= expected:
+            return
+        if n != last:
+            last, last_change = n, time.monotonic()
+        elif time.monotonic() - last_change > 1.0:
+            return
+        time.sleep(0.05)  # polling a capture file, bounded
+
+
+def measure(args, path: str, system: str | None, mode: str, rate: int, seconds: float) -> dict:
+    """One load of one path: returns the latency summary plus the bridge's CPU % and peak RSS."""
+    count = int(rate * seconds)
+    with tempfile.TemporaryDirectory(prefix="bench-paths-") as tmp:
+        work = Path(tmp)
+        rig = Rig(args, work)
+        try:
+            rig.start(system, mode)
+            zn_out, can_out = work / "zenoh.tsv", work / "can.log"
+            if path == "bus":
+                rig.candump(can_out)
+                load = [rig.can_load("send", "vcan0", f"{CAN_TO_ZENOH_ID:X}", rate, count)]
+                collect = lambda: candump_stamps(can_out, CAN_TO_ZENOH_ID)  # noqa: E731
+            elif path == "zenoh":
+                rig.zn_capture("bench/floor", zn_out)
+                load = [rig.zn_flood("bench/floor", rate, count, CAN_TO_ZENOH_ID)]
+                collect = lambda: zenoh_stamps(zn_out)  # noqa: E731
+            elif path == "can-to-zenoh":
+                rig.zn_capture("vehicle/can/rx", zn_out)
+                load = [rig.can_load("send", "vcan0", f"{CAN_TO_ZENOH_ID:X}", rate, count)]
+                collect = lambda: zenoh_stamps(zn_out, CAN_TO_ZENOH_ID)  # noqa: E731
+            elif path == "zenoh-to-can":
+                rig.candump(can_out)
+                load = [rig.zn_flood("vehicle/can/tx", rate, count, COMMAND_ID)]
+                collect = lambda: candump_stamps(can_out, COMMAND_ID)  # noqa: E731
+            else:  # round trip through an echo ECU
+                rig.zn_capture("vehicle/can/rx", zn_out)
+                echo = rig.can_load("echo", "vcan0", f"{COMMAND_ID:X}", f"{ECHO_ID:X}", count, 3000)
+                load = [rig.zn_flood("vehicle/can/tx", rate, count, COMMAND_ID)]
+                collect = lambda: zenoh_stamps(zn_out, ECHO_ID)  # noqa: E731
+            pid = rig.bridge.pid if rig.bridge else None
+            cpu0, t0, peak_rss = (cpu_s(pid) if pid else 0.0), time.monotonic(), 0.0
+            while any(p.poll() is None for p in load):
+                if pid:
+                    peak_rss = max(peak_rss, rss_mib(pid))
+                time.sleep(0.05)  # sampling period of the RSS probe
+            for p in load:
+                if p.returncode != 0:
+                    raise RuntimeError(f"{path}: load exited {p.returncode}")
+            wait_for(lambda: len(collect()), count)
+            wall = time.monotonic() - t0
+            cpu = (cpu_s(pid) - cpu0) if pid else 0.0
+            if path == "round-trip":
+                stop(echo)
+        finally:
+            rig.close()
+        result = latency_summary(collect(), count)
+        result.update(path=path, system=system or path, mode=mode, rate=rate)
+        if pid:
+            result.update(bridge_cpu_pct=round(100 * cpu / wall, 1), peak_rss_mib=round(peak_rss, 1))
+        return result
+
+
+def throughput(args, path: str, system: str) -> list[dict]:
+    """Offered rates from THROUGHPUT_RATES until the first loss."""
+    results = []
+    for rate in THROUGHPUT_RATES:
+        r = measure(args, path, system, "client", rate, THROUGHPUT_S)
+        r.pop("cdf_us", None)
+        r["lossless"] = r["lost"] == 0 and r["duplicates"] == 0
+        print(json.dumps(r), flush=True)
+        results.append(r)
+        if not r["lossless"]:
+            break
+    return results
+
+
+def tables(latency: list[dict], rates: list[dict]) -> str:
+    rows = ["### Latency (µs; per path, mode and load of one 1 Mbit/s bus)", "",
+            "| path | system | mode | load | frames/s | p50 | p90 | p99 | max | lost | bridge CPU % | RSS MiB |",
+            "|" + "---|" * 12]
+    load_name = {v: k for k, v in LOADS.items()}
+    for r in latency:
+        rows.append(f"| {r['path']} | {r['system']} | {r['mode']} | {load_name.get(r['rate'], '')} | {r['rate']} | "
+                    f"{r.get('p50_us', '-')} | {r.get('p90_us', '-')} | {r.get('p99_us', '-')} | "
+                    f"{r.get('max_us', '-')} | {r['lost']} | {r.get('bridge_cpu_pct', '-')} | "
+                    f"{r.get('peak_rss_mib', '-')} |")
+    floor = {r["rate"]: r.get("p50_us") for r in latency if r["path"] == "zenoh"}
+    rows += ["", "Added over raw Zenoh (p50 of the bridge's path minus p50 of zn-flood -> zenohd -> zn-capture "
+             "at the same load, client mode):", ""]
+    for r in latency:
+        if r["mode"] == "client" and r["path"] == "can-to-zenoh" and floor.get(r["rate"]) is not None \
+                and r.get("p50_us") is not None:
+            rows.append(f"- {r['system']} at {r['rate']} frames/s: {r['p50_us'] - floor[r['rate']]:+.1f} µs")
+    rows += ["", "### Throughput (one bus, offered until frames are lost)", "",
+             "| path | system | offered frames/s | received | lossless |", "|---|---|---|---|---|"]
+    for r in rates:
+        rows.append(f"| {r['path']} | {r['system']} | {r['rate']} | {r['received']}/{r['sent']} | "
+                    f"{'yes' if r['lossless'] else 'no'} |")
+    best: dict[tuple[str, str], int] = {}
+    for r in rates:
+        if r["lossless"]:
+            key = (r["path"], r["system"])
+            best[key] = max(best.get(key, 0), r["rate"])
+    rows.append("")
+    for (path, system), rate in sorted(best.items()):
+        rows.append(f"- highest lossless {path}, {system}: {rate} frames/s")
+    return "\n".join(rows)
+
+
+def plots(latency: list[dict], rates: list[dict], out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    paths = [p for p in ("can-to-zenoh", "zenoh-to-can", "round-trip") if any(r["path"] == p for r in latency)]
+    fig, axes = plt.subplots(1, len(paths), figsize=(6 * len(paths), 4.5), squeeze=False)
+    for ax, path in zip(axes[0], paths, strict=True):
+        for r in latency:
+            if r.get("cdf_us") and (r["path"] == path or r["path"] in ("bus", "zenoh")) and r["rate"] == LOADS["50%"]:
+                cdf = r["cdf_us"]
+                ax.plot(cdf, [i / max(len(cdf) - 1, 1) for i in range(len(cdf))],
+                        label=f"{r['system']} ({r['mode']})" if r["path"] == path else r["path"] + " alone",
+                        linestyle="-" if r["path"] == path else ":")
+        ax.set_xscale("log")
+        ax.set_xlabel("latency (µs)")
+        ax.set_ylabel("fraction of frames")
+        ax.set_title(f"{path} at {LOADS['50%']} frames/s")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "latency_cdf.png", dpi=90)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for key in sorted({(r["path"], r["system"]) for r in rates}):
+        pts = [r for r in rates if (r["path"], r["system"]) == key]
+        ax.plot([r["rate"] for r in pts], [r["received"] / THROUGHPUT_S for r in pts], marker="o",
+                label=f"{key[0]}, {key[1]}")
+    top = max([r["rate"] for r in rates], default=1)
+    ax.plot([0, top], [0, top], color="grey", linestyle=":", label="offered")
+    ax.set_xlabel("offered frames/s")
+    ax.set_ylabel("delivered frames/s")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "throughput.png", dpi=90)
+    plt.close(fig)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
+    ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
+    ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
+    ap.add_argument("--zn-flood", required=True)
+    ap.add_argument("--can-load", required=True)
+    ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
+    ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
+    ap.add_argument("--quick", action="store_true", help="the 50 %% load and client mode only (a smoke run)")
+    args = ap.parse_args()
+    run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
+    out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
+    out.mkdir(parents=True, exist_ok=True)
+    loads = {"50%": LOADS["50%"]} if args.quick else LOADS
+    modes = ("client",) if args.quick else MODES
+    plan: list[tuple[str, str | None, str]] = [("bus", None, "client"), ("zenoh", None, "client")]
+    plan += [(p, "zenoh-node", m) for m in modes for p in ("can-to-zenoh", "zenoh-to-can", "round-trip")]
+    plan += [("can-to-zenoh", f"zenoh-node-batch{BATCH_MS}", "client")]
+    plan += [(p, "python-ref", "client") for p in ("can-to-zenoh", "zenoh-to-can", "round-trip")]
+    latency = []
+    for path, system, mode in plan:
+        for rate in loads.values():
+            r = measure(args, path, system, mode, rate, LATENCY_S)
+            print(json.dumps({k: v for k, v in r.items() if k != "cdf_us"}), flush=True)
+            latency.append(r)
+    rates = []
+    for system in ("zenoh-node", "python-ref"):
+        for path in ("zenoh-to-can", "round-trip"):
+            rates += throughput(args, path, system)
+    machine = f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
+    (out / "paths.json").write_text(json.dumps({"run_id": run_id, "machine": machine, "latency": latency,
+                                                "throughput": rates}, indent=1))
+    md = tables(latency, rates)
+    (out / "paths.md").write_text(f"Path benchmark {run_id} on {machine}\n\n{md}\n")
+    plots(latency, rates, out)
+    print(md)
+    print(f"written: {out}/paths.json, paths.md, latency_cdf.png, throughput.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
