@@ -26,7 +26,7 @@ BENCH_BASE     := canbench/base:bookworm
 COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 BENCH_CAN_MODE ?= $(shell scripts/detect-can)
 BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
-IMAGE_SOURCES  := images ucan firmware ':!firmware/bench' ':!ucan/bench' canbench tests/scenarios tests/data pyproject.toml .dockerignore
+IMAGE_SOURCES  := images ucan firmware ':!firmware/bench/*.py' ':!ucan/bench' canbench tests/scenarios tests/data pyproject.toml .dockerignore
 # content hash of everything the images are built from: unchanged sources, no rebuild.
 # Computed once per make run (:=), so the images built and the images tested are the same
 # even if a file changes meanwhile.
@@ -39,7 +39,7 @@ ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind zn-flood test clean preflight base images \
+        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -153,7 +153,7 @@ check: check-python check-ucan check-firmware check-bus check-kernel check-bridg
 	@echo "make check: all project tests passed"
 
 bench-bus: ucan
-	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD)
+	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD) --out $(BENCH_OUT)
 
 # zenoh-node against the Python reference bridge, same run, same bus/router/capture
 # (README's performance table is generated from it: BENCH_README=1).
@@ -183,8 +183,18 @@ bench-paths: ucan firmware zenohd zn-flood
 bench-callgrind: ucan firmware zenohd zn-flood
 	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_callgrind.py $(BENCH_TOOLS) $(if $(BENCH_RECORD),--record)
 
-# Benchmarks for nightly runs, never part of check (docs/userspace-bus.md, docs/benchmark.md).
-bench: bench-bus bench-bridge bench-capture bench-paths bench-callgrind
+# Benchmarks for nightly runs, never part of check (docs/benchmark.md, docs/userspace-bus.md):
+# in compose, with the binaries of the images `make test` runs (compose.bench.yaml, no network);
+# BENCHMARKS= picks some of them. bench-host runs the same scripts with the host's builds.
+BENCHMARKS ?= bus bridge capture paths callgrind
+bench: images
+	@scripts/build-images $(BENCH_TAG) $(BENCH_BASE) bench
+	@mkdir -p $(BENCH_OUT)
+	BENCH_UID=$$(id -u) BENCH_GID=$$(id -g) BENCH_COMMIT=$$(git rev-parse --short HEAD) $(COMPOSE) -f compose.bench.yaml -p canbench-bench run --rm \
+	  bench run-bench /repo/$(BENCH_OUT) $(BENCHMARKS)
+	@echo "make bench: results in $(BENCH_OUT)"
+
+bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }

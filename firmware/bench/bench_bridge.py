@@ -168,7 +168,13 @@ class Bench:
             stop(p, close_stdin=p is capture)
         session.close()
         received = count_frames(capture_file)
+        # sustained rate: first send (can-load stamps its frames) to last receive, so a backlog worked off
+        # after the load counts at the rate it was really carried
+        from bench_paths import zenoh_stamps  # bench_paths imports this module: import when used
+        stamps = zenoh_stamps(capture_file)
+        span_s = (max(r for _, r in stamps) - min(t for t, _ in stamps)) / 1e9 if stamps else 0
         return {"system": system, "buses": buses, "offered": offered,
+                "delivered_fps": round(len(stamps) / span_s) if span_s > 0 else None,
                 "offered_fps": round(offered / sent["seconds"]), "instances": len(bridges),
                 "received": received, "lossless": received == offered,
                 "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2),
@@ -181,14 +187,15 @@ class Bench:
 
 
 def table(results: list[dict]) -> str:
-    rows = ["| system | buses | instances | offered frames/s | received | lossless | CPU µs/frame | of it in the "
-            "kernel | RSS MiB |", "|" + "---|" * 9]
+    rows = ["| system | buses | instances | offered frames/s | received | lossless | delivered frames/s | "
+            "CPU µs/frame | of it in the kernel | RSS MiB |", "|" + "---|" * 10]
     for r in sorted(results, key=lambda r: (SYSTEMS.index(r["system"]), r["buses"])):
         rows.append(f"| {r['system']} | {r['buses']} | {r['instances']} | {r['offered_fps']} | "
-                    f"{r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | "
+                    f"{r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | {r['delivered_fps']} | "
                     f"{r['cpu_us_per_frame']} | {r['kernel_share']} | {r['peak_rss_mib']} |")
-    best = {s: max([r["offered_fps"] for r in results if r["system"] == s and r["lossless"]], default=0)
-            for s in SYSTEMS}
+    # a load counts as carried only as far as it was sustained (not a backlog worked off afterwards)
+    best = {s: max([min(r["offered_fps"], r["delivered_fps"] or 0) for r in results
+                    if r["system"] == s and r["lossless"]], default=0) for s in SYSTEMS}
     by = {(r["system"], r["buses"]): r for r in results}
     ref = "python-ref"
     rows += ["", "| | " + " | ".join(SYSTEMS) + " | target |", "|---|" + "---|" * (len(SYSTEMS) + 1),
@@ -216,11 +223,11 @@ def plot(results: list[dict], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     for s in SYSTEMS:
         pts = sorted((r for r in results if r["system"] == s), key=lambda r: r["buses"])
-        ax.plot([r["offered_fps"] for r in pts], [r["received"] / LOAD_S for r in pts], marker="o", label=s)
+        ax.plot([r["offered_fps"] for r in pts], [r["delivered_fps"] or 0 for r in pts], marker="o", label=s)
     top = max((r["offered_fps"] for r in results), default=1)
     ax.plot([0, top], [0, top], color="grey", linestyle=":", label="offered")
     ax.set_xlabel("offered CAN frames/s (9000 per bus)")
-    ax.set_ylabel("frames/s delivered on Zenoh")
+    ax.set_ylabel("frames/s delivered on Zenoh (first send to last receive)")
     ax.set_title("CAN -> Zenoh throughput")
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -40,27 +40,36 @@ from canbench.runkeys import open_session, wait_token  # noqa: E402
 FRAMES = 5000
 RATE = 1000  # frames/s: slow enough for the bridge under valgrind (about 50x slower) to keep up
 HISTORY = REPO / "docs" / "callgrind-history.csv"
-# stage -> (function whose inclusive count it is, per frame of which direction)
+# stage -> (function whose inclusive count it is, the run it is divided over)
 STAGES = {
     "can_read": ("zn_can_receive", "rx"),
-    "reader_loop": ("reader_thread", "rx"),
     "put": ("zn_put", "rx"),
-    "publisher_loop": ("publisher_thread", "rx"),
     "command": ("on_command", "tx"),
     "can_write": ("zn_can_transmit", "tx"),
 }
+# the component's own code: self counts of the functions in these files (inlined code stays in its file)
+COMPONENT_FILES = ("zenoh_node.c", "zenoh_serialize.c")
 
 
-def inclusive_counts(callgrind_out: Path) -> dict[str, int]:
-    """Inclusive instruction counts per function name, from callgrind_annotate."""
-    text = subprocess.run(["callgrind_annotate", "--inclusive=yes", "--threshold=100", str(callgrind_out)],
-                          capture_output=True, text=True, check=True).stdout
-    counts: dict[str, int] = {}
+def annotate(callgrind_out: Path, inclusive: bool) -> list[tuple[int, str, str]]:
+    """(count, file, function) per function, from callgrind_annotate."""
+    text = subprocess.run(["callgrind_annotate", f"--inclusive={'yes' if inclusive else 'no'}", "--threshold=100",
+                           str(callgrind_out)], capture_output=True, text=True, check=True).stdout
+    rows = []
     for line in text.splitlines():
         m = re.match(r"\s*([\d,]+)\s+\([^)]*\)\s+(\S+):(\S+)", line)
         if m:
-            name = m.group(3).split("'")[0]
-            counts[name] = counts.get(name, 0) + int(m.group(1).replace(",", ""))
+            rows.append((int(m.group(1).replace(",", "")), m.group(2), m.group(3).split("'")[0]))
+    return rows
+
+
+def counts_of(callgrind_out: Path) -> dict[str, int]:
+    """Inclusive count per function name, plus "<component>": self counts of the component's files."""
+    counts: dict[str, int] = {}
+    for n, _, fn in annotate(callgrind_out, inclusive=True):
+        counts[fn] = counts.get(fn, 0) + n
+    counts["<component>"] = sum(n for n, file, _ in annotate(callgrind_out, inclusive=False)
+                                if file.endswith(COMPONENT_FILES))
     return counts
 
 
@@ -123,7 +132,7 @@ def run(args, work: Path, rx_frames: int, tx_frames: int) -> tuple[dict[str, int
                      f"{tx_frames} commands to CAN:\n" + (work / "bridge.log").read_text()[-2000:])
         stop(candump)
         stop(capture, close_stdin=True)
-        return inclusive_counts(out), program_total(out)
+        return counts_of(out), program_total(out)
     finally:
         for p in reversed(procs):
             if p.poll() is None:
@@ -141,12 +150,22 @@ def measure(args) -> dict:
         if fn not in counts:
             sys.exit(f"bench-callgrind: no callgrind count for {fn} (symbols stripped?)")
         per_frame[stage] = round(counts[fn] / FRAMES)
-    per_frame["component_rx"] = per_frame["reader_loop"] - per_frame["can_read"] \
-        + per_frame["publisher_loop"] - per_frame["put"]
+    if not runs["rx"][0]["<component>"]:
+        sys.exit(f"bench-callgrind: no instructions attributed to {COMPONENT_FILES}: {args.bridge} lacks debug info")
+    per_frame["component_rx"] = round(runs["rx"][0]["<component>"] / FRAMES)
+    per_frame["component_tx"] = round(runs["tx"][0]["<component>"] / FRAMES)
     idle_total = runs["idle"][1]
     per_frame["process_rx"] = round((runs["rx"][1] - idle_total) / FRAMES)
     per_frame["process_tx"] = round((runs["tx"][1] - idle_total) / FRAMES)
     return {"frames": FRAMES, "rate": RATE, "instructions_per_frame": per_frame}
+
+
+def git_commit() -> str:
+    try:
+        return subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True).stdout.strip() or "unknown"
+    except FileNotFoundError:  # no git (the bench container): make passes BENCH_COMMIT
+        return "unknown"
 
 
 def main() -> int:
@@ -164,14 +183,14 @@ def main() -> int:
     out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
     out.mkdir(parents=True, exist_ok=True)
     result = measure(args)
-    commit = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip() or "unknown"
+    commit = os.environ.get("BENCH_COMMIT") or git_commit()
     result.update(run_id=run_id, commit=commit)
     (out / "callgrind.json").write_text(json.dumps(result, indent=1))
     ipf = result["instructions_per_frame"]
     md = ["| stage | function (inclusive) | instructions per frame |", "|---|---|---|"]
     md += [f"| {stage} | {fn} | {ipf[stage]} |" for stage, (fn, _) in STAGES.items()]
-    md.append(f"| component_rx | reader + publisher loops minus CAN read and put | {ipf['component_rx']} |")
+    md.append(f"| component_rx | self: {', '.join(COMPONENT_FILES)} in the CAN -> Zenoh run | {ipf['component_rx']} |")
+    md.append(f"| component_tx | self: {', '.join(COMPONENT_FILES)} in the Zenoh -> CAN run | {ipf['component_tx']} |")
     md.append(f"| process_rx | whole process, CAN -> Zenoh run minus idle run | {ipf['process_rx']} |")
     md.append(f"| process_tx | whole process, Zenoh -> CAN run minus idle run | {ipf['process_tx']} |")
     text = f"callgrind {run_id} at {commit}: {FRAMES} frames each way at {RATE} frames/s\n\n" + "\n".join(md)

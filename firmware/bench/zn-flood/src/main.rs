@@ -18,7 +18,8 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use zenoh::qos::CongestionControl;
 use zenoh::{Config, Wait};
 
-/// Paces in slices this long: sleeping per sample would cap the rate at the timer's resolution.
+/// Paces by "send what is due, then sleep at most this long": a sleep per sample would cap
+/// the rate at the timer's resolution.
 const SLICE: Duration = Duration::from_millis(1);
 
 fn usage() -> ! {
@@ -76,14 +77,13 @@ fn main() {
             eprintln!("zn-flood: cannot declare a publisher on {key}: {e}");
             std::process::exit(1)
         });
-    let per_slice = if rate == 0 { u64::MAX } else { (rate as f64 * SLICE.as_secs_f64()).ceil() as u64 };
     let start = Instant::now();
     let mut seq = 0u64;
     let mut last_stamp = 0u64;
-    let mut slice_end = start + SLICE;
     while seq < count {
-        let mut in_slice = 0;
-        while in_slice < per_slice && seq < count {
+        // send what is due by now (everything when unpaced), then sleep a slice
+        let due = if rate == 0 { count } else { (start.elapsed().as_secs_f64() * rate as f64) as u64 + 1 };
+        while seq < due.min(count) {
             // the bridge's wire format: id (LE u32), dlc, flags, 2 reserved, 8 data bytes
             let mut frame = [0u8; 16];
             frame[0..4].copy_from_slice(&can_id.to_le_bytes());
@@ -104,14 +104,9 @@ fn main() {
                 std::process::exit(1);
             }
             seq += 1;
-            in_slice += 1;
         }
-        if rate != 0 {
-            let now = Instant::now();
-            if slice_end > now {
-                std::thread::sleep(slice_end - now);
-            }
-            slice_end += SLICE;
+        if seq < count {
+            std::thread::sleep(SLICE.min(Duration::from_secs_f64(1.0 / rate as f64)));
         }
     }
     let elapsed = start.elapsed().as_secs_f64();
