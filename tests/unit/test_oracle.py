@@ -129,15 +129,18 @@ def test_round_trip_matches_answers_among_other_traffic():
 
 
 def test_loss_inside_a_fault_window_is_the_faults_loss_outside_is_the_bridges():
-    from canbench.oracle import FAULT_LEAD_NS, apply_fault_windows
-    sent = stream(50)  # one frame per ms
+    from canbench.oracle import FAULT_LEAD_NS, FAULT_SETTLE_NS, apply_fault_windows
+    sent = stream(2000)  # one frame per ms
     fault_start, fault_end = 20_000_000 + FAULT_LEAD_NS, 25_000_000 + FAULT_LEAD_NS
     shifted = [Observed(s.frame, s.t_ns + FAULT_LEAD_NS, s.index, line=s.line) for s in sent]
-    kept = [s for s in shifted if not 18 <= s.index < 27 and s.index != 40]  # 18..26 in the window, 40 not
+    # 18..26 in the window; 30 while the reconnection settles (3 ms after the first frame got through);
+    # 1100 well after that: the bridge's
+    late = 27 + FAULT_SETTLE_NS // 1_000_000 + 73
+    kept = [s for s in shifted if not 18 <= s.index < 27 and s.index not in (30, late)]
     c = compare(shifted, [Observed(s.frame, s.t_ns + 200_000, i, key="k", seq=i) for i, s in enumerate(kept)])
     apply_fault_windows(c, [(fault_start, fault_end)])
-    assert [o.index for o in c.lost] == [40]
-    assert [o.index for o in c.lost_in_faults] == list(range(18, 27))
+    assert [o.index for o in c.lost] == [late]
+    assert [o.index for o in c.lost_in_faults] == [*range(18, 27), 30]
     assert c.recovery_s == [0.002]  # frame 27: sent 2 ms after the end, received 0.2 ms later (ms resolution)
 
 
@@ -147,3 +150,26 @@ def test_no_frame_after_the_fault_is_no_recovery():
     c = compare(sent, received([s.frame for s in sent[:10]]))
     apply_fault_windows(c, [(10_000_000, 12_000_000)])
     assert c.recovery_s == [None] and c.lost  # everything after the fault stays lost
+
+
+def test_loss_of_repeated_contents_is_found_where_it_happened():
+    # a constant status frame every third frame (as real ECUs send), counters elsewhere: with
+    # "n-th copy matches n-th copy" every later status frame would shift onto its predecessor
+    # and the loss would be reported at the end of the run, outside any fault window
+    sent = [Observed(wire.Frame(0x200, 2, b"\x01\x02") if i % 3 == 0 else wire.Frame(0x100, 1, bytes([i % 256])),
+                     1_000_000 * i, i, line=i + 1) for i in range(600)]
+    window = range(100, 130)
+    arrived = [s for s in sent if s.index not in window]
+    c = compare(sent, [Observed(s.frame, s.t_ns + 200_000, i) for i, s in enumerate(arrived)])
+    assert [o.index for o in c.lost] == list(window)
+    assert not c.duplicates and not c.reordered and not c.corrupted
+    assert max(c.latency_ms) == pytest.approx(0.2)
+
+
+def test_a_late_copy_of_a_repeated_frame_is_still_reordering():
+    sent = [Observed(wire.Frame(0x200, 1, bytes([i % 4])), 1_000_000 * i, i, line=i + 1) for i in range(40)]
+    frames = [s.frame for s in sent]
+    frames[20], frames[21] = frames[21], frames[20]
+    c = compare(sent, received(frames))
+    assert [(a.index, b.index) for a, b in c.reordered] == [(20, 21)]
+    assert not c.lost and not c.duplicates
