@@ -33,7 +33,7 @@ static const struct option_spec specs[] = {
 	{ OPT_DENY, "deny-ids", "ZENOH_NODE_DENY_IDS", "RANGES", "never bridge these ids (deny wins over allow)" },
 	{ OPT_RX_PRIORITY, "rx-priority", "ZENOH_RX_PRIORITY", "1-7", "Zenoh priority of CAN -> Zenoh samples (default 5, data)" },
 	{ OPT_RX_CONGESTION, "rx-congestion", "ZENOH_RX_CONGESTION", "block|drop", "Zenoh congestion control of CAN -> Zenoh (default block)" },
-	{ OPT_RX_EXPRESS, "rx-express", "ZENOH_RX_EXPRESS", "0|1", "send CAN -> Zenoh samples without Zenoh batching (default 1)" },
+	{ OPT_RX_EXPRESS, "rx-express", "ZENOH_RX_EXPRESS", "0|1", "send CAN -> Zenoh samples without Zenoh batching (default 0)" },
 	{ OPT_RX_QUEUE, "rx-queue-frames", "ZENOH_RX_QUEUE_FRAMES", "N", "frames queued between CAN reader and publisher (default 65536)" },
 	{ OPT_ZENOH_CONFIG, "zenoh-config", "ZENOH_CONFIG", "FILE", "Zenoh JSON5 config applied first (TLS, auth)" },
 	{ OPT_COMPRESSION, "compression", "ZENOH_COMPRESSION", "0|1", "compress the Zenoh transport (default 0)" },
