@@ -255,8 +255,10 @@ def run(args) -> int:
         print(f"canbench view: {view_mcap(args.source, dbc)} messages from {args.source}")
         rr.disconnect()
         return 0
-    # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete
+    # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete; SIGINT explicitly too,
+    # because a viewer started from a background job inherits SIGINT ignored and would never stop
     signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGINT, _interrupt)
     session = open_session(args.zenoh_mode, args.zenoh_connect)
     viewer = Viewer(session, args.topic, args.auto_subscribe, dbc)
     viewer.start()
