@@ -155,10 +155,10 @@ check: check-python check-ucan check-firmware check-bus check-kernel check-bridg
 bench-bus: ucan
 	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD) --out $(BENCH_OUT)
 
-# zenoh-node against the Python reference bridge, same run, same bus/router/capture
+# zenoh-node against the Python reference bridge both ways, same run, same bus/router/capture
 # (README's performance table is generated from it: BENCH_README=1).
-bench-bridge: ucan firmware zenohd
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py --can-load $(CAN_LOAD) --out $(BENCH_OUT) $(if $(BENCH_README),--update-readme)
+bench-bridge: ucan firmware zenohd zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py $(BENCH_TOOLS) $(if $(BENCH_README),--update-readme)
 
 # The bench's captures at >= 100k frames/s: zn-flood (a paced Rust publisher, same zenoh and
 # target dir as the port, so only its own crate compiles) into zn-capture; cangen into candump -L.

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Bridge benchmark (make bench-bridge): CAN -> Zenoh forwarding of zenoh-node
-next to the Python reference bridge (canbench/refbridge.py: python-can +
+"""Bridge benchmark (make bench-bridge): CAN -> Zenoh and Zenoh -> CAN
+forwarding of zenoh-node next to the Python reference bridge (canbench/refbridge.py: python-can +
 eclipse-zenoh, what a user writes first), in the same run, on the same
 machine, same bus (the userspace hub), router (zenohd on loopback) and capture
 (zn-capture).
@@ -12,15 +12,23 @@ first one with loss. A zenoh-node instance bridges at most ZN_MAX_BUSES = 8
 buses, so more buses run several instances (each its own name and keys), as a
 vehicle computer with more buses would. Systems: zenoh-node in immediate mode
 (one put per frame) and in batching mode (--publish-period-ms BATCH_MS), the
-Python reference. Per system and load: frames offered, received on Zenoh,
-lossless or not, the bridges' CPU time per forwarded frame (utime + stime from
-/proc, all instances) and peak RSS (the largest instance).
+Python reference.
+
+Zenoh -> CAN, the same loads the other way: zn-flood publishes stamped
+commands on every bus's tx key (9000/s per bus, all keys interleaved, one
+Zenoh session) and one can-load reader counts them on all buses, checking
+that each bus's stamps only rise (no reordering, no duplicates). Systems:
+zenoh-node (its publish period batches only CAN -> Zenoh) and the reference.
+
+Per system, direction and load: frames offered, received, lossless or not,
+the bridges' CPU time per forwarded frame (utime + stime from /proc, all
+instances) and peak RSS (the largest instance).
 Ratios zenoh-node / reference are computed within the run; absolute numbers
 are only a record of this machine.
 
 Writes bench.json, bench.md (the table README's performance section is
-generated from) and throughput_can_to_zenoh.png. Loopback only; every load is
-bounded in frames and time."""
+generated from), throughput_can_to_zenoh.png and throughput_zenoh_to_can.png.
+Loopback only; every load is bounded in frames and time."""
 from __future__ import annotations
 
 import argparse
@@ -45,6 +53,8 @@ FRAMES_PER_S = 9000  # ~ one saturated 1 Mbit/s bus of 8-byte frames
 LOAD_S = 2.0
 BATCH_MS = 10
 SYSTEMS = ("zenoh-node", f"zenoh-node-batch{BATCH_MS}", "python-ref")
+ZENOH_TO_CAN_SYSTEMS = ("zenoh-node", "python-ref")  # the publish period batches CAN -> Zenoh only
+DIRECTIONS = ("can-to-zenoh", "zenoh-to-can")
 SETTLE_S = 10.0
 
 
@@ -92,7 +102,21 @@ def count_frames(path: Path) -> int:
     return sum(len(line.split("\t")[2]) // 32 for line in open(path) if line.count("\t") == 3)
 
 
+def bus_keys(prefix: str, group: list[str], direction: str) -> list[str]:
+    """A bridge's per-bus keys: <prefix>/rx|tx for one bus, <prefix>/<bus>/rx|tx for several (docs/bridge.md)."""
+    return [f"{prefix}/{direction}"] if len(group) == 1 else [f"{prefix}/{bus}/{direction}" for bus in group]
+
+
+def sustained_fps(frames: int, first_send_ns: int, last_receive_ns: int) -> int | None:
+    """Frames over first send to last receive: a backlog worked off after the load counts at the
+    rate it was really carried."""
+    span_s = (last_receive_ns - first_send_ns) / 1e9
+    return round(frames / span_s) if frames and span_s > 0 else None
+
+
 class Bench:
+    """One measurement: a fresh hub with the buses, zenohd, the bridge instances of one system."""
+
     def __init__(self, args, workdir: Path):
         self.args, self.workdir = args, workdir
         self.build = Path(args.ucan_build)
@@ -100,83 +124,119 @@ class Bench:
         self.procs: list[subprocess.Popen] = []
 
     def spawn(self, cmd, **kw) -> subprocess.Popen:
-        p = subprocess.Popen(cmd, **kw)
+        p = subprocess.Popen([str(c) for c in cmd], **kw)
         self.procs.append(p)
         return p
 
-    def run_one(self, system: str, buses: int) -> dict:
+    def bound_sockets(self) -> int:
+        """CAN sockets bound on the hub (its own count: readiness of a reader without a signal of its own)."""
+        out = subprocess.run([self.build / "ucanctl", "-d", self.workdir, "stats", "-j"], capture_output=True,
+                             text=True)
+        return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
+
+    def run_one(self, system: str, buses: int, direction: str = "can-to-zenoh") -> dict:
         names = [f"vcan{i}" for i in range(buses)]
-        hub = self.spawn([str(self.build / "ucan-hub"), "-d", str(self.workdir), *names],
-                         stderr=subprocess.DEVNULL)
+        self.spawn([self.build / "ucan-hub", "-d", self.workdir, *names], stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 10
         while not (self.workdir / "hub.sock").exists() and time.monotonic() < deadline:
             time.sleep(0.01)  # the hub's socket file is its readiness
-        port = free_port()
-        endpoint = f"tcp/127.0.0.1:{port}"
-        router = self.spawn([self.args.zenohd, "--no-multicast-scouting", "-l", endpoint],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.spawn([self.args.zenohd, "--no-multicast-scouting", "-l", endpoint],
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         session = open_session(endpoint)
         capture_file = self.workdir / f"{system}-{buses}.tsv"
-        capture = self.spawn([self.args.zn_capture, "--connect", endpoint, "--key", "vehicle/can/**",
-                              "--ready-token", "bench/capture", "--out", str(capture_file)], stdin=subprocess.PIPE,
-                             stderr=subprocess.DEVNULL)
-        wait_token(session, "bench/capture", 20)
+        if direction == "can-to-zenoh":
+            self.spawn([self.args.zn_capture, "--connect", endpoint, "--key", "vehicle/can/**",
+                                  "--ready-token", "bench/capture", "--out", capture_file], stdin=subprocess.PIPE,
+                                 stderr=subprocess.DEVNULL)
+            wait_token(session, "bench/capture", 20)
+        per_node = BUSES_PER_NODE if system.startswith("zenoh-node") else buses
+        groups = [names[k:k + per_node] for k in range(0, buses, per_node)]
         bridges = []
-        for k in range(0, buses, BUSES_PER_NODE if system.startswith("zenoh-node") else buses):
-            group = names[k:k + (BUSES_PER_NODE if system.startswith("zenoh-node") else buses)]
+        for k, group in enumerate(groups):
             if system.startswith("zenoh-node"):
                 period = system.removeprefix("zenoh-node").removeprefix("-batch") or "0"
                 cmd = [self.args.bridge, "--router", endpoint, "--can", ",".join(group), "--publish-period-ms",
-                       period, "--name", f"zenoh-node-{k // BUSES_PER_NODE}"]
+                       period, "--name", f"zenoh-node-{k}"]
             else:
                 cmd = [sys.executable, "-m", "canbench.refbridge", "--router", endpoint, "--can", ",".join(group)]
             log = open(self.workdir / f"{system}-{k}.log", "w")
             bridges.append(self.spawn(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO))
         try:
-            for group_start in range(0, buses, BUSES_PER_NODE if system.startswith("zenoh-node") else buses):
-                wait_token(session, f"vehicle/can/bridges/*/{names[group_start]}/**", 30)
+            for group in groups:
+                wait_token(session, f"vehicle/can/bridges/*/{group[0]}/**", 30)
         except TimeoutError:
             sys.exit(f"{system} with {buses} buses did not come up:\n"
                      + "".join(f.read_text()[-1000:] for f in self.workdir.glob(f"{system}-*.log")))
         per_bus = int(FRAMES_PER_S * LOAD_S)
+        offered = per_bus * buses
         sys0 = sum(cpu_split_s(b.pid)[1] for b in bridges)
         cpu0 = sum(cpu_s(b.pid) for b in bridges)
-        gen = subprocess.Popen([self.args.can_load, "send", ",".join(names), "100", str(FRAMES_PER_S),
-                                str(per_bus)], env=self.env, stdout=subprocess.PIPE, text=True)
         peak_rss = 0.0
-        while gen.poll() is None:
+
+        def sample_rss() -> None:
+            nonlocal peak_rss
             peak_rss = max([peak_rss] + [rss_mib(b.pid) for b in bridges])
-            time.sleep(0.05)  # sampling period of the RSS probe
-        sent = json.loads(gen.stdout.read())
-        offered = per_bus * buses
-        # wait until every frame arrived, or nothing more arrives for a second (bounded)
-        received, last_change, previous = 0, time.monotonic(), -1
-        end = time.monotonic() + SETTLE_S
-        while time.monotonic() < end:
-            received = count_frames(capture_file)
-            if received >= offered:
-                break
-            if received != previous:
-                previous, last_change = received, time.monotonic()
-            elif time.monotonic() - last_change > 1.0:
-                break
-            peak_rss = max([peak_rss] + [rss_mib(b.pid) for b in bridges])
-            time.sleep(0.1)  # polling the capture file, bounded
+
+        if direction == "can-to-zenoh":
+            gen = self.spawn([self.args.can_load, "send", ",".join(names), "100", FRAMES_PER_S, per_bus],
+                             env=self.env, stdout=subprocess.PIPE, text=True)
+            while gen.poll() is None:
+                sample_rss()
+                time.sleep(0.05)  # sampling period of the RSS probe
+            offered_fps = round(offered / json.loads(gen.stdout.read())["seconds"])
+            # wait until every frame arrived, or nothing more arrives for a second (bounded)
+            received, last_change, previous = 0, time.monotonic(), -1
+            end = time.monotonic() + SETTLE_S
+            while time.monotonic() < end:
+                received = count_frames(capture_file)
+                if received >= offered:
+                    break
+                if received != previous:
+                    previous, last_change = received, time.monotonic()
+                elif time.monotonic() - last_change > 1.0:
+                    break
+                sample_rss()
+                time.sleep(0.1)  # polling the capture file, bounded
+        else:  # Zenoh -> CAN: stamped commands on every bus's tx key, one counting reader on all buses
+            before = self.bound_sockets()
+            reader = self.spawn([self.args.can_load, "count", ",".join(names), offered, 1000], env=self.env,
+                                stdout=subprocess.PIPE, text=True)
+            deadline = time.monotonic() + 10
+            while self.bound_sockets() < before + buses and time.monotonic() < deadline:
+                time.sleep(0.01)  # polling the hub's own count of bound sockets, bounded
+            keys = [key for group in groups for key in bus_keys("vehicle/can", group, "tx")]
+            gen = self.spawn([self.args.zn_flood, "--connect", endpoint, "--key", ",".join(keys), "--count",
+                              per_bus, "--rate", FRAMES_PER_S, "--stamp-data", "--id", "200"],
+                             stdout=subprocess.PIPE, text=True)
+            while gen.poll() is None:
+                sample_rss()
+                time.sleep(0.05)  # sampling period of the RSS probe
+            if gen.returncode != 0:
+                sys.exit(f"zn-flood exited {gen.returncode}")
+            from bench_paths import load_rate  # bench_paths imports this module: import when used
+            offered_fps = load_rate(gen.stdout.read(), offered)
+            counted = json.loads(reader.communicate(timeout=SETTLE_S + 5)[0])  # stops after 1 s idle
         cpu = sum(cpu_s(b.pid) for b in bridges) - cpu0
         system_cpu = sum(cpu_split_s(b.pid)[1] for b in bridges) - sys0
-        for p in (*bridges, capture, router, hub):
-            stop(p, close_stdin=p is capture)
+        for p in self.procs:
+            if p.poll() is None:
+                stop(p, close_stdin=p.stdin is not None)
         session.close()
-        received = count_frames(capture_file)
-        # sustained rate: first send (can-load stamps its frames) to last receive, so a backlog worked off
-        # after the load counts at the rate it was really carried
-        from bench_paths import zenoh_stamps  # bench_paths imports this module: import when used
-        stamps = zenoh_stamps(capture_file)
-        span_s = (max(r for _, r in stamps) - min(t for t, _ in stamps)) / 1e9 if stamps else 0
-        return {"system": system, "buses": buses, "offered": offered,
-                "delivered_fps": round(len(stamps) / span_s) if span_s > 0 else None,
-                "offered_fps": round(offered / sent["seconds"]), "instances": len(bridges),
-                "received": received, "lossless": received == offered,
+        if direction == "can-to-zenoh":
+            from bench_paths import zenoh_stamps  # bench_paths imports this module: import when used
+            stamps = zenoh_stamps(capture_file)
+            received = count_frames(capture_file)
+            delivered = sustained_fps(len(stamps), min(t for t, _ in stamps), max(r for _, r in stamps)) \
+                if stamps else None
+            in_order = True  # ordering CAN -> Zenoh is the scenarios' business (the oracle)
+        else:
+            received = counted["frames"]
+            delivered = sustained_fps(received, counted["first_stamp_ns"], counted["last_recv_ns"])
+            in_order = counted["out_of_order"] == 0
+        return {"direction": direction, "system": system, "buses": buses, "offered": offered,
+                "delivered_fps": delivered, "offered_fps": offered_fps, "instances": len(bridges),
+                "received": received, "lossless": received == offered and in_order,
                 "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2),
                 "kernel_share": round(system_cpu / cpu, 2) if cpu else None, "peak_rss_mib": round(peak_rss, 1)}
 
@@ -186,95 +246,129 @@ class Bench:
                 p.kill()
 
 
+def best_lossless(results: list[dict], system: str) -> int:
+    """The highest rate a system carried losslessly, counted only as far as it was sustained
+    (a load worked off later as a backlog counts at the rate it was really carried)."""
+    return max([min(r["offered_fps"] or 0, r["delivered_fps"] or 0) for r in results
+                if r["system"] == system and r["lossless"]], default=0)
+
+
 def table(results: list[dict]) -> str:
-    rows = ["| system | buses | instances | offered frames/s | received | lossless | delivered frames/s | "
-            "CPU µs/frame | of it in the kernel | RSS MiB |", "|" + "---|" * 10]
-    for r in sorted(results, key=lambda r: (SYSTEMS.index(r["system"]), r["buses"])):
-        rows.append(f"| {r['system']} | {r['buses']} | {r['instances']} | {r['offered_fps']} | "
-                    f"{r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | {r['delivered_fps']} | "
-                    f"{r['cpu_us_per_frame']} | {r['kernel_share']} | {r['peak_rss_mib']} |")
-    # a load counts as carried only as far as it was sustained (not a backlog worked off afterwards)
-    best = {s: max([min(r["offered_fps"], r["delivered_fps"] or 0) for r in results
-                    if r["system"] == s and r["lossless"]], default=0) for s in SYSTEMS}
-    by = {(r["system"], r["buses"]): r for r in results}
+    rows = ["| direction | system | buses | instances | offered frames/s | received | lossless | delivered frames/s | "
+            "CPU µs/frame | of it in the kernel | RSS MiB |", "|" + "---|" * 11]
+    for r in sorted(results, key=lambda r: (DIRECTIONS.index(r.get("direction", DIRECTIONS[0])),
+                                            SYSTEMS.index(r["system"]), r["buses"])):
+        rows.append(f"| {r.get('direction', DIRECTIONS[0])} | {r['system']} | {r['buses']} | {r['instances']} | "
+                    f"{r['offered_fps']} | {r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | "
+                    f"{r['delivered_fps']} | {r['cpu_us_per_frame']} | {r['kernel_share']} | {r['peak_rss_mib']} |")
     ref = "python-ref"
-    rows += ["", "| | " + " | ".join(SYSTEMS) + " | target |", "|---|" + "---|" * (len(SYSTEMS) + 1),
-             "| highest lossless CAN -> Zenoh frames/s | " + " | ".join(str(best[s]) for s in SYSTEMS)
-             + " | >= 144000 |",
-             "| ... relative to the Python reference | "
-             + " | ".join(f"{best[s] / best[ref]:.1f}x" if best[ref] else "-" for s in SYSTEMS) + " | >= 3x |"]
-    ratios = []
-    for s in SYSTEMS:
-        common = [(by[(s, n)]["cpu_us_per_frame"], by[(ref, n)]["cpu_us_per_frame"]) for (sys_, n) in by
-                  if sys_ == s and (ref, n) in by and by[(s, n)]["lossless"] and by[(ref, n)]["lossless"]]
-        ratios.append(f"{statistics.median(a / b for a, b in common):.2f}" if common else "-")
-    rows.append("| CPU time per frame relative to the reference (median over loads both forward losslessly) | "
-                + " | ".join(ratios) + " | <= 0.1 |")
-    rows.append("| peak RSS MiB (any load) | " + " | ".join(
-        str(max([r["peak_rss_mib"] for r in results if r["system"] == s], default=0)) for s in SYSTEMS)
-        + " | <= 32 |")
+    for direction in DIRECTIONS:
+        runs = [r for r in results if r.get("direction", DIRECTIONS[0]) == direction]
+        if not runs:
+            continue
+        systems = [s for s in SYSTEMS if any(r["system"] == s for r in runs)]
+        best = {s: best_lossless(runs, s) for s in systems}
+        by = {(r["system"], r["buses"]): r for r in runs}
+        target = " | >= 144000 |" if direction == "can-to-zenoh" else " | |"
+        rows += ["", f"| {direction} | " + " | ".join(systems) + " | target |",
+                 "|---|" + "---|" * (len(systems) + 1),
+                 "| highest lossless frames/s | " + " | ".join(str(best[s]) for s in systems) + target,
+                 "| ... relative to the Python reference | "
+                 + " | ".join(f"{best[s] / best[ref]:.1f}x" if best.get(ref) else "-" for s in systems)
+                 + " | >= 3x |"]
+        ratios = []
+        for s in systems:
+            common = [(by[(s, n)]["cpu_us_per_frame"], by[(ref, n)]["cpu_us_per_frame"]) for (sys_, n) in by
+                      if sys_ == s and (ref, n) in by and by[(s, n)]["lossless"] and by[(ref, n)]["lossless"]]
+            ratios.append(f"{statistics.median(a / b for a, b in common):.2f}" if common else "-")
+        rows.append("| CPU time per frame relative to the reference (median over loads both forward losslessly) | "
+                    + " | ".join(ratios) + " | <= 0.1 |")
+        rows.append("| peak RSS MiB (any load) | " + " | ".join(
+            str(max([r["peak_rss_mib"] for r in runs if r["system"] == s], default=0)) for s in systems)
+            + " | <= 32 |")
     return "\n".join(rows)
 
 
-def plot(results: list[dict], path: Path) -> None:
+def plot(results: list[dict], path: Path, direction: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    runs = [r for r in results if r.get("direction", DIRECTIONS[0]) == direction]
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     for s in SYSTEMS:
-        pts = sorted((r for r in results if r["system"] == s), key=lambda r: r["buses"])
-        ax.plot([r["offered_fps"] for r in pts], [r["delivered_fps"] or 0 for r in pts], marker="o", label=s)
-    top = max((r["offered_fps"] for r in results), default=1)
+        pts = sorted((r for r in runs if r["system"] == s), key=lambda r: r["buses"])
+        if pts:
+            ax.plot([r["offered_fps"] or 0 for r in pts], [r["delivered_fps"] or 0 for r in pts], marker="o",
+                    label=s)
+    top = max((r["offered_fps"] or 0 for r in runs), default=1)
     ax.plot([0, top], [0, top], color="grey", linestyle=":", label="offered")
-    ax.set_xlabel("offered CAN frames/s (9000 per bus)")
-    ax.set_ylabel("frames/s delivered on Zenoh (first send to last receive)")
-    ax.set_title("CAN -> Zenoh throughput")
+    ax.set_xlabel(f"offered frames/s ({FRAMES_PER_S} per bus)")
+    ax.set_ylabel("frames/s delivered (first send to last receive)")
+    ax.set_title(f"{direction} throughput")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def add_tool_arguments(ap: argparse.ArgumentParser) -> None:
+    """The tools every benchmark script takes (make bench passes one list to all of them)."""
     ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
     ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
     ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
     ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
     ap.add_argument("--can-load", default=str(REPO / "build" / "ucan" / "can-load"))
-    ap.add_argument("--zn-flood", help="unused here (make bench passes one tool list to every benchmark)")
-    ap.add_argument("--buses", default=",".join(map(str, BUS_COUNTS)))
+    ap.add_argument("--zn-flood", default=str(REPO / "build" / "rust" / "release" / "zn-flood"))
     ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
-    ap.add_argument("--update-readme", action="store_true",
-                    help="replace README's performance table (between the bench markers) with this run's")
-    args = ap.parse_args()
+
+
+def run_id_and_output(args) -> tuple[str, Path]:
+    """This run's id (UTC time) and its output directory, created."""
     run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
     out.mkdir(parents=True, exist_ok=True)
+    return run_id, out
+
+
+def machine_line() -> str:
+    return f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    add_tool_arguments(ap)
+    ap.add_argument("--buses", default=",".join(map(str, BUS_COUNTS)))
+    ap.add_argument("--directions", default=",".join(DIRECTIONS))
+    ap.add_argument("--update-readme", action="store_true",
+                    help="replace README's performance table (between the bench markers) with this run's")
+    args = ap.parse_args()
+    run_id, out = run_id_and_output(args)
     results = []
-    lossy: set[str] = set()  # systems past their first load with loss: no higher load for them
-    for buses in [int(b) for b in args.buses.split(",")]:
-        for system in SYSTEMS:
-            if system in lossy:
-                continue
-            with tempfile.TemporaryDirectory(prefix="bench-bridge-") as tmp:
-                bench = Bench(args, Path(tmp))
-                try:
-                    r = bench.run_one(system, buses)
-                finally:
-                    bench.cleanup()
-            print(json.dumps(r), flush=True)
-            results.append(r)
-            if not r["lossless"]:
-                lossy.add(system)
+    for direction in args.directions.split(","):
+        lossy: set[str] = set()  # systems past their first load with loss: no higher load for them
+        for buses in [int(b) for b in args.buses.split(",")]:
+            for system in SYSTEMS if direction == "can-to-zenoh" else ZENOH_TO_CAN_SYSTEMS:
+                if system in lossy:
+                    continue
+                with tempfile.TemporaryDirectory(prefix="bench-bridge-") as tmp:
+                    bench = Bench(args, Path(tmp))
+                    try:
+                        r = bench.run_one(system, buses, direction)
+                    finally:
+                        bench.cleanup()
+                print(json.dumps(r), flush=True)
+                results.append(r)
+                if not r["lossless"]:
+                    lossy.add(system)
     md = table(results)
-    plot(results, out / "throughput_can_to_zenoh.png")
-    machine = f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
+    for direction in args.directions.split(","):
+        plot(results, out / f"throughput_{direction.replace('-', '_')}.png", direction)
+    machine = machine_line()
     (out / "bench.json").write_text(json.dumps({"run_id": run_id, "machine": machine, "results": results},
                                                indent=2))
     (out / "bench.md").write_text(f"Bridge benchmark {run_id} on {machine}\n\n{md}\n")
     print(md)
-    print(f"written: {out}/bench.json, bench.md, throughput_can_to_zenoh.png")
+    print(f"written: {out}/bench.json, bench.md, throughput_*.png")
     if args.update_readme:
         readme = REPO / "README.md"
         text = readme.read_text()

@@ -32,7 +32,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "firmware" / "bench"))
 sys.path.insert(0, str(REPO))
-from bench_bridge import free_port, stop  # noqa: E402
+from bench_bridge import add_tool_arguments, free_port, run_id_and_output, stop  # noqa: E402
 from bench_paths import candump_stamps, zenoh_stamps  # noqa: E402
 
 from canbench.runkeys import open_session, wait_token  # noqa: E402
@@ -170,18 +170,10 @@ def git_commit() -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
-    ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
-    ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
-    ap.add_argument("--zn-flood", required=True)
-    ap.add_argument("--can-load", required=True)
-    ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
-    ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
+    add_tool_arguments(ap)
     ap.add_argument("--record", action="store_true", help=f"append this run to {HISTORY.relative_to(REPO)}")
     args = ap.parse_args()
-    run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
-    out.mkdir(parents=True, exist_ok=True)
+    run_id, out = run_id_and_output(args)
     result = measure(args)
     commit = os.environ.get("BENCH_COMMIT") or git_commit()
     result.update(run_id=run_id, commit=commit)

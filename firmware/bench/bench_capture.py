@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import re
 import subprocess
 import sys
@@ -34,7 +32,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "ucan" / "bench"))
-from bench_bridge import free_port, stop  # noqa: E402  (this directory: the script's own)
+from bench_bridge import add_tool_arguments, free_port, machine_line, run_id_and_output, stop  # noqa: E402
 from bench_bus import start_hub  # noqa: E402
 
 from canbench.capture import CAPTURE_RCVBUF  # noqa: E402
@@ -157,11 +155,7 @@ def table(results: list[dict]) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
-    ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
-    ap.add_argument("--zn-flood", required=True)
-    ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
-    ap.add_argument("--out", help="output directory (default reports/bench/capture-<run-id>)")
+    add_tool_arguments(ap)
     args = ap.parse_args()
     results = []
     with tempfile.TemporaryDirectory(prefix="bench-capture-") as tmp:
@@ -185,11 +179,9 @@ def main() -> int:
                f"CAN capture (candump -L -r) {reached['can']} frames/s; target {TARGET_FPS}."]
     slow = [f"{side} capture: no lossless run at >= {TARGET_FPS} frames/s" for side, fps in reached.items()
             if fps < TARGET_FPS]
-    machine = f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
+    machine = machine_line()
     md = "\n".join([table(results), "", *summary, "", machine])
-    run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out = Path(args.out) if args.out else REPO / "reports" / "bench" / f"capture-{run_id}"
-    out.mkdir(parents=True, exist_ok=True)
+    _, out = run_id_and_output(args)
     (out / "capture.json").write_text(json.dumps({"results": results, "machine": machine}, indent=2) + "\n")
     (out / "capture.md").write_text(md + "\n")
     print(md)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
 import socket
 import statistics
@@ -39,7 +38,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "firmware" / "bench"))
 sys.path.insert(0, str(REPO))
-from bench_bridge import cpu_s, free_port, rss_mib, stop  # noqa: E402
+from bench_bridge import add_tool_arguments, cpu_s, free_port, machine_line, rss_mib, run_id_and_output, stop  # noqa: E402
 
 from canbench.runkeys import open_session, wait_token  # noqa: E402
 
@@ -368,18 +367,10 @@ def plots(latency: list[dict], rates: list[dict], out: Path) -> None:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
-    ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
-    ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
-    ap.add_argument("--zn-flood", required=True)
-    ap.add_argument("--can-load", required=True)
-    ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
-    ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
+    add_tool_arguments(ap)
     ap.add_argument("--quick", action="store_true", help="the 50 %% load and client mode only (a smoke run)")
     args = ap.parse_args()
-    run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
-    out.mkdir(parents=True, exist_ok=True)
+    run_id, out = run_id_and_output(args)
     loads = {"50%": LOADS["50%"]} if args.quick else LOADS
     modes = ("client",) if args.quick else MODES
     plan: list[tuple[str, str | None, str]] = [("bus", None, "client"), ("zenoh", None, "client")]
@@ -396,7 +387,7 @@ def main() -> int:
     for system in ("zenoh-node", "python-ref"):
         for path in ("zenoh-to-can", "round-trip"):
             rates += throughput(args, path, system)
-    machine = f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
+    machine = machine_line()
     (out / "paths.json").write_text(json.dumps({"run_id": run_id, "machine": machine, "latency": latency,
                                                 "throughput": rates}, indent=1))
     md = tables(latency, rates)

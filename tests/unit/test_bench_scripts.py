@@ -72,3 +72,30 @@ def test_bridge_table_counts_only_sustained_lossless_rates():
     assert best_row.split(" | ")[1:4] == ["40000", "72000", "9000"]
     cpu_row = next(line for line in table.splitlines() if line.startswith("| CPU time per frame"))
     assert cpu_row.split(" | ")[1:4] == ["0.50", "0.10", "1.00"]
+
+
+def test_bridge_table_reports_each_direction_against_the_reference():
+    ref, node = "python-ref", "zenoh-node"
+    results = [dict(result(ref, 1, True, 40), direction="zenoh-to-can"),
+               dict(result(ref, 2, False, 40), direction="zenoh-to-can"),
+               dict(result(node, 1, True, 10), direction="zenoh-to-can"),
+               dict(result(node, 2, True, 8), direction="zenoh-to-can"),
+               result(node, 1, True, 30), result(ref, 1, True, 60)]
+    table = bench_bridge.table(results)
+    sections = table.split("\n\n")
+    z2c = next(s for s in sections if s.startswith("| zenoh-to-can | zenoh-node | python-ref |"))
+    best_row = next(line for line in z2c.splitlines() if line.startswith("| highest lossless"))
+    assert best_row.split(" | ")[1:3] == ["18000", "9000"]
+    assert "| 2.0x | 1.0x |" in z2c
+    cpu_row = next(line for line in z2c.splitlines() if line.startswith("| CPU time per frame"))
+    assert cpu_row.split(" | ")[1:3] == ["0.25", "1.00"]  # only the 1-bus load: both lossless there
+    c2z = next(s for s in sections if s.startswith("| can-to-zenoh |"))
+    assert "| 9000 |" in c2z and "18000" not in c2z
+
+
+def test_bridge_keys_and_sustained_rate():
+    assert bench_bridge.bus_keys("vehicle/can", ["vcan0"], "tx") == ["vehicle/can/tx"]
+    assert bench_bridge.bus_keys("vehicle/can", ["vcan0", "vcan1"], "tx") == ["vehicle/can/vcan0/tx",
+                                                                               "vehicle/can/vcan1/tx"]
+    assert bench_bridge.sustained_fps(9000, T0, T0 + 500_000_000) == 18000
+    assert bench_bridge.sustained_fps(0, T0, T0) is None

@@ -11,26 +11,27 @@
  *   can-load echo IFACE FROM_ID TO_ID COUNT IDLE_MS
  *     an echo ECU: every frame with FROM_ID comes back as TO_ID with the same
  *     data; stops after COUNT frames or IDLE_MS without one.
- *   can-load count IFACE COUNT IDLE_MS
- *     a reader that formats nothing: counts frames and checks that each id's
- *     stamps only rise (order kept); stops like echo.
+ *   can-load count IFACES COUNT IDLE_MS
+ *     a reader that formats nothing: counts frames on all of IFACES and checks
+ *     that each id's stamps only rise (order kept, no duplicates); stops after
+ *     COUNT frames in all or IDLE_MS without one.
  *
  * Prints one JSON line (frames, seconds, ENOBUFS retries or order errors). A benchmark load:
  * bounded in count, on the bench's own bus only. */
 #define _GNU_SOURCE
 #include <errno.h>
-#include <net/if.h>
 #include <poll.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
+
+#include "can_open.h"
 
 #define MAX_IFACES 64
 
@@ -41,22 +42,12 @@ static int64_t now_ns(clockid_t clock)
 	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
 }
 
-static int open_can(const char *iface)
+static int open_ifaces(char *ifaces, int *fds)
 {
-	int s = socket(PF_CAN, SOCK_RAW, CAN_RAW);
-	struct ifreq ifr;
-	memset(&ifr, 0, sizeof(ifr));
-	snprintf(ifr.ifr_name, sizeof(ifr.ifr_name), "%s", iface);
-	if (s < 0 || ioctl(s, SIOCGIFINDEX, &ifr) < 0) {
-		fprintf(stderr, "can-load: %s: %s\n", iface, strerror(errno));
-		exit(1);
-	}
-	struct sockaddr_can addr = { .can_family = AF_CAN, .can_ifindex = ifr.ifr_ifindex };
-	if (bind(s, (struct sockaddr *)&addr, sizeof(addr)) < 0) {
-		fprintf(stderr, "can-load: bind %s: %s\n", iface, strerror(errno));
-		exit(1);
-	}
-	return s;
+	int n = 0;
+	for (char *name = strtok(ifaces, ","); name && n < MAX_IFACES; name = strtok(NULL, ","))
+		fds[n++] = open_can("can-load", name);
+	return n;
 }
 
 /* A full send queue is back-pressure, not an error: wait until it drains. */
@@ -75,9 +66,7 @@ static void write_frame(int fd, const struct can_frame *f, long *retries)
 
 static int send_load(char *ifaces, canid_t id, long rate, long count)
 {
-	int fds[MAX_IFACES], n = 0;
-	for (char *name = strtok(ifaces, ","); name && n < MAX_IFACES; name = strtok(NULL, ","))
-		fds[n++] = open_can(name);
+	int fds[MAX_IFACES], n = open_ifaces(ifaces, fds);
 	long total = count * n, sent = 0, retries = 0;
 	int64_t start = now_ns(CLOCK_MONOTONIC), last_stamp = 0;
 	double gap_ns = 1e9 / ((double)rate * n);
@@ -105,7 +94,7 @@ static int send_load(char *ifaces, canid_t id, long rate, long count)
 
 static int echo(const char *iface, canid_t from, canid_t to, long count, int idle_ms)
 {
-	int fd = open_can(iface);
+	int fd = open_can("can-load", iface);
 	struct can_filter filter = { .can_id = from, .can_mask = CAN_SFF_MASK | CAN_EFF_FLAG | CAN_RTR_FLAG };
 	int rcvbuf = 8 << 20;
 	setsockopt(fd, SOL_CAN_RAW, CAN_RAW_FILTER, &filter, sizeof(filter));
@@ -128,41 +117,57 @@ static int echo(const char *iface, canid_t from, canid_t to, long count, int idl
 	return 0;
 }
 
-static int count_frames(const char *iface, long count, int idle_ms)
+/* Per id the stamps must rise: a duplicate or a reordered frame breaks that. The sustained rate
+ * a caller wants is frames / (last receive - first stamp), both CLOCK_REALTIME like the stamps. */
+static int count_frames(char *ifaces, long count, int idle_ms)
 {
-	enum { IDS = 64 };
-	int fd = open_can(iface), rcvbuf = 64 << 20;
-	setsockopt(fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
+	enum { IDS = 256 };
+	int fds[MAX_IFACES], n = open_ifaces(ifaces, fds), rcvbuf = 64 << 20;
+	struct pollfd pfds[MAX_IFACES];
+	for (int i = 0; i < n; i++) {
+		setsockopt(fds[i], SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
+		pfds[i] = (struct pollfd){ .fd = fds[i], .events = POLLIN };
+	}
 	long got = 0, out_of_order = 0;
 	canid_t ids[IDS];
-	uint64_t last[IDS];
+	uint64_t last[IDS], first_stamp = UINT64_MAX;
 	int nids = 0;
-	int64_t start = 0;
+	int64_t start = 0, last_recv = 0;
 	while (got < count) {
-		struct pollfd pfd = { .fd = fd, .events = POLLIN };
-		if (poll(&pfd, 1, idle_ms) != 1)
+		if (poll(pfds, (nfds_t)n, idle_ms) < 1)
 			break;
-		struct can_frame f;
-		if (read(fd, &f, sizeof(f)) != sizeof(f) || f.len != 8)
-			continue;
-		if (got++ == 0)
-			start = now_ns(CLOCK_MONOTONIC);
-		uint64_t stamp;
-		memcpy(&stamp, f.data, sizeof(stamp));
-		int i = 0;
-		while (i < nids && ids[i] != f.can_id)
-			i++;
-		if (i == nids && nids < IDS) {
-			ids[nids] = f.can_id;
-			last[nids++] = 0;
-		}
-		if (i < nids) {
-			out_of_order += stamp <= last[i];
-			last[i] = stamp;
+		for (int k = 0; k < n && got < count; k++) {
+			if (!(pfds[k].revents & POLLIN))
+				continue;
+			struct can_frame f;
+			/* drain what is queued on this socket, without blocking on it */
+			while (got < count && recv(fds[k], &f, sizeof(f), MSG_DONTWAIT) == sizeof(f)) {
+				if (f.len != 8)
+					continue;
+				if (got++ == 0)
+					start = now_ns(CLOCK_MONOTONIC);
+				last_recv = now_ns(CLOCK_REALTIME);
+				uint64_t stamp;
+				memcpy(&stamp, f.data, sizeof(stamp));
+				first_stamp = stamp < first_stamp ? stamp : first_stamp;
+				int i = 0;
+				while (i < nids && ids[i] != f.can_id)
+					i++;
+				if (i == nids && nids < IDS) {
+					ids[nids] = f.can_id;
+					last[nids++] = 0;
+				}
+				if (i < nids) {
+					out_of_order += stamp <= last[i];
+					last[i] = stamp;
+				}
+			}
 		}
 	}
 	double seconds = got ? (double)(now_ns(CLOCK_MONOTONIC) - start) / 1e9 : 0;
-	printf("{\"frames\": %ld, \"seconds\": %.4f, \"out_of_order\": %ld}\n", got, seconds, out_of_order);
+	printf("{\"frames\": %ld, \"seconds\": %.4f, \"out_of_order\": %ld, \"first_stamp_ns\": %llu, "
+	       "\"last_recv_ns\": %lld}\n",
+	       got, seconds, out_of_order, got ? (unsigned long long)first_stamp : 0ULL, (long long)last_recv);
 	return 0;
 }
 
@@ -186,6 +191,6 @@ int main(int argc, char **argv)
 	}
 	fprintf(stderr, "usage: can-load send IFACES ID_HEX RATE_PER_IFACE COUNT_PER_IFACE\n"
 			"       can-load echo IFACE FROM_ID_HEX TO_ID_HEX COUNT IDLE_MS\n"
-			"       can-load count IFACE COUNT IDLE_MS\n");
+			"       can-load count IFACES COUNT IDLE_MS\n");
 	return 2;
 }

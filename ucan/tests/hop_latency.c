@@ -9,19 +9,19 @@
  * Prints one JSON object: count, received, p50/p90/p99/max in microseconds. */
 #define _GNU_SOURCE
 #include <errno.h>
-#include <net/if.h>
 #include <poll.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
+
+#include "can_open.h"
 
 #define RECV_TIMEOUT_MS 2000
 
@@ -62,24 +62,6 @@ static int cmp(const void *a, const void *b)
 	return (x > y) - (x < y);
 }
 
-static int open_can(const char *iface)
-{
-	int s = socket(PF_CAN, SOCK_RAW, CAN_RAW);
-	struct ifreq ifr;
-	memset(&ifr, 0, sizeof(ifr));
-	snprintf(ifr.ifr_name, sizeof(ifr.ifr_name), "%s", iface);
-	if (s < 0 || ioctl(s, SIOCGIFINDEX, &ifr) < 0) {
-		perror(iface);
-		exit(1);
-	}
-	struct sockaddr_can addr = { .can_family = AF_CAN, .can_ifindex = ifr.ifr_ifindex };
-	if (bind(s, (struct sockaddr *)&addr, sizeof(addr)) < 0) {
-		perror("bind");
-		exit(1);
-	}
-	return s;
-}
-
 int main(int argc, char **argv)
 {
 	if (argc != 5) {
@@ -99,8 +81,8 @@ int main(int argc, char **argv)
 		tx_fd = sv[0];
 		rx_fd = sv[1];
 	} else {
-		rx_fd = open_can(argv[2]);
-		tx_fd = open_can(argv[2]);
+		rx_fd = open_can("hop_latency", argv[2]);
+		tx_fd = open_can("hop_latency", argv[2]);
 	}
 	int on = 1, rcvbuf = 8 << 20;
 	setsockopt(rx_fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));

@@ -1,6 +1,6 @@
 //! zn-flood: publishes COUNT samples shaped like the bridge's (16-byte frame,
-//! 8-byte sequence attachment) on KEY at RATE samples/s (0 = as fast as it
-//! can), then exits. A benchmark load: bounded in count, loopback or the
+//! 8-byte sequence attachment) on each key of KEYS (comma separated, all keys
+//! interleaved) at RATE samples/s per key (0 = as fast as it can), then exits. A benchmark load: bounded in count, loopback or the
 //! bench's own router only, multicast scouting off.
 //!
 //!   zn-flood --connect tcp/127.0.0.1:7447 --key bench/flood --count 300000 --rate 100000
@@ -9,7 +9,8 @@
 //! send time (ns since the epoch, strictly increasing) and there is no
 //! attachment (a valid command for the bridge's tx key): the stamp survives
 //! the trip through the bridge and the CAN bus, so every capture point reads
-//! the latency from the frame itself. --id sets the CAN id (hex, default 123),
+//! the latency from the frame itself. --id sets the CAN id (hex, default 123;
+//! ID+i on the i-th key, so a reader tells the keys' streams apart),
 //! --mode client|peer the Zenoh mode (default client).
 //!
 //! Prints "<samples> samples in <seconds> s" on stdout when done.
@@ -24,7 +25,7 @@ const SLICE: Duration = Duration::from_millis(1);
 
 fn usage() -> ! {
     eprintln!(
-        "usage: zn-flood --connect ENDPOINT --key KEY --count N [--rate SAMPLES_PER_S] [--block] [--stamp-data] \
+        "usage: zn-flood --connect ENDPOINT --key KEY[,KEY...] --count N_PER_KEY [--rate SAMPLES_PER_S] [--block] [--stamp-data] \
          [--id HEX] [--mode client|peer]"
     );
     std::process::exit(2);
@@ -69,14 +70,21 @@ fn main() {
         eprintln!("zn-flood: cannot open a Zenoh session to {connect}: {e}");
         std::process::exit(1)
     });
-    let publisher = session
-        .declare_publisher(key.clone())
-        .congestion_control(if block { CongestionControl::Block } else { CongestionControl::Drop })
-        .wait()
-        .unwrap_or_else(|e| {
-            eprintln!("zn-flood: cannot declare a publisher on {key}: {e}");
-            std::process::exit(1)
-        });
+    let publishers: Vec<_> = key
+        .split(',')
+        .map(|k| {
+            session
+                .declare_publisher(k.to_string())
+                .congestion_control(if block { CongestionControl::Block } else { CongestionControl::Drop })
+                .wait()
+                .unwrap_or_else(|e| {
+                    eprintln!("zn-flood: cannot declare a publisher on {k}: {e}");
+                    std::process::exit(1)
+                })
+        })
+        .collect();
+    let keys = publishers.len() as u64;
+    let (count, rate) = (count * keys, rate * keys);
     let start = Instant::now();
     let mut seq = 0u64;
     let mut last_stamp = 0u64;
@@ -86,7 +94,8 @@ fn main() {
         while seq < due.min(count) {
             // the bridge's wire format: id (LE u32), dlc, flags, 2 reserved, 8 data bytes
             let mut frame = [0u8; 16];
-            frame[0..4].copy_from_slice(&can_id.to_le_bytes());
+            let slot = (seq % keys) as usize;
+            frame[0..4].copy_from_slice(&(can_id + slot as u32).to_le_bytes());
             frame[4] = 8;
             let data = if stamp_data {
                 let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
@@ -96,7 +105,7 @@ fn main() {
                 seq
             };
             frame[8..16].copy_from_slice(&data.to_le_bytes());
-            let put = publisher.put(frame.to_vec());
+            let put = publishers[slot].put(frame.to_vec());
             // a stamped frame is its own identity, and a bare payload is a valid bridge command
             let put = if stamp_data { put } else { put.attachment(seq.to_le_bytes().to_vec()) };
             if let Err(e) = put.wait() {
@@ -111,6 +120,6 @@ fn main() {
     }
     let elapsed = start.elapsed().as_secs_f64();
     println!("{count} samples in {elapsed:.3} s");
-    drop(publisher);
+    drop(publishers);
     let _ = session.close().wait();
 }
