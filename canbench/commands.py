@@ -31,8 +31,8 @@ def plan(scenario: Scenario) -> list[tuple[float, str, int, wire.Frame]]:
 
 def _messages(c: Commands):
     if c.trace is not None:
-        return timed_plan(read_trace(c.trace, None), c.speed, 1, c.start_offset_s, c.bus, {})
-    return [(0, m) for m in tracegen.periodic(c.messages, c.run_s, c.start_offset_s, c.bus)]
+        return timed_plan(read_trace(c.trace, None), c.speed, 1, c.start_offset_s, c.bus, {}).frames()
+    return ((0, m) for m in tracegen.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
 
 
 class Commander(threading.Thread):

@@ -12,10 +12,14 @@ orchestrator declares), runs its role, then publishes its summary on
 bench/runs/<run-id>/ecus/<name>/done and exits."""
 from __future__ import annotations
 
+import itertools
 import json
 import statistics
 import threading
 import time
+from array import array
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -30,32 +34,51 @@ SEND_TIMEOUT_S = 5.0
 ECHO_POLL_S = 0.05  # how often the echo loop looks at its stop flag while the bus is quiet
 
 
-def schedule(ecu: Ecu, scenario: Scenario) -> list[tuple[int, can.Message]]:
-    """(trace line, message) in send order, with speed, loops, offset and id remap applied.
-    Generated (periodic) frames have line 0."""
+@dataclass(frozen=True)
+class Plan:
+    """What an ECU sends, in send order. The frames are made as they are sent (frames() gives a
+    fresh iterator each call): an hour at 500 frames/s held as can.Message objects is ~0.6 GiB."""
+    frames: Callable[[], Iterator[tuple[int, can.Message]]]  # (trace line, message); generated: line 0
+    count: int
+    last: can.Message | None
+    last_id_count: int  # frames with the last frame's id and id format: the own copies to wait for
+
+
+def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
+    """The ECU's plan with speed, loops, offset and id remap applied."""
     if ecu.role == "periodic":
-        return [(0, m) for m in tracegen.periodic(ecu.messages, ecu.run_s, ecu.start_offset_s, ecu.bus)]
+        msgs, run_s, start, bus = ecu.messages, ecu.run_s, ecu.start_offset_s, ecu.bus
+        last = tracegen.periodic_last(msgs, run_s, start, bus)
+        return Plan(frames=lambda: ((0, m) for m in tracegen.periodic_frames(msgs, run_s, start, bus)),
+                    count=sum(tracegen.periodic_count(m, run_s) for m in msgs), last=last,
+                    last_id_count=sum(tracegen.periodic_count(m, run_s) for m in msgs
+                                      if last and (m.can_id, m.extended) == (last.arbitration_id,
+                                                                             last.is_extended_id)))
     frames = read_trace(ecu.trace, None) if ecu.trace else []
     return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap)
 
 
 def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
-               id_remap: dict[int, int]) -> list[tuple[int, can.Message]]:
+               id_remap: dict[int, int]) -> Plan:
+    """A trace's frames (canbench.trace.TraceFrame) looped `loops` times at `speed`."""
     if not frames:
-        return []
+        return Plan(frames=lambda: iter(()), count=0, last=None, last_id_count=0)
     t0 = frames[0].message.timestamp
     span = frames[-1].message.timestamp - t0
     period = span + (frames[1].message.timestamp - t0 if len(frames) > 1 else 0.001)
-    out = []
-    for loop in range(loops):
-        for tf in frames:
-            m = tf.message
-            offset = start_offset_s + (m.timestamp - t0 + loop * period) / speed
-            out.append((tf.line, can.Message(
-                timestamp=offset, arbitration_id=id_remap.get(m.arbitration_id, m.arbitration_id),
-                is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame, dlc=m.dlc,
-                data=b"" if m.is_remote_frame else m.data, channel=bus)))
-    return out
+
+    def timed(tf, loop: int) -> can.Message:
+        m = tf.message
+        return can.Message(timestamp=start_offset_s + (m.timestamp - t0 + loop * period) / speed,
+                           arbitration_id=id_remap.get(m.arbitration_id, m.arbitration_id),
+                           is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame, dlc=m.dlc,
+                           data=b"" if m.is_remote_frame else m.data, channel=bus)
+
+    last = timed(frames[-1], loops - 1)
+    per_loop = sum(1 for tf in frames if (id_remap.get(tf.message.arbitration_id, tf.message.arbitration_id),
+                                          tf.message.is_extended_id) == (last.arbitration_id, last.is_extended_id))
+    return Plan(frames=lambda: ((tf.line, timed(tf, loop)) for loop in range(loops) for tf in frames),
+                count=loops * len(frames), last=last, last_id_count=loops * per_loop)
 
 
 def frame_of(msg: can.Message) -> Frame:
@@ -63,7 +86,7 @@ def frame_of(msg: can.Message) -> Frame:
                  msg.is_extended_id, msg.is_remote_frame)
 
 
-def fidelity(errors_ms: list[float]) -> dict:
+def fidelity(errors_ms) -> dict:
     return {"p50": round(percentile(errors_ms, 0.5) or 0.0, 3), "p99": round(percentile(errors_ms, 0.99) or 0.0, 3),
             "max": round(max(errors_ms, default=0.0), 3),
             "mean": round(statistics.fmean(errors_ms), 3) if errors_ms else 0.0}
@@ -75,25 +98,27 @@ SENT_LOG_HEADER = "# trace_line\tsend_time_ns\tframe (candump form)\n"
 def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
     plan = schedule(ecu, scenario)
     sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
-    errors_ms: list[float] = []
+    errors_ms = array("d")  # 8 bytes per frame: an hour's worth stays small
     # line-buffered and written just before each send: an ECU killed by a fault step leaves a
     # log that accounts for every frame it put on the bus (the oracle relies on it)
     # our own copies of the last frame's id come back (CAN_RAW_RECV_OWN_MSGS, filtered to that id):
     # the ECU says done only once the bus has carried everything it sent
-    last = plan[-1][1] if plan else None
+    last = plan.last
     own = [{"can_id": last.arbitration_id, "can_mask": 0x1FFFFFFF, "extended": last.is_extended_id}] if last else None
     with can.Bus(interface="socketcan", channel=ecu.bus, receive_own_messages=bool(own), can_filters=own) as bus, \
             open(sent_log, "w", buffering=1) as log:
         log.write(SENT_LOG_HEADER)
+        timed, to_sync = itertools.tee(plan.frames())  # MessageSync paces one copy, the log reads the other
+        first = next(plan.frames(), None)
         # MessageSync times messages relative to the first one: wait out the first offset here
-        first_s = plan[0][1].timestamp if plan else 0.0
+        first_s = first[1].timestamp if first else 0.0
         time.sleep(first_s)  # the scenario's start offset (pacing, not synchronisation)
         start = time.perf_counter() - first_s
         wall0 = time.time_ns() - int(start * 1e9)
-        messages = [m for _, m in plan]
         seen = 0
         # MessageSync sleeps until each message's offset: the recorded timing
-        for (line, msg), synced in zip(plan, can.MessageSync(messages, timestamps=True, skip=3600), strict=True):
+        synced_messages = can.MessageSync((m for _, m in to_sync), timestamps=True, skip=3600)
+        for (line, msg), synced in zip(timed, synced_messages, strict=True):
             now = time.perf_counter()
             log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
             bus.send(synced, timeout=SEND_TIMEOUT_S)  # a busy bus makes a sender wait, as on a real one
@@ -101,10 +126,9 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
             if last is not None:  # read the copies as they come: a long run would overflow the socket
                 seen += _own_copies(bus, last, timeout=0.0)
         if last is not None:
-            _wait_own_copies(bus, last, sum(1 for _, m in plan if m.arbitration_id == last.arbitration_id
-                                            and m.is_extended_id == last.is_extended_id), seen)
+            _wait_own_copies(bus, last, plan.last_id_count, seen)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
-            "sent": len(plan), "fidelity_ms": fidelity(errors_ms)}
+            "sent": plan.count, "fidelity_ms": fidelity(errors_ms)}
 
 
 def _own_copies(bus: can.BusABC, last: can.Message, timeout: float) -> int:

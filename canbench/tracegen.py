@@ -16,7 +16,9 @@ OEM CRC-less schemes), the rest slowly varying signals."""
 from __future__ import annotations
 
 import argparse
+import heapq
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import can
@@ -85,20 +87,38 @@ def burst(count: int, start: float = 1_700_000_000.0, iface: str = "vcan0") -> l
                         data=_payload(0x100 + n % 16, 8, n, n * 1e-4), channel=iface) for n in range(count)]
 
 
+def periodic_count(message, seconds: float) -> int:
+    """How many frames a scenario message (canbench.scenario.Message) gives in `seconds`."""
+    return max(1, int(seconds * 1000 / message.cycle_ms))
+
+
+def periodic_frame(message, n: int, start: float, iface: str) -> can.Message:
+    """The n-th frame of a scenario message, with the same counter/checksum payloads as the
+    synthetic trace."""
+    m = message
+    phase = (m.can_id % 97) / 97 * min(m.cycle_ms, 10) / 1000
+    t = start + phase + n * m.cycle_ms / 1000
+    return can.Message(timestamp=t, arbitration_id=m.can_id, is_extended_id=m.extended, is_remote_frame=m.remote,
+                       dlc=m.dlc, data=b"" if m.remote else _payload(m.can_id, m.dlc, n, t - start), channel=iface)
+
+
+def periodic_frames(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> Iterator[can.Message]:
+    """Frames of scenario messages for `seconds` in time order (then id; ties in the messages'
+    order), made as they are consumed: an hour of a busy bus is millions of frames."""
+    def one(m):
+        return (periodic_frame(m, n, start, iface) for n in range(periodic_count(m, seconds)))
+    return heapq.merge(*(one(m) for m in messages), key=lambda f: (f.timestamp, f.arbitration_id))
+
+
+def periodic_last(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> can.Message | None:
+    """The frame periodic_frames ends with, without making the others."""
+    last = [(periodic_frame(m, periodic_count(m, seconds) - 1, start, iface), i) for i, m in enumerate(messages)]
+    return max(last, key=lambda fi: (fi[0].timestamp, fi[0].arbitration_id, fi[1]))[0] if last else None
+
+
 def periodic(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> list[can.Message]:
-    """Frames of scenario messages (canbench.scenario.Message) for `seconds`, in time order,
-    with the same counter/checksum payloads as the synthetic trace."""
-    frames: list[can.Message] = []
-    for m in messages:
-        phase = (m.can_id % 97) / 97 * min(m.cycle_ms, 10) / 1000
-        for n in range(max(1, int(seconds * 1000 / m.cycle_ms))):
-            t = start + phase + n * m.cycle_ms / 1000
-            frames.append(can.Message(timestamp=t, arbitration_id=m.can_id, is_extended_id=m.extended,
-                                      is_remote_frame=m.remote, dlc=m.dlc,
-                                      data=b"" if m.remote else _payload(m.can_id, m.dlc, n, t - start),
-                                      channel=iface))
-    frames.sort(key=lambda f: (f.timestamp, f.arbitration_id))
-    return frames
+    """periodic_frames as a list (short runs and trace files)."""
+    return list(periodic_frames(messages, seconds, start, iface))
 
 
 def write(path: Path, frames: list[can.Message]) -> None:
