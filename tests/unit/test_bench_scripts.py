@@ -87,6 +87,7 @@ def test_bridge_table_reports_each_direction_against_the_reference():
     best_row = next(line for line in z2c.splitlines() if line.startswith("| highest lossless"))
     assert best_row.split(" | ")[1:3] == ["18000", "9000"]
     assert "| 2.0x | 1.0x |" in z2c
+    assert "| first load with loss | none up to 2 buses | 2 buses | |" in z2c
     cpu_row = next(line for line in z2c.splitlines() if line.startswith("| CPU time per frame"))
     assert cpu_row.split(" | ")[1:3] == ["0.25", "1.00"]  # only the 1-bus load: both lossless there
     c2z = next(s for s in sections if s.startswith("| can-to-zenoh |"))
