@@ -294,6 +294,20 @@ def throughput(args, path: str, system: str) -> list[dict]:
     return results
 
 
+def added_latency(latency: list[dict]) -> list[dict]:
+    """p50 latency each bridge adds CAN -> Zenoh (client mode) over raw Zenoh, and over raw Zenoh
+    plus the bus alone, at the same load: the issue's target and the bridge's own share of it."""
+    floor = {(r["path"], r["rate"]): r.get("p50_us") for r in latency if r["path"] in ("zenoh", "bus")}
+    added = []
+    for r in latency:
+        zenoh, bus = floor.get(("zenoh", r["rate"])), floor.get(("bus", r["rate"]))
+        if r["mode"] != "client" or r["path"] != "can-to-zenoh" or None in (zenoh, bus, r.get("p50_us")):
+            continue
+        added.append({"system": r["system"], "rate": r["rate"], "over_zenoh_us": round(r["p50_us"] - zenoh, 1),
+                      "over_zenoh_and_bus_us": round(r["p50_us"] - zenoh - bus, 1)})
+    return added
+
+
 def tables(latency: list[dict], rates: list[dict]) -> str:
     rows = ["### Latency (µs; per path, mode and load of one 1 Mbit/s bus)", "",
             "| path | system | mode | load | frames/s | p50 | p90 | p99 | max | lost | bridge CPU % | RSS MiB |",
@@ -304,13 +318,11 @@ def tables(latency: list[dict], rates: list[dict]) -> str:
                     f"{r.get('p50_us', '-')} | {r.get('p90_us', '-')} | {r.get('p99_us', '-')} | "
                     f"{r.get('max_us', '-')} | {r['lost']} | {r.get('bridge_cpu_pct', '-')} | "
                     f"{r.get('peak_rss_mib', '-')} |")
-    floor = {r["rate"]: r.get("p50_us") for r in latency if r["path"] == "zenoh"}
     rows += ["", "Added over raw Zenoh (p50 of the bridge's path minus p50 of zn-flood -> zenohd -> zn-capture "
-             "at the same load, client mode):", ""]
-    for r in latency:
-        if r["mode"] == "client" and r["path"] == "can-to-zenoh" and floor.get(r["rate"]) is not None \
-                and r.get("p50_us") is not None:
-            rows.append(f"- {r['system']} at {r['rate']} frames/s: {r['p50_us'] - floor[r['rate']]:+.1f} µs")
+             "at the same load, client mode; in brackets what is left after also taking off the bus alone, "
+             "can-load -> hub -> candump: the bridge's own share):", ""]
+    rows += [f"- {a['system']} at {a['rate']} frames/s: {a['over_zenoh_us']:+.1f} µs "
+             f"({a['over_zenoh_and_bus_us']:+.1f} µs)" for a in added_latency(latency)]
     rows += ["", "### Throughput (one bus, offered until frames are lost)", "",
              "| path | system | offered frames/s | received | lossless | delivered frames/s (sustained) "
              "| p50 latency µs |",
@@ -389,7 +401,8 @@ def main() -> int:
             rates += throughput(args, path, system)
     machine = machine_line()
     (out / "paths.json").write_text(json.dumps({"run_id": run_id, "machine": machine, "latency": latency,
-                                                "throughput": rates}, indent=1))
+                                                "added_latency": added_latency(latency), "throughput": rates},
+                                               indent=1))
     md = tables(latency, rates)
     (out / "paths.md").write_text(f"Path benchmark {run_id} on {machine}\n\n{md}\n")
     plots(latency, rates, out)

@@ -53,6 +53,19 @@ def test_load_rate_reads_both_loads_reports():
     assert bench_paths.load_rate("garbage", 10) is None
 
 
+def test_added_latency_takes_off_raw_zenoh_and_the_bus_at_the_same_load():
+    def row(path, rate, p50, system=None, mode="client"):
+        return {"path": path, "system": system, "mode": mode, "rate": rate, "p50_us": p50, "lost": 0}
+    latency = [row("bus", 900, 20.0), row("zenoh", 900, 100.0), row("bus", 4500, 10.0), row("zenoh", 4500, 90.0),
+               row("can-to-zenoh", 900, 150.0, "zenoh-node"), row("can-to-zenoh", 4500, 95.0, "zenoh-node"),
+               row("can-to-zenoh", 4500, 80.0, "zenoh-node", mode="peer"),
+               row("zenoh-to-can", 4500, 300.0, "zenoh-node"), row("can-to-zenoh", 8100, 99.0, "zenoh-node")]
+    assert bench_paths.added_latency(latency) == [
+        {"system": "zenoh-node", "rate": 900, "over_zenoh_us": 50.0, "over_zenoh_and_bus_us": 30.0},
+        {"system": "zenoh-node", "rate": 4500, "over_zenoh_us": 5.0, "over_zenoh_and_bus_us": -5.0}]
+    assert "+50.0 µs (+30.0 µs)" in bench_paths.tables(latency, [])
+
+
 def result(system: str, buses: int, lossless: bool, cpu: float, delivered: int | None = None) -> dict:
     offered = 9000 * buses
     return {"system": system, "buses": buses, "instances": 1, "offered": offered * 2, "offered_fps": offered,
