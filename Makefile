@@ -38,6 +38,27 @@ SCENARIO       ?= $(wildcard scenarios/*.yaml)
 ROUTER_IMAGE   ?= canbench/router:$(BENCH_TAG)
 export COMPOSE BENCH_TAG BENCH_CAN_MODE BENCH_BUS_CAP ROUTER_IMAGE BASELINE
 
+# The Zenoh port (Rust over the zenoh crate) is compiled once per cold machine: the host
+# build links the port that the builder image compiled from the same Rust sources (.ci/run
+# builds the images first), kept in $(CACHE) by the hash of those sources, instead of
+# compiling the zenoh crate a second time (25 minutes on a slow 2-core day). Without such an
+# image or copy, or with RUST_PORT=cargo, cargo builds it.
+RUST_PORT_SOURCES := firmware/ports/linux/zenoh_rust
+RUST_PORT_HASH := $(shell { git ls-files -s $(RUST_PORT_SOURCES); git diff HEAD -- $(RUST_PORT_SOURCES); \
+                   git ls-files -o --exclude-standard $(RUST_PORT_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-12)
+RUST_PORT_DIR  := $(CACHE)/rust-port-$(RUST_PORT_HASH)
+ifndef RUST_PORT
+RUST_PORT      := $(if $(wildcard $(RUST_PORT_DIR)/libzn_port_zenoh.a),copy,$(if \
+                   $(shell docker image inspect canbench/builder:$(BENCH_TAG) >/dev/null 2>&1 && echo y),image,cargo))
+endif
+ifeq ($(RUST_PORT),cargo)
+FW_RUST_ARGS   := -DZN_RUST_PREBUILT_DIR= -DZN_RUST_TARGET_DIR=$(CARGO_TARGET)
+FW_RUST_DEP    :=
+else
+FW_RUST_ARGS   := -DZN_RUST_PREBUILT_DIR=$(RUST_PORT_DIR) -DZN_RUST_TARGET_DIR=$(CARGO_TARGET)
+FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
+endif
+
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
         check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host zn-flood test clean preflight base images \
         shell logs soak
@@ -64,13 +85,20 @@ ucan-asan:
 	cmake -S ucan -B $(BUILD)/ucan-asan $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DUCAN_SANITIZE=ON >/dev/null
 	ninja -C $(BUILD)/ucan-asan
 
-firmware:
-	cmake -S firmware -B $(FW_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DZN_RUST_TARGET_DIR=$(CARGO_TARGET) >/dev/null
+firmware: $(FW_RUST_DEP)
+	cmake -S firmware -B $(FW_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo $(FW_RUST_ARGS) >/dev/null
 	ninja -C $(FW_BUILD)
 
-firmware-asan:
-	cmake -S firmware -B $(FW_ASAN_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DZN_SANITIZE=ON -DZN_RUST_TARGET_DIR=$(CARGO_TARGET) >/dev/null
+firmware-asan: $(FW_RUST_DEP)
+	cmake -S firmware -B $(FW_ASAN_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DZN_SANITIZE=ON $(FW_RUST_ARGS) >/dev/null
 	ninja -C $(FW_ASAN_BUILD)
+
+# the builder image's port (same Rust sources: RUST_PORT_HASH is part of BENCH_TAG's input)
+$(CACHE)/rust-port-%/libzn_port_zenoh.a:
+	@mkdir -p $(CACHE) && tmp=$$(mktemp -d $(CACHE)/rust-port-tmp.XXXXXX) && id=$$(docker create canbench/builder:$(BENCH_TAG)) && \
+	 docker cp $$id:/build/rust/release/libzn_port_zenoh.a $$tmp/ && docker cp $$id:/build/rust/release/zn-capture $$tmp/; \
+	 rc=$$?; docker rm $$id >/dev/null; [ $$rc = 0 ] && chmod 755 $$tmp && rm -rf $(@D) && mv $$tmp $(@D) || { rm -rf $$tmp; exit 1; }
+	@echo "Zenoh port: copied from canbench/builder:$(BENCH_TAG) into $(@D)"
 
 # zenohd is compiled once per cold machine: taken from the builder image when
 # Docker works (the images need it anyway), else installed from crates.io.
