@@ -70,6 +70,32 @@ def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]
     return out
 
 
+ATTACHMENT_HEADER = 12  # zenoh_node.h: version, reserved, count u16, first sequence u64; then rx ns u64 per frame
+
+
+def can_stamp_split(path: Path, can_id: int) -> dict:
+    """p50 of the two halves of zenoh-node's CAN -> Zenoh latency, split at the CAN receive stamp
+    (SO_TIMESTAMPNS) its attachment carries per frame: send -> the bridge's socket (the bus) and
+    the bridge's socket -> capture (the reader waking, read, handoff to the publisher, put, Zenoh)."""
+    to_socket, from_socket = [], []
+    for line in open(path) if path.exists() else ():
+        parts = line.rstrip("\n").split("\t")
+        if len(parts) != 4 or parts[3] == "-":
+            continue
+        recv, payload, att = int(parts[0]), bytes.fromhex(parts[2]), bytes.fromhex(parts[3])
+        for n, i in enumerate(range(0, len(payload) - 15, 16)):
+            at = ATTACHMENT_HEADER + 8 * n
+            if int.from_bytes(payload[i:i + 4], "little") & 0x1FFFFFFF != can_id or len(att) < at + 8:
+                continue
+            sent, rx = int.from_bytes(payload[i + 8:i + 16], "little"), int.from_bytes(att[at:at + 8], "little")
+            to_socket.append((rx - sent) / 1000)
+            from_socket.append((recv - rx) / 1000)
+    if not to_socket:
+        return {}
+    return {"to_bridge_socket_p50_us": round(statistics.median(to_socket), 1),
+            "bridge_socket_to_capture_p50_us": round(statistics.median(from_socket), 1)}
+
+
 def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
     """(send stamp, bus receive ns) per frame with can_id in a candump -L log."""
     out = []
@@ -271,9 +297,12 @@ def measure(args, path: str, system: str | None, mode: str, rate: int, seconds: 
             cpu = (cpu_s(pid) - cpu0) if pid else 0.0
             if path == "round-trip":
                 stop(echo)
+            split = can_stamp_split(zn_out, CAN_TO_ZENOH_ID) if path == "can-to-zenoh" else {}
+            stamps = collect()
         finally:
             rig.close()
-        result = latency_summary(collect(), count)
+        result = latency_summary(stamps, count)
+        result.update(split)
         result.update(path=path, system=system or path, mode=mode, rate=rate, offered_fps=offered_fps)
         if pid:
             result.update(bridge_cpu_pct=round(100 * cpu / wall, 1), peak_rss_mib=round(peak_rss, 1))
@@ -295,16 +324,20 @@ def throughput(args, path: str, system: str) -> list[dict]:
 
 
 def added_latency(latency: list[dict]) -> list[dict]:
-    """p50 latency each bridge adds CAN -> Zenoh (client mode) over raw Zenoh, and over raw Zenoh
-    plus the bus alone, at the same load: the issue's target and the bridge's own share of it."""
-    floor = {(r["path"], r["rate"]): r.get("p50_us") for r in latency if r["path"] in ("zenoh", "bus")}
+    """p50 latency each bridge adds CAN -> Zenoh (client mode) over raw Zenoh at the same load (the
+    issue's target), and where the bridge stamps its CAN receive time (zenoh-node) the same from that
+    stamp on: the bridge's own share, without the bus's hop to its socket."""
+    floor = {r["rate"]: r.get("p50_us") for r in latency if r["path"] == "zenoh"}
     added = []
     for r in latency:
-        zenoh, bus = floor.get(("zenoh", r["rate"])), floor.get(("bus", r["rate"]))
-        if r["mode"] != "client" or r["path"] != "can-to-zenoh" or None in (zenoh, bus, r.get("p50_us")):
+        zenoh = floor.get(r["rate"])
+        if r["mode"] != "client" or r["path"] != "can-to-zenoh" or None in (zenoh, r.get("p50_us")):
             continue
-        added.append({"system": r["system"], "rate": r["rate"], "over_zenoh_us": round(r["p50_us"] - zenoh, 1),
-                      "over_zenoh_and_bus_us": round(r["p50_us"] - zenoh - bus, 1)})
+        a = {"system": r["system"], "rate": r["rate"], "over_zenoh_us": round(r["p50_us"] - zenoh, 1)}
+        if r.get("bridge_socket_to_capture_p50_us") is not None:
+            a["bus_p50_us"] = r["to_bridge_socket_p50_us"]
+            a["from_can_stamp_over_zenoh_us"] = round(r["bridge_socket_to_capture_p50_us"] - zenoh, 1)
+        added.append(a)
     return added
 
 
@@ -319,10 +352,14 @@ def tables(latency: list[dict], rates: list[dict]) -> str:
                     f"{r.get('max_us', '-')} | {r['lost']} | {r.get('bridge_cpu_pct', '-')} | "
                     f"{r.get('peak_rss_mib', '-')} |")
     rows += ["", "Added over raw Zenoh (p50 of the bridge's path minus p50 of zn-flood -> zenohd -> zn-capture "
-             "at the same load, client mode; in brackets what is left after also taking off the bus alone, "
-             "can-load -> hub -> candump: the bridge's own share):", ""]
-    rows += [f"- {a['system']} at {a['rate']} frames/s: {a['over_zenoh_us']:+.1f} µs "
-             f"({a['over_zenoh_and_bus_us']:+.1f} µs)" for a in added_latency(latency)]
+             "at the same load, client mode). zenoh-node's attachment carries each frame's CAN receive stamp, "
+             "which splits its path: the bus's p50 from send to the bridge's socket, and what the bridge adds "
+             "over raw Zenoh from that stamp on (its reader waking, the read, the handoff to the publisher, "
+             "the put):", ""]
+    for a in added_latency(latency):
+        split = (f" (bus to the bridge's socket {a['bus_p50_us']} µs; from the CAN stamp on "
+                 f"{a['from_can_stamp_over_zenoh_us']:+.1f} µs)" if "bus_p50_us" in a else "")
+        rows.append(f"- {a['system']} at {a['rate']} frames/s: {a['over_zenoh_us']:+.1f} µs{split}")
     rows += ["", "### Throughput (one bus, offered until frames are lost)", "",
              "| path | system | offered frames/s | received | lossless | delivered frames/s (sustained) "
              "| p50 latency µs |",

@@ -53,17 +53,35 @@ def test_load_rate_reads_both_loads_reports():
     assert bench_paths.load_rate("garbage", 10) is None
 
 
-def test_added_latency_takes_off_raw_zenoh_and_the_bus_at_the_same_load():
-    def row(path, rate, p50, system=None, mode="client"):
-        return {"path": path, "system": system, "mode": mode, "rate": rate, "p50_us": p50, "lost": 0}
-    latency = [row("bus", 900, 20.0), row("zenoh", 900, 100.0), row("bus", 4500, 10.0), row("zenoh", 4500, 90.0),
-               row("can-to-zenoh", 900, 150.0, "zenoh-node"), row("can-to-zenoh", 4500, 95.0, "zenoh-node"),
+def test_added_latency_is_over_raw_zenoh_at_the_same_load_and_split_at_the_can_stamp():
+    def row(path, rate, p50, system=None, mode="client", **split):
+        return {"path": path, "system": system, "mode": mode, "rate": rate, "p50_us": p50, "lost": 0, **split}
+    latency = [row("zenoh", 900, 100.0), row("zenoh", 4500, 90.0),
+               row("can-to-zenoh", 900, 150.0, "zenoh-node", to_bridge_socket_p50_us=20.0,
+                   bridge_socket_to_capture_p50_us=130.0),
+               row("can-to-zenoh", 4500, 95.0, "python-ref"),
                row("can-to-zenoh", 4500, 80.0, "zenoh-node", mode="peer"),
                row("zenoh-to-can", 4500, 300.0, "zenoh-node"), row("can-to-zenoh", 8100, 99.0, "zenoh-node")]
     assert bench_paths.added_latency(latency) == [
-        {"system": "zenoh-node", "rate": 900, "over_zenoh_us": 50.0, "over_zenoh_and_bus_us": 30.0},
-        {"system": "zenoh-node", "rate": 4500, "over_zenoh_us": 5.0, "over_zenoh_and_bus_us": -5.0}]
-    assert "+50.0 µs (+30.0 µs)" in bench_paths.tables(latency, [])
+        {"system": "zenoh-node", "rate": 900, "over_zenoh_us": 50.0, "bus_p50_us": 20.0,
+         "from_can_stamp_over_zenoh_us": 30.0},
+        {"system": "python-ref", "rate": 4500, "over_zenoh_us": 5.0}]
+    md = bench_paths.tables(latency, [])
+    assert "zenoh-node at 900 frames/s: +50.0 µs (bus to the bridge's socket 20.0 µs; from the CAN stamp on +30.0 µs)" \
+        in md and "python-ref at 4500 frames/s: +5.0 µs\n" in md
+
+
+def test_can_stamp_split_reads_the_receive_stamp_of_each_frame_from_the_attachment(tmp_path):
+    def frame(can_id, sent):
+        return can_id.to_bytes(4, "little") + bytes([8, 0, 0, 0]) + sent.to_bytes(8, "little")
+    att = bytes([1, 0, 2, 0]) + (7).to_bytes(8, "little") + (T0 + 10_000).to_bytes(8, "little") \
+        + (T0 + 30_000).to_bytes(8, "little")
+    tsv = tmp_path / "zenoh.tsv"
+    tsv.write_text(f"{T0 + 110_000}\tvehicle/can/rx\t{(frame(0x100, T0) + frame(0x200, T0)).hex()}\t{att.hex()}\n"
+                   f"{T0 + 200_000}\tvehicle/can/rx\t{frame(0x100, T0).hex()}\t-\n")
+    assert bench_paths.can_stamp_split(tsv, 0x100) == {"to_bridge_socket_p50_us": 10.0,
+                                                      "bridge_socket_to_capture_p50_us": 100.0}
+    assert bench_paths.can_stamp_split(tmp_path / "missing.tsv", 0x100) == {}
 
 
 def result(system: str, buses: int, lossless: bool, cpu: float, delivered: int | None = None) -> dict:
