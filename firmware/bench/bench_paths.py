@@ -53,47 +53,41 @@ CAN_TO_ZENOH_ID, COMMAND_ID, ECHO_ID = 0x100, 0x321, 0x322
 BATCH_MS = 10  # zenoh-node's batching mode: one sample per bus every 10 ms
 
 
-def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]:
-    """(send stamp, receive ns) per frame in a zn-capture TSV (batched samples hold several frames)."""
-    out = []
+ATTACHMENT_HEADER = 12  # zenoh_node.h: version, reserved, count u16, first sequence u64; then rx ns u64 per frame
+
+
+def zenoh_frames(path: Path):
+    """(CAN id, send stamp, receive ns, the bridge's CAN receive stamp or None) per frame in a
+    zn-capture TSV: batched samples hold several frames, zenoh-node's attachment a stamp per frame."""
     if not path.exists():
-        return out
+        return
     for line in open(path):
         parts = line.rstrip("\n").split("\t")
         if len(parts) != 4:
             continue
         recv, payload = int(parts[0]), bytes.fromhex(parts[2])
-        for i in range(0, len(payload) - 15, 16):
-            frame = payload[i:i + 16]
-            if can_id is None or int.from_bytes(frame[0:4], "little") & 0x1FFFFFFF == can_id:
-                out.append((int.from_bytes(frame[8:16], "little"), recv))
-    return out
+        att = bytes.fromhex(parts[3]) if parts[3] != "-" else b""
+        for n, i in enumerate(range(0, len(payload) - 15, 16)):
+            at = ATTACHMENT_HEADER + 8 * n
+            can_rx = int.from_bytes(att[at:at + 8], "little") if len(att) >= at + 8 else None
+            yield (int.from_bytes(payload[i:i + 4], "little") & 0x1FFFFFFF,
+                   int.from_bytes(payload[i + 8:i + 16], "little"), recv, can_rx)
 
 
-ATTACHMENT_HEADER = 12  # zenoh_node.h: version, reserved, count u16, first sequence u64; then rx ns u64 per frame
+def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]:
+    """(send stamp, receive ns) per frame in a zn-capture TSV."""
+    return [(sent, recv) for fid, sent, recv, _ in zenoh_frames(path) if can_id is None or fid == can_id]
 
 
 def can_stamp_split(path: Path, can_id: int) -> dict:
     """p50 of the two halves of zenoh-node's CAN -> Zenoh latency, split at the CAN receive stamp
     (SO_TIMESTAMPNS) its attachment carries per frame: send -> the bridge's socket (the bus) and
     the bridge's socket -> capture (the reader waking, read, handoff to the publisher, put, Zenoh)."""
-    to_socket, from_socket = [], []
-    for line in open(path) if path.exists() else ():
-        parts = line.rstrip("\n").split("\t")
-        if len(parts) != 4 or parts[3] == "-":
-            continue
-        recv, payload, att = int(parts[0]), bytes.fromhex(parts[2]), bytes.fromhex(parts[3])
-        for n, i in enumerate(range(0, len(payload) - 15, 16)):
-            at = ATTACHMENT_HEADER + 8 * n
-            if int.from_bytes(payload[i:i + 4], "little") & 0x1FFFFFFF != can_id or len(att) < at + 8:
-                continue
-            sent, rx = int.from_bytes(payload[i + 8:i + 16], "little"), int.from_bytes(att[at:at + 8], "little")
-            to_socket.append((rx - sent) / 1000)
-            from_socket.append((recv - rx) / 1000)
-    if not to_socket:
+    split = [(rx - sent, recv - rx) for fid, sent, recv, rx in zenoh_frames(path) if fid == can_id and rx is not None]
+    if not split:
         return {}
-    return {"to_bridge_socket_p50_us": round(statistics.median(to_socket), 1),
-            "bridge_socket_to_capture_p50_us": round(statistics.median(from_socket), 1)}
+    return {"to_bridge_socket_p50_us": round(statistics.median(a for a, _ in split) / 1000, 1),
+            "bridge_socket_to_capture_p50_us": round(statistics.median(b for _, b in split) / 1000, 1)}
 
 
 def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
