@@ -81,6 +81,8 @@ def test_can_stamp_split_reads_the_receive_stamp_of_each_frame_from_the_attachme
                    f"{T0 + 200_000}\tvehicle/can/rx\t{frame(0x100, T0).hex()}\t-\n")
     assert bench_paths.can_stamp_split(tsv, 0x100) == {"to_bridge_socket_p50_us": 10.0,
                                                       "bridge_socket_to_capture_p50_us": 100.0}
+    assert bench_paths.can_stamp_split(tsv, 0x200) == {"to_bridge_socket_p50_us": 30.0,  # its own stamp, the 2nd
+                                                      "bridge_socket_to_capture_p50_us": 80.0}
     assert bench_paths.can_stamp_split(tmp_path / "missing.tsv", 0x100) == {}
 
 
