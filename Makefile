@@ -26,7 +26,7 @@ BENCH_BASE     := canbench/base:bookworm
 COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 BENCH_CAN_MODE ?= $(shell scripts/detect-can)
 BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
-IMAGE_SOURCES  := images ucan firmware ':!firmware/bench/*.py' ':!ucan/bench' canbench tests/scenarios tests/data pyproject.toml .dockerignore
+IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/scenarios tests/data pyproject.toml .dockerignore
 # content hash of everything the images are built from: unchanged sources, no rebuild.
 # Computed once per make run (:=), so the images built and the images tested are the same
 # even if a file changes meanwhile.
@@ -60,7 +60,7 @@ FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host zn-flood test clean preflight base images \
+        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -129,7 +129,7 @@ check-firmware: firmware firmware-asan
 	ctest --test-dir $(FW_ASAN_BUILD) --output-on-failure
 
 check-python:
-	$(PYTHON) -m ruff check canbench tests ucan/bench firmware/bench
+	$(PYTHON) -m ruff check canbench tests bench
 	$(PYTHON) -m mypy --ignore-missing-imports canbench
 	$(PYTEST) -q -m unit tests/unit
 
@@ -180,36 +180,42 @@ check-compose: images
 check: check-python check-ucan check-firmware check-bus check-kernel check-bridge check-faults fuzz check-compose
 	@echo "make check: all project tests passed"
 
-bench-bus: ucan
-	$(PYTHON) ucan/bench/bench_bus.py --build $(UCAN_BUILD) --out $(BENCH_OUT)
+# The benchmarks' loads (bench/tools): can-load, the stamped CAN load, echo ECU and counting
+# reader; hop_latency, one hop of a bus; zn-flood, a paced Rust publisher (same zenoh and
+# target dir as the port, so only its own crate compiles).
+BENCH_TOOLS_BUILD := $(BUILD)/bench-tools
+CAN_LOAD := $(BENCH_TOOLS_BUILD)/can-load
+ZN_FLOOD := $(CARGO_TARGET)/release/zn-flood
+bench-tools:
+	cmake -S bench/tools -B $(BENCH_TOOLS_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	ninja -C $(BENCH_TOOLS_BUILD)
+
+zn-flood:
+	CARGO_TARGET_DIR=$(CARGO_TARGET) cargo build --release --manifest-path bench/tools/zn-flood/Cargo.toml
+
+bench-bus: ucan bench-tools
+	$(PYTHON) -m bench.bus --build $(UCAN_BUILD) --tools $(BENCH_TOOLS_BUILD) --out $(BENCH_OUT)
 
 # zenoh-node against the Python reference bridge both ways, same run, same bus/router/capture
 # (README's performance table is generated from it: BENCH_README=1).
-bench-bridge: ucan firmware zenohd zn-flood
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_bridge.py $(BENCH_TOOLS) $(if $(BENCH_README),--update-readme)
+bench-bridge: ucan firmware zenohd bench-tools zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) -m bench.bridge $(BENCH_TOOLS) $(if $(BENCH_README),--update-readme)
 
-# The bench's captures at >= 100k frames/s: zn-flood (a paced Rust publisher, same zenoh and
-# target dir as the port, so only its own crate compiles) into zn-capture; cangen into candump -L.
-ZN_FLOOD := $(CARGO_TARGET)/release/zn-flood
+# The bench's captures at >= 100k frames/s: zn-flood into zn-capture; cangen into candump -L.
 bench-capture: ucan firmware zenohd zn-flood
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_capture.py --zn-flood $(ZN_FLOOD) --zn-capture $(FW_BUILD)/zn-capture --out $(BENCH_OUT)
+	ZENOHD=$(ZENOHD) $(PYTHON) -m bench.capture --zn-flood $(ZN_FLOOD) --zn-capture $(FW_BUILD)/zn-capture --out $(BENCH_OUT)
 
 # Latency and throughput of every path through the bridge next to the bus alone, raw Zenoh and
 # the Python reference; instructions per frame under callgrind (BENCH_RECORD=1 appends them to
-# docs/callgrind-history.csv). can-load (ucan/tests) is the stamped CAN load and echo ECU.
-CAN_LOAD := $(UCAN_BUILD)/can-load
-
-zn-flood:
-	CARGO_TARGET_DIR=$(CARGO_TARGET) cargo build --release --manifest-path firmware/bench/zn-flood/Cargo.toml
-
+# docs/callgrind-history.csv).
 # One output directory per make run: all benchmarks of `make bench` write side by side.
 BENCH_OUT := reports/bench/$(shell date -u +%Y%m%d-%H%M%S)
 BENCH_TOOLS = --zn-flood $(ZN_FLOOD) --can-load $(CAN_LOAD) --zn-capture $(FW_BUILD)/zn-capture --out $(BENCH_OUT)
-bench-paths: ucan firmware zenohd zn-flood
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_paths.py $(BENCH_TOOLS) $(if $(BENCH_QUICK),--quick)
+bench-paths: ucan firmware zenohd bench-tools zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) -m bench.paths $(BENCH_TOOLS) $(if $(BENCH_QUICK),--quick)
 
-bench-callgrind: ucan firmware zenohd zn-flood
-	ZENOHD=$(ZENOHD) $(PYTHON) firmware/bench/bench_callgrind.py $(BENCH_TOOLS) $(if $(BENCH_RECORD),--record)
+bench-callgrind: ucan firmware zenohd bench-tools zn-flood
+	ZENOHD=$(ZENOHD) $(PYTHON) -m bench.callgrind $(BENCH_TOOLS) $(if $(BENCH_RECORD),--record)
 
 # Benchmarks for nightly runs, never part of check (docs/benchmark.md, docs/userspace-bus.md):
 # in compose, with the binaries of the images `make test` runs (compose.bench.yaml, no network);

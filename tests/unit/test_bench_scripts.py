@@ -3,14 +3,11 @@ zn-capture TSV (batched samples too) and candump -L logs, latency percentiles,
 loss and duplicates, sustained rates, and the summary table's verdicts."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "firmware" / "bench"))
-import bench_bridge  # noqa: E402
-import bench_paths  # noqa: E402
+from bench import bridge as bench_bridge
+from bench import paths as bench_paths
+from bench import stamps
 
 pytestmark = pytest.mark.unit
 
@@ -26,9 +23,9 @@ def test_zenoh_stamps_reads_every_frame_of_a_batch_and_filters_by_id(tmp_path):
     tsv.write_text(f"{T0 + 500_000}\tvehicle/can/rx\t{frame(0x100, T0)}{frame(0x322, T0 + 1)}\t-\n"
                    f"{T0 + 900_000}\tvehicle/can/rx\t{frame(0x100, T0 + 2)}\t01000100\n"
                    "truncated line\n")
-    assert bench_paths.zenoh_stamps(tsv) == [(T0, T0 + 500_000), (T0 + 1, T0 + 500_000), (T0 + 2, T0 + 900_000)]
-    assert bench_paths.zenoh_stamps(tsv, 0x322) == [(T0 + 1, T0 + 500_000)]
-    assert bench_paths.zenoh_stamps(tmp_path / "missing.tsv") == []
+    assert stamps.zenoh_stamps(tsv) == [(T0, T0 + 500_000), (T0 + 1, T0 + 500_000), (T0 + 2, T0 + 900_000)]
+    assert stamps.zenoh_stamps(tsv, 0x322) == [(T0 + 1, T0 + 500_000)]
+    assert stamps.zenoh_stamps(tmp_path / "missing.tsv") == []
 
 
 def test_candump_stamps_takes_the_bus_time_and_the_data_stamp(tmp_path):
@@ -36,7 +33,7 @@ def test_candump_stamps_takes_the_bus_time_and_the_data_stamp(tmp_path):
     data = (T0 + 7).to_bytes(8, "little").hex().upper()
     log.write_text(f"(1795000000.000250) vcan0 321#{data}\n(1795000000.000300) vcan0 7FF#\n"
                    f"(1795000000.000400) vcan0 322#{data}\n")
-    assert bench_paths.candump_stamps(log, 0x321) == [(T0 + 7, T0 + 250_000)]
+    assert stamps.candump_stamps(log, 0x321) == [(T0 + 7, T0 + 250_000)]
 
 
 def test_latency_summary_counts_loss_duplicates_and_percentiles():
@@ -48,9 +45,9 @@ def test_latency_summary_counts_loss_duplicates_and_percentiles():
 
 
 def test_load_rate_reads_both_loads_reports():
-    assert bench_paths.load_rate('{"frames": 9000, "seconds": 1.0000, "enobufs_retries": 0}', 9000) == 9000
-    assert bench_paths.load_rate("144000 samples in 2.000 s\n", 144000) == 72000
-    assert bench_paths.load_rate("garbage", 10) is None
+    assert stamps.load_rate('{"frames": 9000, "seconds": 1.0000, "enobufs_retries": 0}', 9000) == 9000
+    assert stamps.load_rate("144000 samples in 2.000 s\n", 144000) == 72000
+    assert stamps.load_rate("garbage", 10) is None
 
 
 def test_added_latency_is_over_raw_zenoh_at_the_same_load_and_split_at_the_can_stamp():
@@ -79,11 +76,11 @@ def test_can_stamp_split_reads_the_receive_stamp_of_each_frame_from_the_attachme
     tsv = tmp_path / "zenoh.tsv"
     tsv.write_text(f"{T0 + 110_000}\tvehicle/can/rx\t{(frame(0x100, T0) + frame(0x200, T0)).hex()}\t{att.hex()}\n"
                    f"{T0 + 200_000}\tvehicle/can/rx\t{frame(0x100, T0).hex()}\t-\n")
-    assert bench_paths.can_stamp_split(tsv, 0x100) == {"to_bridge_socket_p50_us": 10.0,
+    assert stamps.can_stamp_split(tsv, 0x100) == {"to_bridge_socket_p50_us": 10.0,
                                                       "bridge_socket_to_capture_p50_us": 100.0}
-    assert bench_paths.can_stamp_split(tsv, 0x200) == {"to_bridge_socket_p50_us": 30.0,  # its own stamp, the 2nd
+    assert stamps.can_stamp_split(tsv, 0x200) == {"to_bridge_socket_p50_us": 30.0,  # its own stamp, the 2nd
                                                       "bridge_socket_to_capture_p50_us": 80.0}
-    assert bench_paths.can_stamp_split(tmp_path / "missing.tsv", 0x100) == {}
+    assert stamps.can_stamp_split(tmp_path / "missing.tsv", 0x100) == {}
 
 
 def result(system: str, buses: int, lossless: bool, cpu: float, delivered: int | None = None) -> dict:

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Bridge benchmark (make bench-bridge): CAN -> Zenoh and Zenoh -> CAN
-forwarding of zenoh-node next to the Python reference bridge (canbench/refbridge.py: python-can +
+forwarding of zenoh-node next to the Python reference bridge (bench/refbridge.py: python-can +
 eclipse-zenoh, what a user writes first), in the same run, on the same
 machine, same bus (the userspace hub), router (zenohd on loopback) and capture
 (zn-capture).
@@ -34,8 +34,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import signal
 import statistics
 import subprocess
 import sys
@@ -43,9 +41,20 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
-from canbench.runkeys import open_session, wait_token  # noqa: E402
+from canbench.runkeys import open_session, wait_token
+
+from .common import (
+    REPO,
+    add_tool_arguments,
+    cpu_s,
+    cpu_split_s,
+    free_port,
+    machine_line,
+    rss_mib,
+    run_id_and_output,
+    stop,
+)
+from .stamps import load_rate, zenoh_stamps
 
 BUS_COUNTS = (1, 2, 4, 8, 16, 24, 32, 48, 64)  # can-load: at most 64 interfaces
 BUSES_PER_NODE = 8  # ZN_MAX_BUSES
@@ -56,44 +65,6 @@ SYSTEMS = ("zenoh-node", f"zenoh-node-batch{BATCH_MS}", "python-ref")
 ZENOH_TO_CAN_SYSTEMS = ("zenoh-node", "python-ref")  # the publish period batches CAN -> Zenoh only
 DIRECTIONS = ("can-to-zenoh", "zenoh-to-can")
 SETTLE_S = 10.0
-
-
-def free_port() -> int:
-    import socket
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def cpu_split_s(pid: int) -> tuple[float, float]:
-    """(user, system) CPU seconds of a process, all its threads."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    tick = os.sysconf("SC_CLK_TCK")
-    return int(fields[11]) / tick, int(fields[12]) / tick
-
-
-def cpu_s(pid: int) -> float:
-    return sum(cpu_split_s(pid))
-
-
-def rss_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return 0.0
-
-
-def stop(proc: subprocess.Popen, close_stdin: bool = False) -> None:
-    """SIGTERM (or end of stdin for zn-capture), then SIGKILL after 10 s."""
-    if close_stdin:
-        proc.stdin.close()
-    else:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def count_frames(path: Path) -> int:
@@ -159,7 +130,7 @@ class Bench:
                 cmd = [self.args.bridge, "--router", endpoint, "--can", ",".join(group), "--publish-period-ms",
                        period, "--name", f"zenoh-node-{k}"]
             else:
-                cmd = [sys.executable, "-m", "canbench.refbridge", "--router", endpoint, "--can", ",".join(group)]
+                cmd = [sys.executable, "-m", "bench.refbridge", "--router", endpoint, "--can", ",".join(group)]
             log = open(self.workdir / f"{system}-{k}.log", "w")
             bridges.append(self.spawn(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO))
         try:
@@ -214,7 +185,6 @@ class Bench:
                 time.sleep(0.05)  # sampling period of the RSS probe
             if gen.returncode != 0:
                 sys.exit(f"zn-flood exited {gen.returncode}")
-            from bench_paths import load_rate  # bench_paths imports this module: import when used
             offered_fps = load_rate(gen.stdout.read(), offered)
             counted = json.loads(reader.communicate(timeout=SETTLE_S + 5)[0])  # stops after 1 s idle
         cpu = sum(cpu_s(b.pid) for b in bridges) - cpu0
@@ -224,7 +194,6 @@ class Bench:
                 stop(p, close_stdin=p.stdin is not None)
         session.close()
         if direction == "can-to-zenoh":
-            from bench_paths import zenoh_stamps  # bench_paths imports this module: import when used
             stamps = zenoh_stamps(capture_file)
             received = count_frames(capture_file)
             delivered = sustained_fps(len(stamps), min(t for t, _ in stamps), max(r for _, r in stamps)) \
@@ -317,29 +286,6 @@ def plot(results: list[dict], path: Path, direction: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
-
-
-def add_tool_arguments(ap: argparse.ArgumentParser) -> None:
-    """The tools every benchmark script takes (make bench passes one list to all of them)."""
-    ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
-    ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
-    ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
-    ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
-    ap.add_argument("--can-load", default=str(REPO / "build" / "ucan" / "can-load"))
-    ap.add_argument("--zn-flood", default=str(REPO / "build" / "rust" / "release" / "zn-flood"))
-    ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
-
-
-def run_id_and_output(args) -> tuple[str, Path]:
-    """This run's id (UTC time) and its output directory, created."""
-    run_id = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out = Path(args.out) if args.out else REPO / "reports" / "bench" / run_id
-    out.mkdir(parents=True, exist_ok=True)
-    return run_id, out
-
-
-def machine_line() -> str:
-    return f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
 
 
 def main() -> int:

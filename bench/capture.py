@@ -29,14 +29,11 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "ucan" / "bench"))
-from bench_bridge import add_tool_arguments, free_port, machine_line, run_id_and_output, stop  # noqa: E402
-from bench_bus import start_hub  # noqa: E402
+from canbench.capture import CAPTURE_RCVBUF
+from canbench.runkeys import open_session, wait_token
 
-from canbench.capture import CAPTURE_RCVBUF  # noqa: E402
-from canbench.runkeys import open_session, wait_token  # noqa: E402
+from .bus import start_hub
+from .common import add_tool_arguments, free_port, machine_line, run_id_and_output, stop
 
 TARGET_FPS = 100_000
 ZENOH_RATES = (50_000, 100_000, 150_000)

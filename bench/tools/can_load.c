@@ -1,5 +1,5 @@
-/* can-load - the benchmarks' CAN side (ucan/bench/bench_bus.py,
- * firmware/bench/bench_paths.py, bench_callgrind.py).
+/* can-load - the benchmarks' CAN side (bench/bus.py,
+ * bench/paths.py, bench/callgrind.py, bench/bridge.py).
  *
  *   can-load send IFACES ID RATE COUNT
  *     writes COUNT frames to each interface of IFACES (comma separated; id ID+i

@@ -26,7 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
+from .common import REPO
+
 READERS = 3
 THROUGHPUT_FRAMES = 200_000
 THROUGHPUT_RATES_PER_MS = (50, 100, 150, 250)
@@ -76,14 +77,14 @@ def throughput(build: Path, workdir: Path, env: dict, per_ms: int) -> dict:
             "hub_drops": stats["interfaces"][0]["rx_drops"]}
 
 
-def paced(build: Path, workdir: Path, env: dict, rate: int) -> dict:
+def paced(build: Path, tools: Path, workdir: Path, env: dict, rate: int) -> dict:
     """can-load at an exact pace into 3 counting readers (no text formatting anywhere)."""
-    readers = [subprocess.Popen([str(build / "can-load"), "count", "vcan0", str(THROUGHPUT_FRAMES), "2000"],
+    readers = [subprocess.Popen([str(tools / "can-load"), "count", "vcan0", str(THROUGHPUT_FRAMES), "2000"],
                                 stdout=subprocess.PIPE, text=True, env=env) for _ in range(READERS)]
     deadline = time.monotonic() + 10
     while bound_readers(build, workdir) < READERS and time.monotonic() < deadline:
         time.sleep(0.01)  # polling the hub's own readiness count, bounded
-    sent = json.loads(subprocess.run([str(build / "can-load"), "send", "vcan0", "123", str(rate),
+    sent = json.loads(subprocess.run([str(tools / "can-load"), "send", "vcan0", "123", str(rate),
                                       str(THROUGHPUT_FRAMES)], capture_output=True, text=True, env=env,
                                      check=True, timeout=120).stdout)
     counted = [json.loads(r.communicate(timeout=30)[0]) for r in readers]
@@ -94,18 +95,19 @@ def paced(build: Path, workdir: Path, env: dict, rate: int) -> dict:
             "lossless": all(c["frames"] == THROUGHPUT_FRAMES and c["out_of_order"] == 0 for c in counted)}
 
 
-def latency(build: Path, env: dict, mode: str, rate: int) -> dict:
-    out = subprocess.run([str(build / "hop_latency"), mode, "vcan0" if mode == "can" else "-", str(LATENCY_FRAMES),
+def latency(tools: Path, env: dict, mode: str, rate: int) -> dict:
+    out = subprocess.run([str(tools / "hop_latency"), mode, "vcan0" if mode == "can" else "-", str(LATENCY_FRAMES),
                           str(rate)], capture_output=True, text=True, env=env if mode == "can" else None, timeout=120)
     return {"mode": mode, "rate": rate, **json.loads(out.stdout)}
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--build", type=Path, default=REPO / "build" / "ucan")
+    ap.add_argument("--build", type=Path, default=REPO / "build" / "ucan", help="the hub, ucanctl, the preload")
+    ap.add_argument("--tools", type=Path, default=REPO / "build" / "bench-tools", help="can-load, hop_latency")
     ap.add_argument("--out", type=Path, default=REPO / "reports" / "bench")
     args = ap.parse_args()
-    build = args.build.resolve()
+    build, tools = args.build.resolve(), args.tools.resolve()
     workdir = Path(tempfile.mkdtemp(prefix="ucan-bench-", dir="/tmp"))
     hub, env = start_hub(build, workdir)
     try:
@@ -114,9 +116,9 @@ def main() -> int:
             "throughput": [throughput(build, workdir, env, r) for r in THROUGHPUT_RATES_PER_MS],
             "latency": [],
         }
-        results["paced"] = [paced(build, workdir, env, r) for r in PACED_RATES]
+        results["paced"] = [paced(build, tools, workdir, env, r) for r in PACED_RATES]
         for rate in LATENCY_RATES:
-            hub_lat, floor = latency(build, env, "can", rate), latency(build, env, "socketpair", rate)
+            hub_lat, floor = latency(tools, env, "can", rate), latency(tools, env, "socketpair", rate)
             results["latency"] += [hub_lat, floor]
             hub_lat["p50_ratio_to_socketpair"] = round(hub_lat["p50_us"] / max(floor["p50_us"], 0.01), 1)
     finally:
@@ -126,7 +128,7 @@ def main() -> int:
     hub, env = start_hub(build, spin_dir, "-s", str(SPIN_US))
     try:
         for rate in LATENCY_RATES:
-            spun = latency(build, env, "can", rate)
+            spun = latency(tools, env, "can", rate)
             floor = next(r for r in results["latency"] if r["mode"] == "socketpair" and r["rate"] == rate)
             spun.update(mode=f"can-spin{SPIN_US}",
                         p50_ratio_to_socketpair=round(spun["p50_us"] / max(floor["p50_us"], 0.01), 1))

@@ -16,12 +16,9 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "firmware" / "bench"))
-sys.path.insert(0, str(REPO))
-from bench_bridge import free_port, stop  # noqa: E402
+from canbench.runkeys import open_session, wait_token
 
-from canbench.runkeys import open_session, wait_token  # noqa: E402
+from .common import REPO, free_port, stop
 
 
 def memory(pid: int) -> dict:

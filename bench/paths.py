@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import socket
 import statistics
 import subprocess
@@ -35,12 +34,10 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "firmware" / "bench"))
-sys.path.insert(0, str(REPO))
-from bench_bridge import add_tool_arguments, cpu_s, free_port, machine_line, rss_mib, run_id_and_output, stop  # noqa: E402
+from canbench.runkeys import open_session, wait_token
 
-from canbench.runkeys import open_session, wait_token  # noqa: E402
+from .common import REPO, add_tool_arguments, cpu_s, free_port, machine_line, rss_mib, run_id_and_output, stop
+from .stamps import can_stamp_split, candump_stamps, load_rate, zenoh_stamps
 
 BUS_FPS = 9000  # one saturated 1 Mbit/s bus of 8-byte frames
 LOADS = {"10%": 900, "50%": 4500, "90%": 8100}
@@ -51,59 +48,6 @@ THROUGHPUT_S = 1.0
 SETTLE_S = 5.0
 CAN_TO_ZENOH_ID, COMMAND_ID, ECHO_ID = 0x100, 0x321, 0x322
 BATCH_MS = 10  # zenoh-node's batching mode: one sample per bus every 10 ms
-
-
-ATTACHMENT_HEADER = 12  # zenoh_node.h: version, reserved, count u16, first sequence u64; then rx ns u64 per frame
-
-
-def zenoh_frames(path: Path):
-    """(CAN id, send stamp, receive ns, the bridge's CAN receive stamp or None) per frame in a
-    zn-capture TSV: batched samples hold several frames, zenoh-node's attachment a stamp per frame."""
-    if not path.exists():
-        return
-    for line in open(path):
-        parts = line.rstrip("\n").split("\t")
-        if len(parts) != 4:
-            continue
-        recv, payload = int(parts[0]), bytes.fromhex(parts[2])
-        att = bytes.fromhex(parts[3]) if parts[3] != "-" else b""
-        for n, i in enumerate(range(0, len(payload) - 15, 16)):
-            at = ATTACHMENT_HEADER + 8 * n
-            can_rx = int.from_bytes(att[at:at + 8], "little") if len(att) >= at + 8 else None
-            yield (int.from_bytes(payload[i:i + 4], "little") & 0x1FFFFFFF,
-                   int.from_bytes(payload[i + 8:i + 16], "little"), recv, can_rx)
-
-
-def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]:
-    """(send stamp, receive ns) per frame in a zn-capture TSV."""
-    return [(sent, recv) for fid, sent, recv, _ in zenoh_frames(path) if can_id is None or fid == can_id]
-
-
-def can_stamp_split(path: Path, can_id: int) -> dict:
-    """p50 of the two halves of zenoh-node's CAN -> Zenoh latency, split at the CAN receive stamp
-    (SO_TIMESTAMPNS) its attachment carries per frame: send -> the bridge's socket (the bus) and
-    the bridge's socket -> capture (the reader waking, read, handoff to the publisher, put, Zenoh)."""
-    split = [(rx - sent, recv - rx) for fid, sent, recv, rx in zenoh_frames(path) if fid == can_id and rx is not None]
-    if not split:
-        return {}
-    return {"to_bridge_socket_p50_us": round(statistics.median(a for a, _ in split) / 1000, 1),
-            "bridge_socket_to_capture_p50_us": round(statistics.median(b for _, b in split) / 1000, 1)}
-
-
-def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
-    """(send stamp, bus receive ns) per frame with can_id in a candump -L log."""
-    out = []
-    if not path.exists():
-        return out
-    want = f"{can_id:03X}#"
-    for line in open(path):
-        parts = line.split()
-        if len(parts) == 3 and parts[2].startswith(want):
-            sec, usec = parts[0].strip("()").split(".")
-            data = bytes.fromhex(parts[2].split("#", 1)[1])
-            if len(data) == 8:
-                out.append((int.from_bytes(data, "little"), int(sec) * 1_000_000_000 + int(usec) * 1000))
-    return out
 
 
 def latency_summary(stamps: list[tuple[int, int]], sent: int) -> dict:
@@ -168,7 +112,7 @@ class Rig:
             return
         log = open(self.workdir / "bridge.log", "w")
         if bridge == "python-ref":
-            cmd = [sys.executable, "-m", "canbench.refbridge", "--router", router, "--can", "vcan0"]
+            cmd = [sys.executable, "-m", "bench.refbridge", "--router", router, "--can", "vcan0"]
         else:
             period = bridge.removeprefix("zenoh-node").removeprefix("-batch") or "0"
             cmd = [self.args.bridge, "--mode", mode, "--can", "vcan0", "--publish-period-ms", period]
@@ -224,12 +168,6 @@ class Rig:
         for p in reversed(self.procs):
             if p.poll() is None:
                 stop(p, close_stdin=p.stdin is not None)
-
-
-def load_rate(report: str, count: int) -> int | None:
-    """The rate a load really offered, from its own report (can-load: JSON; zn-flood: "N samples in S s")."""
-    m = re.search(r'"seconds": ([\d.]+)', report) or re.search(r"samples in ([\d.]+) s", report)
-    return round(count / float(m.group(1))) if m and float(m.group(1)) > 0 else None
 
 
 def wait_for(count_fn, expected: int) -> None:

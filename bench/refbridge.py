@@ -5,7 +5,7 @@ the tx key). Declares a liveliness token like the bridge, so the same
 readiness wait applies. Not a product: the baseline `make bench` measures
 zenoh-node against, in the same run.
 
-  python -m canbench.refbridge --router tcp/127.0.0.1:7447 --can vcan0,vcan1"""
+  python -m bench.refbridge --router tcp/127.0.0.1:7447 --can vcan0,vcan1"""
 from __future__ import annotations
 
 import argparse
@@ -15,8 +15,8 @@ import threading
 import can
 import zenoh
 
-from . import wire
-from .runkeys import open_session
+from canbench import wire
+from canbench.runkeys import open_session
 
 
 def frame_of(msg: can.Message) -> wire.Frame:

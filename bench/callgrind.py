@@ -29,13 +29,10 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "firmware" / "bench"))
-sys.path.insert(0, str(REPO))
-from bench_bridge import add_tool_arguments, free_port, run_id_and_output, stop  # noqa: E402
-from bench_paths import candump_stamps, zenoh_stamps  # noqa: E402
+from canbench.runkeys import open_session, wait_token
 
-from canbench.runkeys import open_session, wait_token  # noqa: E402
+from .common import REPO, add_tool_arguments, free_port, run_id_and_output, stop
+from .stamps import candump_stamps, zenoh_stamps
 
 FRAMES = 5000
 RATE = 1000  # frames/s: slow enough for the bridge under valgrind (about 50x slower) to keep up
