@@ -1,10 +1,6 @@
-/* ucan-hub - userspace SocketCAN bus: serves virtual CAN interfaces to
- * programs running under libucan-preload.so, with kernel vcan semantics.
- *
- * Usage: ucan-hub [-d dir] [-q frames] [-r fd] [-v] [iface[:opt=val,...]]...
- *   iface options: bitrate=<bit/s> (0 = unthrottled, vcan behaviour),
- *                  stuffing=worst|exact|none, mtu=16|72
- *   example: ucan-hub vcan0 vcan1:bitrate=500000,stuffing=exact,mtu=16
+/* hub.c - the userspace SocketCAN bus: serves virtual CAN interfaces to
+ * programs running under libucan-preload.so, with kernel vcan semantics
+ * (hub_main.c is the ucan-hub daemon around it, hub.h the interface).
  *
  * One thread, one epoll loop. Every frame accepted from a sender is delivered
  * to all matching readers before the next frame is read, which gives the one
@@ -14,7 +10,6 @@
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
-#include <getopt.h>
 #include <inttypes.h>
 #include <signal.h>
 #include <stdarg.h>
@@ -31,11 +26,11 @@
 #include <unistd.h>
 
 #include "canfilter.h"
+#include "hub.h"
 #include "canframelen.h"
 #include "ucan_msg.h"
 #include "ucan_proto.h"
 
-#define DEFAULT_QUEUE_FRAMES 4096
 #define MSGS_PER_WAKEUP 256	 /* fairness between senders */
 #define TX_PENDING_SOFT_LIMIT 256 /* bitrate interfaces: pause senders above this */
 #define MAX_MSG 8192		 /* BIND with 512 filters is 4120 bytes */
@@ -85,7 +80,7 @@ struct iface {
 static struct {
 	const char *dir;
 	char sock_path[sizeof(((struct sockaddr_un *)0)->sun_path)];
-	int listen_fd, epoll_fd, stats_timer_fd, verbose;
+	int listen_fd, lock_fd, epoll_fd, stats_timer_fd, verbose;
 	unsigned spin_us; /* -s: keep polling this long after the last event before sleeping */
 	uint32_t default_queue;
 	struct iface ifaces[UCAN_MAX_IFACES];
@@ -99,31 +94,18 @@ static struct {
 	struct timespec start;
 	uint64_t proto_errors;
 	volatile sig_atomic_t stop;
-} hub = { .listen_fd = -1, .epoll_fd = -1, .stats_timer_fd = -1, .default_queue = DEFAULT_QUEUE_FRAMES };
+} hub = { .listen_fd = -1, .lock_fd = -1, .epoll_fd = -1, .stats_timer_fd = -1, .default_queue = HUB_DEFAULT_QUEUE_FRAMES };
 
-static void logmsg(const char *fmt, ...)
+void hub_log(const char *fmt, ...)
 {
 	va_list ap;
+	if (hub.verbose < 0) /* the fuzzer's hub: thousands of refusals a second */
+		return;
 	va_start(ap, fmt);
 	fputs("ucan-hub: ", stderr);
 	vfprintf(stderr, fmt, ap);
 	fputc('\n', stderr);
 	va_end(ap);
-}
-
-static void usage(void)
-{
-	fprintf(stderr,
-		"Usage: ucan-hub [-d dir] [-q frames] [-r fd] [-s usec] [-v] [iface[:opt=val,...]]...\n"
-		"  -d dir     socket directory (default $" UCAN_DIR_ENV " or " UCAN_DEFAULT_DIR ")\n"
-		"  -q frames  frames queued per slow reader before drops (default %d)\n"
-		"  -r fd      write \"ready\\n\" to fd once accepting connections\n"
-		"  -s usec    busy-poll this long after the last event before sleeping: lower\n"
-		"             latency for a core's worth of CPU while busy (default 0: never spin)\n"
-		"  -v         log connections\n"
-		"  iface options: bitrate=<bit/s>, stuffing=worst|exact|none, mtu=16|72\n"
-		"  default interface: vcan0 (unthrottled, mtu 72, like kernel vcan)\n",
-		DEFAULT_QUEUE_FRAMES);
 }
 
 static uint64_t now_ns(void)
@@ -133,9 +115,8 @@ static uint64_t now_ns(void)
 	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
 }
 
-static void on_signal(int sig)
+void hub_request_stop(void)
 {
-	(void)sig;
 	hub.stop = 1;
 }
 
@@ -153,17 +134,17 @@ static int ts_before_eq(const struct timespec *a, const struct timespec *b)
 
 /* ---- configuration ---- */
 
-static int parse_iface(const char *spec)
+int hub_add_iface(const char *spec)
 {
 	struct iface *ifc;
 	char buf[256], *opts, *tok, *save = NULL;
 
 	if (hub.nifs >= UCAN_MAX_IFACES) {
-		logmsg("too many interfaces (max %d)", UCAN_MAX_IFACES);
+		hub_log("too many interfaces (max %d)", UCAN_MAX_IFACES);
 		return -1;
 	}
 	if (snprintf(buf, sizeof(buf), "%s", spec) >= (int)sizeof(buf)) {
-		logmsg("interface spec too long: %s", spec);
+		hub_log("interface spec too long: %s", spec);
 		return -1;
 	}
 	ifc = &hub.ifaces[hub.nifs];
@@ -174,12 +155,12 @@ static int parse_iface(const char *spec)
 	if (opts)
 		*opts++ = '\0';
 	if (buf[0] == '\0' || strlen(buf) >= sizeof(ifc->info.name) || strchr(buf, '/')) {
-		logmsg("invalid interface name '%s' (1-15 characters, no '/')", buf);
+		hub_log("invalid interface name '%s' (1-15 characters, no '/')", buf);
 		return -1;
 	}
 	for (unsigned i = 0; i < hub.nifs; i++)
 		if (strcmp(hub.ifaces[i].info.name, buf) == 0) {
-			logmsg("interface %s given twice", buf);
+			hub_log("interface %s given twice", buf);
 			return -1;
 		}
 	strcpy(ifc->info.name, buf);
@@ -189,14 +170,14 @@ static int parse_iface(const char *spec)
 	for (tok = opts ? strtok_r(opts, ",", &save) : NULL; tok; tok = strtok_r(NULL, ",", &save)) {
 		char *val = strchr(tok, '='), *end;
 		if (!val) {
-			logmsg("%s: option '%s' needs a value", ifc->info.name, tok);
+			hub_log("%s: option '%s' needs a value", ifc->info.name, tok);
 			return -1;
 		}
 		*val++ = '\0';
 		if (strcmp(tok, "bitrate") == 0) {
 			unsigned long rate = strtoul(val, &end, 10);
 			if (*end || rate > 10000000ul) {
-				logmsg("%s: bitrate '%s' is not 0..10000000 bit/s", ifc->info.name, val);
+				hub_log("%s: bitrate '%s' is not 0..10000000 bit/s", ifc->info.name, val);
 				return -1;
 			}
 			ifc->info.bitrate = (uint32_t)rate;
@@ -208,7 +189,7 @@ static int parse_iface(const char *spec)
 			else if (strcmp(val, "none") == 0)
 				ifc->info.stuffing = UCAN_STUFF_NONE;
 			else {
-				logmsg("%s: stuffing '%s' is not worst|exact|none", ifc->info.name, val);
+				hub_log("%s: stuffing '%s' is not worst|exact|none", ifc->info.name, val);
 				return -1;
 			}
 		} else if (strcmp(tok, "mtu") == 0) {
@@ -217,11 +198,11 @@ static int parse_iface(const char *spec)
 			else if (strcmp(val, "72") == 0)
 				ifc->info.mtu = CANFD_MTU;
 			else {
-				logmsg("%s: mtu '%s' is not 16 or 72", ifc->info.name, val);
+				hub_log("%s: mtu '%s' is not 16 or 72", ifc->info.name, val);
 				return -1;
 			}
 		} else {
-			logmsg("%s: unknown option '%s' (bitrate, stuffing, mtu)", ifc->info.name, tok);
+			hub_log("%s: unknown option '%s' (bitrate, stuffing, mtu)", ifc->info.name, tok);
 			return -1;
 		}
 	}
@@ -260,7 +241,7 @@ static void client_close(uint32_t idx, const char *why)
 	if (c->fd < 0)
 		return;
 	if (hub.verbose || why)
-		logmsg("client %u (pid %d, %s) closed%s%s", idx, (int)c->pid, c->cookie[0] ? c->cookie : "-",
+		hub_log("client %u (pid %d, %s) closed%s%s", idx, (int)c->pid, c->cookie[0] ? c->cookie : "-",
 		       why ? ": " : "", why ? why : "");
 	epoll_ctl(hub.epoll_fd, EPOLL_CTL_DEL, c->fd, NULL);
 	close(c->fd);
@@ -302,12 +283,12 @@ static void accept_clients(void)
 		int fd = accept4(hub.listen_fd, (struct sockaddr *)&addr, &addrlen, SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd < 0) {
 			if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
-				logmsg("accept: %s", strerror(errno));
+				hub_log("accept: %s", strerror(errno));
 			return;
 		}
 		uint32_t idx = client_alloc();
 		if (idx == UINT32_MAX) {
-			logmsg("out of memory for client");
+			hub_log("out of memory for client");
 			close(fd);
 			continue;
 		}
@@ -328,12 +309,12 @@ static void accept_clients(void)
 		if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &credlen) == 0)
 			c->pid = cred.pid;
 		if (epoll_set(fd, EPOLLIN, (uint64_t)c->generation << 32 | idx, EPOLL_CTL_ADD) < 0) {
-			logmsg("epoll add: %s", strerror(errno));
+			hub_log("epoll add: %s", strerror(errno));
 			client_close(idx, "epoll failure");
 			continue;
 		}
 		if (hub.verbose)
-			logmsg("client %u connected (pid %d, %s)", idx, (int)c->pid, c->cookie);
+			hub_log("client %u connected (pid %d, %s)", idx, (int)c->pid, c->cookie);
 	}
 }
 
@@ -833,7 +814,7 @@ static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
 static int make_dir(const char *dir)
 {
 	if (mkdir(dir, 0777) < 0 && errno != EEXIST) {
-		logmsg("cannot create %s: %s", dir, strerror(errno));
+		hub_log("cannot create %s: %s", dir, strerror(errno));
 		return -1;
 	}
 	return 0;
@@ -847,26 +828,26 @@ static int listen_socket(void)
 	if (snprintf(hub.sock_path, sizeof(hub.sock_path), "%s/%s", hub.dir, UCAN_SOCK_NAME) >=
 		    (int)sizeof(hub.sock_path) ||
 	    snprintf(lock_path, sizeof(lock_path), "%s/%s", hub.dir, UCAN_LOCK_NAME) >= (int)sizeof(lock_path)) {
-		logmsg("socket directory path too long: %s", hub.dir);
+		hub_log("socket directory path too long: %s", hub.dir);
 		return -1;
 	}
 	if (make_dir(hub.dir) < 0)
 		return -1;
 	/* the lock, held for the hub's lifetime, tells a live hub from a stale socket file */
-	int lock_fd = open(lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+	int lock_fd = hub.lock_fd = open(lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
 	if (lock_fd < 0) {
-		logmsg("cannot open %s: %s", lock_path, strerror(errno));
+		hub_log("cannot open %s: %s", lock_path, strerror(errno));
 		return -1;
 	}
 	if (flock(lock_fd, LOCK_EX | LOCK_NB) < 0) {
-		logmsg("another hub is already serving %s", hub.sock_path);
+		hub_log("another hub is already serving %s", hub.sock_path);
 		return -1;
 	}
 	if (unlink(hub.sock_path) == 0)
-		logmsg("replaced stale socket %s", hub.sock_path);
+		hub_log("replaced stale socket %s", hub.sock_path);
 	hub.listen_fd = socket(AF_UNIX, SOCK_SEQPACKET | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 	if (hub.listen_fd < 0) {
-		logmsg("socket: %s", strerror(errno));
+		hub_log("socket: %s", strerror(errno));
 		return -1;
 	}
 	strcpy(addr.sun_path, hub.sock_path);
@@ -874,7 +855,7 @@ static int listen_socket(void)
 	int rc = bind(hub.listen_fd, (struct sockaddr *)&addr, sizeof(addr));
 	umask(old);
 	if (rc < 0 || listen(hub.listen_fd, SOMAXCONN) < 0) {
-		logmsg("cannot listen on %s: %s", hub.sock_path, strerror(errno));
+		hub_log("cannot listen on %s: %s", hub.sock_path, strerror(errno));
 		return -1;
 	}
 	return 0;
@@ -894,73 +875,22 @@ static void stats_tick(void)
 	}
 }
 
-int main(int argc, char **argv)
-{
-	int opt, ready_fd = -1;
-	char *end;
 
-	hub.dir = getenv(UCAN_DIR_ENV);
-	if (!hub.dir || !*hub.dir)
-		hub.dir = UCAN_DEFAULT_DIR;
-	while ((opt = getopt(argc, argv, "d:q:r:s:vh")) != -1) {
-		switch (opt) {
-		case 'd':
-			hub.dir = optarg;
-			break;
-		case 'q': {
-			unsigned long q = strtoul(optarg, &end, 10);
-			if (*end || q < 1 || q > 10000000ul) {
-				logmsg("-q '%s' is not 1..10000000 frames", optarg);
-				return 2;
-			}
-			hub.default_queue = (uint32_t)q;
-			break;
-		}
-		case 'r':
-			ready_fd = (int)strtol(optarg, &end, 10);
-			if (*end || ready_fd < 0) {
-				logmsg("-r '%s' is not a file descriptor", optarg);
-				return 2;
-			}
-			break;
-		case 's': {
-			unsigned long us = strtoul(optarg, &end, 10);
-			if (*end || us > 1000000ul) {
-				logmsg("-s '%s' is not 0..1000000 microseconds", optarg);
-				return 2;
-			}
-			hub.spin_us = (unsigned)us;
-			break;
-		}
-		case 'v':
-			hub.verbose = 1;
-			break;
-		default:
-			usage();
-			return opt == 'h' ? 0 : 2;
-		}
-	}
-	for (int i = optind; i < argc; i++)
-		if (parse_iface(argv[i]) < 0)
-			return 2;
-	if (hub.nifs == 0 && parse_iface("vcan0") < 0)
-		return 2;
+/* ---- lifecycle ---- */
+
+int hub_start(const struct hub_options *opts)
+{
+	hub.dir = opts->dir;
+	hub.default_queue = opts->default_queue ? opts->default_queue : HUB_DEFAULT_QUEUE_FRAMES;
+	hub.spin_us = opts->spin_us;
+	hub.verbose = opts->verbose;
+	if (hub.nifs == 0 && hub_add_iface("vcan0") < 0)
+		return -1;
 	for (unsigned i = 0; i < hub.nifs; i++)
 		hub.ifinfos[i] = hub.ifaces[i].info;
-	const char *test_fault = getenv("UCAN_HUB_TEST_FAULT");
-	if (test_fault && strcmp(test_fault, "ignore-rtr-filter") == 0) {
-		can_filter_test_ignore_rtr = 1;
-		logmsg("TEST FAULT: filters ignore the RTR bit (UCAN_HUB_TEST_FAULT)");
-	}
-
-	struct sigaction sa = { .sa_handler = on_signal };
-	sigaction(SIGINT, &sa, NULL);
-	sigaction(SIGTERM, &sa, NULL);
-	signal(SIGPIPE, SIG_IGN);
 	clock_gettime(CLOCK_MONOTONIC, &hub.start);
-
 	if (listen_socket() < 0)
-		return 1;
+		return -1;
 	hub.epoll_fd = epoll_create1(EPOLL_CLOEXEC);
 	hub.stats_timer_fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
 	struct itimerspec second = { .it_interval = { 1, 0 }, .it_value = { 1, 0 } };
@@ -968,8 +898,8 @@ int main(int argc, char **argv)
 	    timerfd_settime(hub.stats_timer_fd, 0, &second, NULL) < 0 ||
 	    epoll_set(hub.listen_fd, EPOLLIN, TAG_LISTEN, EPOLL_CTL_ADD) < 0 ||
 	    epoll_set(hub.stats_timer_fd, EPOLLIN, TAG_STATS_TIMER, EPOLL_CTL_ADD) < 0) {
-		logmsg("epoll/timerfd setup: %s", strerror(errno));
-		return 1;
+		hub_log("epoll/timerfd setup: %s", strerror(errno));
+		return -1;
 	}
 	for (unsigned i = 0; i < hub.nifs; i++) {
 		struct iface *ifc = &hub.ifaces[i];
@@ -977,61 +907,98 @@ int main(int argc, char **argv)
 			continue;
 		ifc->timerfd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
 		if (ifc->timerfd < 0 || epoll_set(ifc->timerfd, EPOLLIN, TAG_IFACE_TIMER_BASE + i, EPOLL_CTL_ADD) < 0) {
-			logmsg("timerfd: %s", strerror(errno));
-			return 1;
+			hub_log("timerfd: %s", strerror(errno));
+			return -1;
 		}
 	}
 	for (unsigned i = 0; i < hub.nifs; i++) {
 		const struct ucan_ifinfo *in = &hub.ifaces[i].info;
 		static const char *const stuffing[] = { "worst", "exact", "none" };
 		if (in->bitrate)
-			logmsg("%s index %u mtu %u bitrate %u stuffing %s", in->name, in->ifindex, in->mtu,
-			       in->bitrate, stuffing[in->stuffing]);
+			hub_log("%s index %u mtu %u bitrate %u stuffing %s", in->name, in->ifindex, in->mtu,
+				in->bitrate, stuffing[in->stuffing]);
 		else
-			logmsg("%s index %u mtu %u unthrottled", in->name, in->ifindex, in->mtu);
+			hub_log("%s index %u mtu %u unthrottled", in->name, in->ifindex, in->mtu);
 	}
-	logmsg("listening on %s", hub.sock_path);
-	if (ready_fd >= 0) {
-		if (write(ready_fd, "ready\n", 6) < 0)
-			logmsg("readiness fd %d: %s", ready_fd, strerror(errno));
-		close(ready_fd);
-	}
+	hub_log("listening on %s", hub.sock_path);
+	return 0;
+}
 
+int hub_run_once(int timeout_ms)
+{
 	struct epoll_event events[64];
+	int n = epoll_wait(hub.epoll_fd, events, 64, timeout_ms);
+	if (n < 0) {
+		if (errno == EINTR)
+			return 0;
+		hub_log("epoll_wait: %s", strerror(errno));
+		return -1;
+	}
+	for (int i = 0; i < n; i++) {
+		uint64_t tag = events[i].data.u64;
+		uint32_t slot = (uint32_t)tag, generation = (uint32_t)(tag >> 32);
+		if (tag == TAG_LISTEN) {
+			accept_clients();
+		} else if (tag == TAG_STATS_TIMER) {
+			stats_tick();
+		} else if (tag >= TAG_IFACE_TIMER_BASE && tag < TAG_STATS_TIMER) {
+			wire_timer(&hub.ifaces[tag - TAG_IFACE_TIMER_BASE]);
+		} else if (slot < hub.nclients_alloc && hub.clients[slot].fd >= 0 &&
+			   hub.clients[slot].generation == generation) {
+			uint32_t ev = events[i].events;
+			if (ev & EPOLLOUT)
+				client_flush(slot);
+			if (hub.clients[slot].fd >= 0 && (ev & (EPOLLIN | EPOLLHUP | EPOLLERR)))
+				drain_client(slot, MSGS_PER_WAKEUP, !!(ev & (EPOLLHUP | EPOLLERR)));
+		}
+	}
+	flush_dirty();
+	return n;
+}
+
+int hub_run(void)
+{
 	uint64_t last_event_ns = 0;
 	while (!hub.stop) {
 		/* spinning (opt-in) saves the hub's own wakeup, about half of a hop's latency */
 		int spinning = hub.spin_us && now_ns() - last_event_ns < (uint64_t)hub.spin_us * 1000;
-		int n = epoll_wait(hub.epoll_fd, events, 64, spinning ? 0 : -1);
+		int n = hub_run_once(spinning ? 0 : -1);
+		if (n < 0)
+			return -1;
 		if (n > 0 && hub.spin_us)
 			last_event_ns = now_ns();
-		if (n < 0) {
-			if (errno == EINTR)
-				continue;
-			logmsg("epoll_wait: %s", strerror(errno));
-			return 1;
-		}
-		for (int i = 0; i < n; i++) {
-			uint64_t tag = events[i].data.u64;
-			uint32_t slot = (uint32_t)tag, generation = (uint32_t)(tag >> 32);
-			if (tag == TAG_LISTEN) {
-				accept_clients();
-			} else if (tag == TAG_STATS_TIMER) {
-				stats_tick();
-			} else if (tag >= TAG_IFACE_TIMER_BASE && tag < TAG_STATS_TIMER) {
-				wire_timer(&hub.ifaces[tag - TAG_IFACE_TIMER_BASE]);
-			} else if (slot < hub.nclients_alloc && hub.clients[slot].fd >= 0 &&
-				   hub.clients[slot].generation == generation) {
-				uint32_t ev = events[i].events;
-				if (ev & EPOLLOUT)
-					client_flush(slot);
-				if (hub.clients[slot].fd >= 0 && (ev & (EPOLLIN | EPOLLHUP | EPOLLERR)))
-					drain_client(slot, MSGS_PER_WAKEUP, !!(ev & (EPOLLHUP | EPOLLERR)));
-			}
-		}
-		flush_dirty();
 	}
-	logmsg("stopping (%" PRIu64 " protocol errors)", hub.proto_errors);
-	unlink(hub.sock_path);
+	hub_log("stopping (%" PRIu64 " protocol errors)", hub.proto_errors);
 	return 0;
+}
+
+const char *hub_socket_path(void)
+{
+	return hub.sock_path;
+}
+
+void hub_shutdown(void)
+{
+	for (uint32_t i = 0; i < hub.nclients_alloc; i++)
+		client_close(i, NULL);
+	free(hub.clients);
+	free(hub.dirty);
+	for (unsigned i = 0; i < hub.nifs; i++) {
+		free(hub.ifaces[i].pending);
+		if (hub.ifaces[i].timerfd >= 0)
+			close(hub.ifaces[i].timerfd);
+	}
+	if (hub.listen_fd >= 0) {
+		unlink(hub.sock_path);
+		close(hub.listen_fd);
+	}
+	if (hub.lock_fd >= 0)
+		close(hub.lock_fd);
+	if (hub.epoll_fd >= 0)
+		close(hub.epoll_fd);
+	if (hub.stats_timer_fd >= 0)
+		close(hub.stats_timer_fd);
+	memset(&hub, 0, sizeof(hub));
+	hub.listen_fd = hub.epoll_fd = hub.stats_timer_fd = hub.lock_fd = -1;
+	hub.default_queue = HUB_DEFAULT_QUEUE_FRAMES;
 }
