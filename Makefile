@@ -124,9 +124,15 @@ check-bus: ucan ucan-asan
 	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) $(PYTEST) -q -rs tests/bus --ignore tests/bus/test_differential.py
 	UCAN_BUILD=$(CURDIR)/$(BUILD)/ucan-asan $(PYTEST) -q tests/bus --ignore tests/bus/test_differential.py
 
-check-firmware: firmware firmware-asan
-	ctest --test-dir $(FW_BUILD) --output-on-failure
-	ctest --test-dir $(FW_ASAN_BUILD) --output-on-failure
+# The component's unit tests on mock ports (release and ASan/UBSan): no Zenoh port needed.
+FW_UNIT_BUILD  := $(BUILD)/firmware-unit
+check-firmware:
+	cmake -S firmware -B $(FW_UNIT_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DZN_BUILD_BRIDGE=OFF >/dev/null
+	ninja -C $(FW_UNIT_BUILD)
+	ctest --test-dir $(FW_UNIT_BUILD) --output-on-failure
+	cmake -S firmware -B $(FW_UNIT_BUILD)-asan $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DZN_SANITIZE=ON -DZN_BUILD_BRIDGE=OFF >/dev/null
+	ninja -C $(FW_UNIT_BUILD)-asan
+	$(ASAN_ENV) ctest --test-dir $(FW_UNIT_BUILD)-asan --output-on-failure
 
 check-python:
 	$(PYTHON) -m ruff check canbench tests bench

@@ -4,7 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "zenoh_serialize.h"
+#include "zn_wire.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
@@ -14,15 +14,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		return 0;
 	memcpy(copy, data, size);
 	size_t count = 0;
-	zn_wire_result_t rc = zenoh_decode_can_batch(copy, size, msgs, 64, &count);
+	zn_wire_result_t rc = zn_wire_decode(copy, size, msgs, 64, &count);
 	if (rc == ZN_WIRE_OK) {
 		for (size_t i = 0; i < count; i++) {
 			uint8_t again[16];
-			if (zenoh_serialize_can_msg(&msgs[i], again, sizeof(again)) != 16 ||
+			if (zn_wire_encode(&msgs[i], again, sizeof(again)) != 16 ||
 			    memcmp(again, copy + 16 * i, 16) != 0)
 				abort(); /* accepted bytes must be the canonical encoding */
 		}
-	} else if (count != 0 || strcmp(zenoh_wire_reason(rc), "unknown") == 0) {
+	} else if (count != 0 || strcmp(zn_wire_reason(rc), "unknown") == 0) {
 		abort();
 	}
 	free(copy);

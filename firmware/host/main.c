@@ -14,7 +14,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "zenoh_node.h"
+#include "zn_node.h"
 #include "zn_config_parse.h"
 
 static pthread_mutex_t state_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -40,7 +40,7 @@ static void *signal_thread(void *arg)
 
 int main(int argc, char **argv)
 {
-	zenoh_node_config_t cfg;
+	zn_node_config_t cfg;
 	char err[256];
 	int rc = zn_config_from_env_and_args(&cfg, argc, argv, err, sizeof(err));
 	if (rc == ZN_CONFIG_HELP) {
@@ -65,9 +65,9 @@ int main(int argc, char **argv)
 		fprintf(stderr, "zenoh-node: cannot start the signal thread\n");
 		return 1;
 	}
-	esp_err_t init = zenoh_node_init(&cfg);
+	esp_err_t init = zn_node_init(&cfg);
 	if (init != ESP_OK) {
-		zenoh_node_stop();
+		zn_node_stop();
 		return init == ESP_ERR_INVALID_ARG ? 2 : 1;
 	}
 	pthread_mutex_lock(&state_lock);
@@ -76,6 +76,6 @@ int main(int argc, char **argv)
 		pthread_cond_wait(&state_changed, &state_lock);
 	pthread_mutex_unlock(&state_lock);
 	fprintf(stderr, "zenoh-node: stopping\n");
-	zenoh_node_stop();
+	zn_node_stop();
 	return 0;
 }

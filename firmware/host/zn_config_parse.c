@@ -126,7 +126,7 @@ int zn_parse_id_ranges(const char *text, zn_id_range_t *out, size_t max, size_t 
 	return 0;
 }
 
-static int parse_buses(const char *text, zenoh_node_config_t *cfg, char *err, size_t err_len)
+static int parse_buses(const char *text, zn_node_config_t *cfg, char *err, size_t err_len)
 {
 	char buf[ZN_MAX_BUSES * ZN_NAME_MAX];
 	char *save = NULL;
@@ -159,7 +159,7 @@ static int set_string(char *dst, size_t cap, const char *value, const char *what
 }
 
 /* Applies one option; `source` names where it came from for the error line. */
-static int apply(zenoh_node_config_t *cfg, enum opt_id id, const char *value, const char *source, char *err,
+static int apply(zn_node_config_t *cfg, enum opt_id id, const char *value, const char *source, char *err,
 		 size_t err_len)
 {
 	uint32_t u;
@@ -252,10 +252,10 @@ static int apply(zenoh_node_config_t *cfg, enum opt_id id, const char *value, co
 	return -1;
 }
 
-int zn_config_from_env_and_args(zenoh_node_config_t *cfg, int argc, char **argv, char *err, size_t err_len)
+int zn_config_from_env_and_args(zn_node_config_t *cfg, int argc, char **argv, char *err, size_t err_len)
 {
 	struct option longopts[NSPECS + 1];
-	zenoh_node_default_config(cfg);
+	zn_node_default_config(cfg);
 	for (size_t i = 0; i < NSPECS; i++) {
 		const char *value = specs[i].env ? getenv(specs[i].env) : NULL;
 		if (value && *value && apply(cfg, specs[i].id, value, specs[i].env, err, err_len) < 0)
@@ -283,7 +283,7 @@ int zn_config_from_env_and_args(zenoh_node_config_t *cfg, int argc, char **argv,
 		snprintf(err, err_len, "unexpected argument '%s' (see --help)", argv[optind]);
 		return ZN_CONFIG_ERROR;
 	}
-	if (zenoh_node_check_config(cfg, err, err_len) != ESP_OK)
+	if (zn_node_check_config(cfg, err, err_len) != ESP_OK)
 		return ZN_CONFIG_ERROR;
 	return ZN_CONFIG_OK;
 }

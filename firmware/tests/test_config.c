@@ -6,7 +6,7 @@
 #include "check.h"
 #include "zn_config_parse.h"
 
-static int parse(zenoh_node_config_t *cfg, char *err, const char *const *args)
+static int parse(zn_node_config_t *cfg, char *err, const char *const *args)
 {
 	char *argv[32];
 	int argc = 0;
@@ -27,7 +27,7 @@ static void clear_env(void)
 
 static void test_defaults_are_linux_safe(void)
 {
-	zenoh_node_config_t cfg;
+	zn_node_config_t cfg;
 	char err[256];
 	const char *none[] = { NULL };
 	clear_env();
@@ -40,7 +40,7 @@ static void test_defaults_are_linux_safe(void)
 
 static void test_precedence(void)
 {
-	zenoh_node_config_t cfg;
+	zn_node_config_t cfg;
 	char err[256];
 	clear_env();
 	setenv("ZENOH_PUBLISH_PERIOD_MS", "5", 1);
@@ -60,7 +60,7 @@ static void test_precedence(void)
 
 static void expect_error(const char *const *args, const char *fragment)
 {
-	zenoh_node_config_t cfg;
+	zn_node_config_t cfg;
 	char err[256] = "";
 	int rc = parse(&cfg, err, args);
 	CHECK(rc == ZN_CONFIG_ERROR);
@@ -86,7 +86,7 @@ static void test_errors(void)
 	setenv("ZENOH_NODE_ENABLED", "perhaps", 1);
 	expect_error((const char *[]){ NULL }, "ZENOH_NODE_ENABLED='perhaps'");
 	clear_env();
-	zenoh_node_config_t cfg;
+	zn_node_config_t cfg;
 	char err[256];
 	CHECK(parse(&cfg, err, (const char *[]){ "--help", NULL }) == ZN_CONFIG_HELP);
 }

@@ -5,8 +5,8 @@
 #include <time.h>
 
 #include "check.h"
-#include "zenoh_node.h"
-#include "zenoh_serialize.h"
+#include "zn_node.h"
+#include "zn_wire.h"
 #include "zn_mock.h"
 
 #define WAIT_MS 5000
@@ -32,10 +32,10 @@ static uint64_t le64(const uint8_t *p)
 	return v;
 }
 
-static zenoh_node_config_t base_config(uint32_t period_ms)
+static zn_node_config_t base_config(uint32_t period_ms)
 {
-	zenoh_node_config_t cfg;
-	zenoh_node_default_config(&cfg);
+	zn_node_config_t cfg;
+	zn_node_default_config(&cfg);
 	cfg.publish_period_ms = period_ms;
 	cfg.rx_queue_frames = 1024;
 	return cfg;
@@ -68,8 +68,8 @@ static int stats_soon_has(const char *needle)
 static void test_immediate_mode(void)
 {
 	mock_reset();
-	zenoh_node_config_t cfg = base_config(0);
-	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
 	CHECK(mock_zenoh_has_token("vehicle/can/bridges/zenoh-node/vcan0/client"));
 	can_message_t in[3] = { frame(0x123, 0, 0, 2, 0xAB), frame(0x18DAF110, 1, 0, 8, 0x11), frame(0x7FF, 0, 1, 4, 0) };
 	for (int i = 0; i < 3; i++)
@@ -79,7 +79,7 @@ static void test_immediate_mode(void)
 		const struct mock_put *p = mock_zenoh_put(i);
 		uint8_t expect[16];
 		CHECK(strcmp(p->key, "vehicle/can/rx") == 0);
-		CHECK(zenoh_serialize_can_msg(&in[i], expect, 16) == 16);
+		CHECK(zn_wire_encode(&in[i], expect, 16) == 16);
 		CHECK(p->len == 16 && memcmp(p->payload, expect, 16) == 0);
 		CHECK(p->attachment_len == ZN_ATTACHMENT_HEADER + 8);
 		CHECK(p->attachment[0] == ZN_ATTACHMENT_VERSION && p->attachment[2] == 1 && p->attachment[3] == 0);
@@ -87,20 +87,20 @@ static void test_immediate_mode(void)
 		CHECK(le64(p->attachment + 12) == 1000 + i);
 	}
 	CHECK(stats_soon_has("\"published_frames\": 3"));
-	zenoh_node_stop();
+	zn_node_stop();
 	CHECK(!mock_zenoh_has_token("vehicle/can/bridges/zenoh-node/vcan0/client"));
 }
 
 static void test_filters(void)
 {
 	mock_reset();
-	zenoh_node_config_t cfg = base_config(0);
+	zn_node_config_t cfg = base_config(0);
 	cfg.allow[0] = (zn_id_range_t){ 0x100, 0x1FF, false };
 	cfg.allow[1] = (zn_id_range_t){ 0x18DA0000, 0x18DAFFFF, true };
 	cfg.allow_count = 2;
 	cfg.deny[0] = (zn_id_range_t){ 0x150, 0x150, false };
 	cfg.deny_count = 1;
-	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
 	uint32_t ids[] = { 0x050, 0x100, 0x150, 0x1FF, 0x200 };
 	for (size_t i = 0; i < 5; i++) {
 		can_message_t m = frame(ids[i], 0, 0, 1, 1);
@@ -114,15 +114,15 @@ static void test_filters(void)
 	CHECK(mock_zenoh_put(1)->payload[0] == 0xFF);
 	CHECK(mock_zenoh_put(2)->payload[3] == 0x18);
 	CHECK(stats_soon_has("\"filtered\": 4"));
-	zenoh_node_stop();
+	zn_node_stop();
 }
 
 static void test_batching(void)
 {
 	mock_reset();
-	zenoh_node_config_t cfg = base_config(20);
+	zn_node_config_t cfg = base_config(20);
 	cfg.batch_max_frames = 4;
-	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
 	for (int i = 0; i < 10; i++) {
 		can_message_t m = frame((uint32_t)i, 0, 0, 1, (uint8_t)i);
 		mock_can_inject("vcan0", &m, 500 + i);
@@ -142,14 +142,14 @@ static void test_batching(void)
 		frames += n;
 	}
 	CHECK(frames == 10);
-	zenoh_node_stop();
+	zn_node_stop();
 }
 
 static void test_flush_on_stop(void)
 {
 	mock_reset();
-	zenoh_node_config_t cfg = base_config(60000); /* a period that never ends during the test */
-	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	zn_node_config_t cfg = base_config(60000); /* a period that never ends during the test */
+	CHECK(zn_node_init(&cfg) == ESP_OK);
 	for (int i = 0; i < 3; i++) {
 		can_message_t m = frame(0x10, 0, 0, 0, 0);
 		mock_can_inject("vcan0", &m, 1);
@@ -163,7 +163,7 @@ static void test_flush_on_stop(void)
 		mock_zenoh_wait_puts(1, 1);
 	}
 	CHECK(mock_zenoh_put_count() == 0);
-	zenoh_node_stop();
+	zn_node_stop();
 	CHECK(mock_zenoh_put_count() == 1 && mock_zenoh_put(0)->len == 48);
 }
 
@@ -175,12 +175,12 @@ static void deliver(const uint8_t *payload, size_t len, const uint8_t *att, size
 static void test_commands(void)
 {
 	mock_reset();
-	zenoh_node_config_t cfg = base_config(0);
-	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
 	uint8_t wire[64];
 	can_message_t a = frame(0x321, 0, 0, 3, 0x42), b = frame(0x1ABCDE, 1, 1, 2, 0);
-	zenoh_serialize_can_msg(&a, wire, 16);
-	zenoh_serialize_can_msg(&b, wire + 16, 16);
+	zn_wire_encode(&a, wire, 16);
+	zn_wire_encode(&b, wire + 16, 16);
 	deliver(wire, 16, NULL, 0);
 	deliver(wire, 32, NULL, 0);
 	CHECK(mock_can_tx_count("vcan0") == 3);
@@ -217,50 +217,50 @@ static void test_commands(void)
 	CHECK(stats_has("\"attachment\": 1"));
 	CHECK(stats_has("\"tx_frames\": 4"));
 	CHECK(stats_has("\"tx_samples\": 10"));
-	zenoh_node_stop();
+	zn_node_stop();
 }
 
 static void test_multi_bus_keys(void)
 {
 	mock_reset();
-	zenoh_node_config_t cfg = base_config(0);
+	zn_node_config_t cfg = base_config(0);
 	strcpy(cfg.buses[0], "can0");
 	strcpy(cfg.buses[1], "can1");
 	cfg.bus_count = 2;
-	CHECK(zenoh_node_init(&cfg) == ESP_OK);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
 	can_message_t m = frame(0x1, 0, 0, 0, 0);
 	mock_can_inject("can1", &m, 1);
 	CHECK(mock_zenoh_wait_puts(1, WAIT_MS) == 1);
 	CHECK(strcmp(mock_zenoh_put(0)->key, "vehicle/can/can1/rx") == 0);
 	uint8_t wire[16];
-	zenoh_serialize_can_msg(&m, wire, 16);
+	zn_wire_encode(&m, wire, 16);
 	CHECK(mock_zenoh_deliver("vehicle/can/can0/tx", wire, 16, NULL, 0) == 0);
 	CHECK(mock_can_tx_count("can0") == 1 && mock_can_tx_count("can1") == 0);
 	CHECK(mock_zenoh_has_token("vehicle/can/bridges/zenoh-node/can1/client"));
-	zenoh_node_stop();
+	zn_node_stop();
 }
 
 static void test_config_checks(void)
 {
 	char err[256];
-	zenoh_node_config_t cfg = base_config(0);
-	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) == ESP_OK);
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) == ESP_OK);
 	cfg.mode = (zn_mode_t)3;
-	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "mode 3"));
+	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "mode 3"));
 	cfg = base_config(0);
 	strcpy(cfg.key_prefix, "vehicle/*");
-	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "key prefix"));
+	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "key prefix"));
 	cfg = base_config(0);
 	cfg.allow[0] = (zn_id_range_t){ 0x100, 0x800, false };
 	cfg.allow_count = 1;
-	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "0x100-0x800"));
+	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "0x100-0x800"));
 	cfg = base_config(0);
 	strcpy(cfg.buses[1], "vcan0");
 	cfg.bus_count = 2;
-	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "twice"));
+	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "twice"));
 	cfg = base_config(0);
 	cfg.router_address[0] = '\0';
-	CHECK(zenoh_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "router"));
+	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "router"));
 }
 
 int main(void)

@@ -5,7 +5,7 @@
 #include <string.h>
 
 #include "check.h"
-#include "zenoh_serialize.h"
+#include "zn_wire.h"
 
 static size_t unhex(const char *hex, uint8_t *out, size_t cap)
 {
@@ -39,13 +39,14 @@ static void test_golden_vectors(void)
 		uint8_t wire[64];
 		size_t len = unhex(hex, wire, sizeof(wire));
 		can_message_t msg;
-		zn_wire_result_t rc = zenoh_decode_can_frame(wire, len, &msg);
+		size_t count = 0;
+		zn_wire_result_t rc = zn_wire_decode(wire, len, &msg, 1, &count); /* a frame is a batch of one */
 		vectors++;
 		if (strcmp(verdict, "ok") == 0) {
 			CHECK(fields == 8);
 			if (rc != ZN_WIRE_OK)
 				fprintf(stderr, "%s:%d: %s: decode says %s\n", WIRE_VECTORS, lineno, name,
-					zenoh_wire_reason(rc));
+					zn_wire_reason(rc));
 			CHECK(rc == ZN_WIRE_OK);
 			CHECK(msg.identifier == strtoul(a, NULL, 16));
 			CHECK(msg.extd == (b[0] == 'e'));
@@ -57,16 +58,16 @@ static void test_golden_vectors(void)
 			CHECK(memcmp(msg.data, data, sizeof(data)) == 0);
 			/* and the encoder produces exactly the golden bytes */
 			uint8_t again[16];
-			CHECK(zenoh_serialize_can_msg(&msg, again, sizeof(again)) == 16);
+			CHECK(zn_wire_encode(&msg, again, sizeof(again)) == 16);
 			CHECK(memcmp(again, wire, 16) == 0);
-			CHECK(zenoh_deserialize_can_msg(wire, len, &msg) == 0);
+			CHECK(count == 1);
 		} else {
 			CHECK(strcmp(verdict, "reject") == 0 && fields >= 4);
-			if (strcmp(zenoh_wire_reason(rc), a) != 0)
+			if (strcmp(zn_wire_reason(rc), a) != 0)
 				fprintf(stderr, "%s:%d: %s: expected %s, decode says %s\n", WIRE_VECTORS, lineno, name, a,
-					zenoh_wire_reason(rc));
-			CHECK(strcmp(zenoh_wire_reason(rc), a) == 0);
-			CHECK(zenoh_deserialize_can_msg(wire, len, &msg) == -1);
+					zn_wire_reason(rc));
+			CHECK(strcmp(zn_wire_reason(rc), a) == 0);
+			CHECK(count == 0);
 		}
 	}
 	fclose(f);
@@ -81,27 +82,27 @@ static void test_encoder(void)
 	msg.identifier = 0x123;
 	msg.data_length_code = 2;
 	memset(msg.data, 0xAA, sizeof(msg.data)); /* bytes beyond dlc must not leak onto the wire */
-	CHECK(zenoh_serialize_can_msg(&msg, buf, sizeof(buf)) == 16);
+	CHECK(zn_wire_encode(&msg, buf, sizeof(buf)) == 16);
 	CHECK(buf[8] == 0xAA && buf[9] == 0xAA && buf[10] == 0 && buf[15] == 0);
-	CHECK(zenoh_serialize_can_msg(&msg, buf, 15) == -1);
-	CHECK(zenoh_serialize_can_msg(NULL, buf, 16) == -1);
-	CHECK(zenoh_serialize_can_msg(&msg, NULL, 16) == -1);
+	CHECK(zn_wire_encode(&msg, buf, 15) == -1);
+	CHECK(zn_wire_encode(NULL, buf, 16) == -1);
+	CHECK(zn_wire_encode(&msg, NULL, 16) == -1);
 	msg.data_length_code = 9;
-	CHECK(zenoh_serialize_can_msg(&msg, buf, 16) == -1);
+	CHECK(zn_wire_encode(&msg, buf, 16) == -1);
 	msg.data_length_code = 1;
 	msg.identifier = 0x800;
-	CHECK(zenoh_serialize_can_msg(&msg, buf, 16) == -1);
+	CHECK(zn_wire_encode(&msg, buf, 16) == -1);
 	msg.extd = 1;
-	CHECK(zenoh_serialize_can_msg(&msg, buf, 16) == 16);
+	CHECK(zn_wire_encode(&msg, buf, 16) == 16);
 	msg.identifier = 0x20000000;
-	CHECK(zenoh_serialize_can_msg(&msg, buf, 16) == -1);
+	CHECK(zn_wire_encode(&msg, buf, 16) == -1);
 	/* remote frames: dlc kept, data never sent */
 	msg.identifier = 0x100;
 	msg.extd = 0;
 	msg.rtr = 1;
 	msg.data_length_code = 4;
-	CHECK(zenoh_serialize_can_msg(&msg, buf, 16) == 16);
-	CHECK(buf[4] == 4 && buf[5] == ZENOH_CAN_FLAG_RTR && buf[8] == 0);
+	CHECK(zn_wire_encode(&msg, buf, 16) == 16);
+	CHECK(buf[4] == 4 && buf[5] == ZN_WIRE_FLAG_RTR && buf[8] == 0);
 }
 
 static void test_batches(void)
@@ -116,15 +117,34 @@ static void test_batches(void)
 		in[i].data[0] = (uint8_t)(i ? i : 0);
 		if (i == 0)
 			in[i].data[0] = 0;
-		CHECK(zenoh_serialize_can_msg(&in[i], buf + 16 * i, 16) == 16);
+		CHECK(zn_wire_encode(&in[i], buf + 16 * i, 16) == 16);
 	}
-	CHECK(zenoh_decode_can_batch(buf, 48, out, 3, &count) == ZN_WIRE_OK && count == 3);
+	CHECK(zn_wire_decode(buf, 48, out, 3, &count) == ZN_WIRE_OK && count == 3);
 	CHECK(out[2].identifier == 0x102 && out[2].data_length_code == 2);
-	CHECK(zenoh_decode_can_batch(buf, 48, out, 2, &count) == ZN_WIRE_ERR_LENGTH && count == 0);
-	CHECK(zenoh_decode_can_batch(buf, 40, out, 3, &count) == ZN_WIRE_ERR_LENGTH);
-	CHECK(zenoh_decode_can_batch(buf, 0, out, 3, &count) == ZN_WIRE_ERR_LENGTH);
+	CHECK(zn_wire_decode(buf, 48, out, 2, &count) == ZN_WIRE_ERR_LENGTH && count == 0);
+	CHECK(zn_wire_decode(buf, 40, out, 3, &count) == ZN_WIRE_ERR_LENGTH);
+	CHECK(zn_wire_decode(buf, 0, out, 3, &count) == ZN_WIRE_ERR_LENGTH);
 	buf[16 + 4] = 9; /* one bad frame spoils the batch */
-	CHECK(zenoh_decode_can_batch(buf, 48, NULL, 0, &count) == ZN_WIRE_ERR_DLC && count == 0);
+	CHECK(zn_wire_decode(buf, 48, NULL, 0, &count) == ZN_WIRE_ERR_DLC && count == 0);
+}
+
+/* the attachment: the worked example of zn_wire.h, and what a command's attachment must describe */
+static void test_attachment(void)
+{
+	uint8_t att[ZN_ATTACHMENT_SIZE(2)], want[ZN_ATTACHMENT_SIZE(1)];
+	zn_attachment_header(att, 1, 5);
+	zn_attachment_set_time(att, 0, 1000);
+	CHECK(unhex("010001000500000000000000e803000000000000", want, sizeof(want)) == sizeof(want));
+	CHECK(memcmp(att, want, sizeof(want)) == 0);
+	CHECK(zn_attachment_check(att, ZN_ATTACHMENT_SIZE(1), 1) == ZN_WIRE_OK);
+	CHECK(zn_attachment_check(NULL, 0, 1) == ZN_WIRE_OK); /* optional */
+	CHECK(zn_attachment_check(att, ZN_ATTACHMENT_SIZE(1), 2) == ZN_WIRE_ERR_ATTACHMENT); /* count */
+	CHECK(zn_attachment_check(att, ZN_ATTACHMENT_SIZE(1) - 1, 1) == ZN_WIRE_ERR_ATTACHMENT); /* length */
+	CHECK(zn_attachment_check(att, 5, 1) == ZN_WIRE_ERR_ATTACHMENT);
+	att[0] = 2;
+	CHECK(zn_attachment_check(att, ZN_ATTACHMENT_SIZE(1), 1) == ZN_WIRE_ERR_ATTACHMENT); /* version */
+	CHECK(strcmp(zn_wire_reason(ZN_WIRE_ERR_ATTACHMENT), "attachment") == 0);
+	CHECK(strcmp(zn_wire_reason((zn_wire_result_t)-10), "unknown") == 0);
 }
 
 /* can_msgs/msg/Frame in CDR: the bytes pycdr2 (the bench's decoder) writes for the same message */
@@ -146,6 +166,7 @@ int main(void)
 	test_golden_vectors();
 	test_encoder();
 	test_batches();
+	test_attachment();
 	test_ros2_frame();
 	CHECK_DONE("test_serialize");
 }

@@ -1,5 +1,5 @@
 /* zn_port_can.h - contract of the CAN port: what zenoh-node needs from a CAN
- * controller. Linux: ports/linux/can_socketcan.c; ESP32: ports/esp32/can_twai.c;
+ * controller. Linux: ports/linux/can_socketcan.c; ESP32 (planned): ports/esp32/can_twai.c;
  * tests: ports/mock/can_mock.c. */
 #ifndef ZN_PORT_CAN_H
 #define ZN_PORT_CAN_H

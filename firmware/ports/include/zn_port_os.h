@@ -1,5 +1,5 @@
 /* zn_port_os.h - contract of the OS port: threads, clocks, locks. Linux:
- * ports/linux/os_linux.c (pthreads); ESP32: ports/esp32/os_freertos.c. */
+ * ports/linux/os_linux.c (pthreads); ESP32 (planned): ports/esp32/os_freertos.c. */
 #ifndef ZN_PORT_OS_H
 #define ZN_PORT_OS_H
 

@@ -1,6 +1,6 @@
 /* zn_port_zenoh.h - contract of the Zenoh port: the few Zenoh operations
  * zenoh-node uses. Linux: ports/linux/zenoh_rust (the official zenoh crate);
- * ESP32: ports/esp32/zenoh_pico.c; tests: ports/mock/zenoh_mock.c.
+ * ESP32 (planned): ports/esp32/zenoh_pico.c; tests: ports/mock/zenoh_mock.c.
  * All functions return 0 on success, a negative value on failure. Callbacks
  * run on the port's threads and must not block for long. */
 #ifndef ZN_PORT_ZENOH_H

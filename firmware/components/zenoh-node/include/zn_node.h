@@ -1,13 +1,13 @@
-/* zenoh_node.h - zenoh-node: bridges CAN 2.0 frames and Zenoh pub/sub.
+/* zn_node.h - zenoh-node: bridges CAN 2.0 frames and Zenoh pub/sub.
  *
  * CAN -> Zenoh: frames received on each bus are published on <prefix>/rx
  * (one bus) or <prefix>/<bus>/rx (several), one frame per sample or, with a
  * publish period, batches of N x 16 bytes. Zenoh -> CAN: samples on .../tx
  * are validated frame by frame and transmitted; anything invalid is refused
  * whole and counted by reason. Every sample carries an attachment with a
- * sequence number and CAN receive timestamps (see docs/wire-format.md). */
-#ifndef ZENOH_NODE_H
-#define ZENOH_NODE_H
+ * sequence number and CAN receive timestamps (zn_wire.h; docs/bridge.md). */
+#ifndef ZN_NODE_H
+#define ZN_NODE_H
 
 #include <stdbool.h>
 #include <stddef.h>
@@ -23,12 +23,6 @@
 #define ZN_KEY_MAX 256
 #define ZN_ENDPOINTS_MAX 512
 #define ZN_BATCH_MAX_FRAMES 1024 /* 16 KiB payload */
-
-/* Attachment, little-endian: version u8 (1), flags u8 (0), frame count u16,
- * sequence number of the first frame u64, then count x CAN receive time u64
- * (ns since the Unix epoch). */
-#define ZN_ATTACHMENT_VERSION 1
-#define ZN_ATTACHMENT_HEADER 12
 
 typedef struct {
 	uint32_t first, last; /* inclusive; flags not included: compare raw identifiers */
@@ -51,37 +45,33 @@ typedef struct {
 	zn_id_range_t deny[ZN_MAX_ID_RANGES]; /* ... never these (deny wins) */
 	size_t deny_count;
 	zn_qos_t rx_qos;		       /* CAN -> Zenoh (telemetry) */
-	zn_qos_t tx_qos;		       /* reserved for replies; commands arrive on the subscriber */
 	uint32_t rx_queue_frames;	       /* frames buffered between CAN reader and publisher */
 	char zenoh_config_file[ZN_ENDPOINTS_MAX]; /* optional JSON5 (TLS, auth) */
 	bool compression;			  /* CONFIG_ZENOH_COMPRESSION: compress the Zenoh transport */
 	char ros2_topic[ZN_NAME_MAX]; /* CONFIG_ZENOH_ROS2_TOPIC: also publish can_msgs/msg/Frame here ("" = off) */
 	uint32_t ros2_domain;	      /* CONFIG_ZENOH_ROS2_DOMAIN: ROS_DOMAIN_ID of that topic */
-} zenoh_node_config_t;
+} zn_node_config_t;
 
 /* Fills cfg with the Kconfig defaults (CONFIG_* from sdkconfig). */
-void zenoh_node_default_config(zenoh_node_config_t *cfg);
+void zn_node_default_config(zn_node_config_t *cfg);
 
 /* Validates cfg; on error writes one line explaining it into err. */
-esp_err_t zenoh_node_check_config(const zenoh_node_config_t *cfg, char *err, size_t err_len);
+esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t err_len);
 
 /* Opens the Zenoh session, declares publishers, subscribers, liveliness token
  * and stats queryable, opens the CAN buses and starts the bridge threads. */
-esp_err_t zenoh_node_init(const zenoh_node_config_t *cfg);
-
-/* The firmware's original entry point: publish one frame from bus 0 now. */
-esp_err_t zenoh_publish_can_msg(const can_message_t *msg);
+esp_err_t zn_node_init(const zn_node_config_t *cfg);
 
 /* Queues a frame received on bus `bus` at rx_time_ns for publication. */
-esp_err_t zenoh_node_submit(size_t bus, const can_message_t *msg, int64_t rx_time_ns);
+esp_err_t zn_node_submit(size_t bus, const can_message_t *msg, int64_t rx_time_ns);
 
 /* Does the CAN -> Zenoh id filter let this frame through? */
-bool zenoh_node_id_allowed(const zenoh_node_config_t *cfg, const can_message_t *msg);
+bool zn_node_id_allowed(const zn_node_config_t *cfg, const can_message_t *msg);
 
 /* Writes the counters as one JSON object; returns its length. */
-size_t zenoh_node_stats_json(char *buf, size_t cap);
+size_t zn_node_stats_json(char *buf, size_t cap);
 
 /* Flushes pending batches, undeclares everything, closes the session. */
-void zenoh_node_stop(void);
+void zn_node_stop(void);
 
 #endif

@@ -1,52 +1,49 @@
-/* zenoh_serialize.c - see zenoh_serialize.h for the format. */
-#include "zenoh_serialize.h"
+/* zn_wire.c - the wire formats' codec; see zn_wire.h for the grammar. */
+#include "zn_wire.h"
 
 #include <string.h>
 
-static void put_u32_le(uint8_t *p, uint32_t v)
+static void put_le(uint8_t *p, uint64_t v, int bytes)
 {
-	p[0] = (uint8_t)v;
-	p[1] = (uint8_t)(v >> 8);
-	p[2] = (uint8_t)(v >> 16);
-	p[3] = (uint8_t)(v >> 24);
+	for (int i = 0; i < bytes; i++)
+		p[i] = (uint8_t)(v >> (8 * i));
 }
 
-static uint32_t get_u32_le(const uint8_t *p)
+static uint64_t get_le(const uint8_t *p, int bytes)
 {
-	return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+	uint64_t v = 0;
+	for (int i = bytes - 1; i >= 0; i--)
+		v = v << 8 | p[i];
+	return v;
 }
 
-int zenoh_serialize_can_msg(const can_message_t *msg, uint8_t *buf, size_t len)
+int zn_wire_encode(const can_message_t *msg, uint8_t *buf, size_t len)
 {
-	if (!msg || !buf || len < ZENOH_CAN_WIRE_SIZE)
+	if (!msg || !buf || len < ZN_WIRE_FRAME_SIZE)
 		return -1;
 	uint32_t id_mask = msg->extd ? CAN_EXTD_ID_MASK : CAN_STD_ID_MASK;
 	if (msg->data_length_code > TWAI_FRAME_MAX_DLC || (msg->identifier & ~id_mask))
 		return -1;
-	memset(buf, 0, ZENOH_CAN_WIRE_SIZE);
-	put_u32_le(buf, msg->identifier);
+	memset(buf, 0, ZN_WIRE_FRAME_SIZE);
+	put_le(buf, msg->identifier, 4);
 	buf[4] = msg->data_length_code;
-	buf[5] = (uint8_t)((msg->extd ? ZENOH_CAN_FLAG_EXTD : 0) | (msg->rtr ? ZENOH_CAN_FLAG_RTR : 0));
+	buf[5] = (uint8_t)((msg->extd ? ZN_WIRE_FLAG_EXTD : 0) | (msg->rtr ? ZN_WIRE_FLAG_RTR : 0));
 	if (!msg->rtr)
 		memcpy(buf + 8, msg->data, msg->data_length_code);
-	return ZENOH_CAN_WIRE_SIZE;
+	return ZN_WIRE_FRAME_SIZE;
 }
 
-zn_wire_result_t zenoh_decode_can_frame(const uint8_t *buf, size_t len, can_message_t *msg)
+static zn_wire_result_t decode_frame(const uint8_t *buf, can_message_t *msg)
 {
-	if (!buf)
-		return ZN_WIRE_ERR_ARG;
-	if (len != ZENOH_CAN_WIRE_SIZE)
-		return ZN_WIRE_ERR_LENGTH;
-	uint32_t id = get_u32_le(buf);
+	uint32_t id = (uint32_t)get_le(buf, 4);
 	uint8_t dlc = buf[4], flags = buf[5];
 	if (dlc > TWAI_FRAME_MAX_DLC)
 		return ZN_WIRE_ERR_DLC;
-	if (flags & ~(ZENOH_CAN_FLAG_EXTD | ZENOH_CAN_FLAG_RTR))
+	if (flags & ~(ZN_WIRE_FLAG_EXTD | ZN_WIRE_FLAG_RTR))
 		return ZN_WIRE_ERR_FLAGS;
 	if (buf[6] || buf[7])
 		return ZN_WIRE_ERR_RESERVED;
-	int extd = !!(flags & ZENOH_CAN_FLAG_EXTD), rtr = !!(flags & ZENOH_CAN_FLAG_RTR);
+	int extd = !!(flags & ZN_WIRE_FLAG_EXTD), rtr = !!(flags & ZN_WIRE_FLAG_RTR);
 	if (id & ~(extd ? CAN_EXTD_ID_MASK : CAN_STD_ID_MASK))
 		return ZN_WIRE_ERR_ID_RANGE;
 	for (unsigned i = rtr ? 0 : dlc; i < TWAI_FRAME_MAX_DLC; i++)
@@ -63,27 +60,18 @@ zn_wire_result_t zenoh_decode_can_frame(const uint8_t *buf, size_t len, can_mess
 	return ZN_WIRE_OK;
 }
 
-int zenoh_deserialize_can_msg(const uint8_t *buf, size_t len, can_message_t *msg)
-{
-	if (!msg)
-		return -1;
-	return zenoh_decode_can_frame(buf, len, msg) == ZN_WIRE_OK ? 0 : -1;
-}
-
-zn_wire_result_t zenoh_decode_can_batch(const uint8_t *buf, size_t len, can_message_t *msgs, size_t max_msgs,
-					size_t *count)
+zn_wire_result_t zn_wire_decode(const uint8_t *buf, size_t len, can_message_t *msgs, size_t max_msgs, size_t *count)
 {
 	if (!buf || !count)
 		return ZN_WIRE_ERR_ARG;
 	*count = 0;
-	if (len == 0 || len % ZENOH_CAN_WIRE_SIZE)
+	if (len == 0 || len % ZN_WIRE_FRAME_SIZE)
 		return ZN_WIRE_ERR_LENGTH;
-	size_t n = len / ZENOH_CAN_WIRE_SIZE;
+	size_t n = len / ZN_WIRE_FRAME_SIZE;
 	if (msgs && n > max_msgs)
 		return ZN_WIRE_ERR_LENGTH;
 	for (size_t i = 0; i < n; i++) {
-		zn_wire_result_t rc =
-			zenoh_decode_can_frame(buf + i * ZENOH_CAN_WIRE_SIZE, ZENOH_CAN_WIRE_SIZE, msgs ? &msgs[i] : NULL);
+		zn_wire_result_t rc = decode_frame(buf + i * ZN_WIRE_FRAME_SIZE, msgs ? &msgs[i] : NULL);
 		if (rc != ZN_WIRE_OK)
 			return rc;
 	}
@@ -91,20 +79,37 @@ zn_wire_result_t zenoh_decode_can_batch(const uint8_t *buf, size_t len, can_mess
 	return ZN_WIRE_OK;
 }
 
-const char *zenoh_wire_reason(zn_wire_result_t result)
+void zn_attachment_header(uint8_t *buf, uint16_t count, uint64_t first_seq)
 {
-	switch (result) {
-	case ZN_WIRE_OK: return "ok";
-	case ZN_WIRE_ERR_ARG: return "argument";
-	case ZN_WIRE_ERR_LENGTH: return "length";
-	case ZN_WIRE_ERR_DLC: return "dlc";
-	case ZN_WIRE_ERR_FLAGS: return "flags";
-	case ZN_WIRE_ERR_RESERVED: return "reserved";
-	case ZN_WIRE_ERR_ID_RANGE: return "id_range";
-	case ZN_WIRE_ERR_REMOTE_DATA: return "remote_data";
-	case ZN_WIRE_ERR_PADDING: return "padding";
-	}
-	return "unknown";
+	buf[0] = ZN_ATTACHMENT_VERSION;
+	buf[1] = 0;
+	put_le(buf + 2, count, 2);
+	put_le(buf + 4, first_seq, 8);
+}
+
+void zn_attachment_set_time(uint8_t *buf, size_t index, int64_t rx_time_ns)
+{
+	put_le(buf + ZN_ATTACHMENT_HEADER + 8 * index, (uint64_t)rx_time_ns, 8);
+}
+
+zn_wire_result_t zn_attachment_check(const uint8_t *att, size_t len, size_t frames)
+{
+	if (!att)
+		return ZN_WIRE_OK;
+	if (len < ZN_ATTACHMENT_HEADER || att[0] != ZN_ATTACHMENT_VERSION || att[1] != 0 || get_le(att + 2, 2) != frames ||
+	    len != ZN_ATTACHMENT_SIZE(frames))
+		return ZN_WIRE_ERR_ATTACHMENT;
+	return ZN_WIRE_OK;
+}
+
+/* Indexed by -result; the stats and logs use these names. */
+static const char *const reasons[ZN_WIRE_REASONS] = {
+	"ok", "argument", "length", "dlc", "flags", "reserved", "id_range", "remote_data", "padding", "attachment",
+};
+
+const char *zn_wire_reason(zn_wire_result_t result)
+{
+	return result <= 0 && result > -ZN_WIRE_REASONS ? reasons[-result] : "unknown";
 }
 
 int zn_ros2_encode_can_frame(const can_message_t *msg, int64_t stamp_ns, const char *frame_id, uint8_t *buf,

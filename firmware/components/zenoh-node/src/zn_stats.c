@@ -1,0 +1,93 @@
+/* zn_stats.c - the node's counters as JSON (the stats queryable and the
+ * final stats line), and the monitor that counts reconnections. */
+#include <inttypes.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "zn_internal.h"
+
+#define MONITOR_PERIOD_MS 500
+
+static size_t append(char *buf, size_t cap, size_t off, const char *fmt, ...)
+{
+	if (off >= cap)
+		return off;
+	va_list ap;
+	va_start(ap, fmt);
+	int n = vsnprintf(buf + off, cap - off, fmt, ap);
+	va_end(ap);
+	return n < 0 ? off : off + (size_t)n;
+}
+
+size_t zn_node_stats_json(char *buf, size_t cap)
+{
+	size_t off = 0;
+	off = append(buf, cap, off,
+		     "{\"node\": \"%s\", \"mode\": \"%s\", \"uptime_ms\": %" PRId64 ", \"connected\": %s, "
+		     "\"reconnects\": %" PRIu64 ", \"publish_period_ms\": %" PRIu32 ", \"buses\": [",
+		     zn_node.cfg.node_name, zn_mode_names[zn_node.cfg.mode], (zn_monotonic_ns() - zn_node.start_ns) / 1000000,
+		     READ(zn_node.connected) ? "true" : "false", READ(zn_node.reconnects), zn_node.cfg.publish_period_ms);
+	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
+		struct bus *b = &zn_node.buses[i];
+		off = append(buf, cap, off,
+			     "%s{\"bus\": \"%s\", \"rx_key\": \"%s\", \"tx_key\": \"%s\", \"can_rx_frames\": %" PRIu64
+			     ", \"filtered\": %" PRIu64 ", \"rx_queue_drops\": %" PRIu64
+			     ", \"published_samples\": %" PRIu64 ", \"published_frames\": %" PRIu64
+			     ", \"publish_errors\": %" PRIu64 ", \"tx_samples\": %" PRIu64 ", \"tx_frames\": %" PRIu64
+			     ", \"can_tx_errors\": %" PRIu64 ", \"can_reopens\": %" PRIu64 ", \"tx_rejected\": {",
+			     i ? ", " : "", b->name, b->rx_key, b->tx_key, READ(b->n.can_rx_frames), READ(b->n.filtered),
+			     READ(b->n.rx_queue_drops), READ(b->n.published_samples), READ(b->n.published_frames),
+			     READ(b->n.publish_errors), READ(b->n.tx_samples), READ(b->n.tx_frames),
+			     READ(b->n.can_tx_errors), READ(b->n.can_reopens));
+		for (int r = 1; r < ZN_WIRE_REASONS; r++)
+			off = append(buf, cap, off, "%s\"%s\": %" PRIu64, r > 1 ? ", " : "",
+				     zn_wire_reason((zn_wire_result_t)-r), READ(b->n.tx_rejected[r]));
+		off = append(buf, cap, off, "}}");
+	}
+	off = append(buf, cap, off, "]}");
+	if (off >= cap && cap) {
+		buf[0] = '\0'; /* never hand out a truncated object */
+		return 0;
+	}
+	return off;
+}
+
+size_t zn_stats_on_query(char *buf, size_t cap, void *ctx)
+{
+	(void)ctx;
+	return zn_node_stats_json(buf, cap);
+}
+
+/* Counts reconnections: the router set going away and coming back, or
+ * changing identity in between two polls (a router restarted quickly). */
+void zn_stats_monitor_thread(void *arg)
+{
+	(void)arg;
+	char ids[512];
+	int announced_wait = 0;
+	while (!zn_stop_wait(MONITOR_PERIOD_MS)) {
+		int routers = zn_routers(zn_node.session, ids, sizeof(ids));
+		int connected = routers > 0 || zn_node.cfg.mode != ZN_MODE_CLIENT; /* peers need no router */
+		int was_connected = READ(zn_node.connected);
+		int replaced = routers > 0 && zn_node.router_ids[0] && strcmp(ids, zn_node.router_ids) != 0;
+		if (connected && (!was_connected || replaced)) {
+			if (zn_node.ever_connected) {
+				COUNT(zn_node.reconnects);
+				zn_log("I", "reconnected to the Zenoh router %s%s", ids, replaced ? " (new router id)" : "");
+			} else {
+				zn_log("I", "connected (%s mode)%s%s", zn_mode_names[zn_node.cfg.mode], routers ? ", router " : "",
+				       routers ? ids : "");
+			}
+			zn_node.ever_connected = 1;
+		} else if (!connected && was_connected) {
+			zn_log("W", "lost the Zenoh router; retrying %s", zn_node.cfg.router_address);
+		} else if (!connected && !zn_node.ever_connected && !announced_wait) {
+			zn_log("I", "waiting for the Zenoh router at %s (retrying)", zn_node.cfg.router_address);
+			announced_wait = 1;
+		}
+		if (routers > 0)
+			snprintf(zn_node.router_ids, sizeof(zn_node.router_ids), "%s", ids);
+		__atomic_store_n(&zn_node.connected, connected, __ATOMIC_RELAXED);
+	}
+}

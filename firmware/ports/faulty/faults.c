@@ -1,0 +1,193 @@
+/* faults.c - seeded faults: a broken bridge on purpose, so the bench can prove
+ * each of its checks fails for the fault it exists for. A port that wraps the
+ * real ones (linker --wrap of zn_declare_publisher, zn_put,
+ * zn_undeclare_publisher and zn_can_transmit), linked only into the
+ * zenoh-node-faulty test executable: the component itself has no fault code.
+ *
+ * ZN_FAULT=<kind>[:<n>] selects one, on the CAN -> Zenoh samples (the
+ * publishers of the .../rx keys):
+ *   drop:N   drop every Nth sample          dup:N    publish every Nth sample twice
+ *   swap:N   publish every Nth sample after the one that follows it
+ *   flip:N   flip the lowest bit of data byte 0 of every Nth sample
+ *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted
+ * and on the Zenoh -> CAN path:
+ *   txdrop:N never write every Nth command (reported written)
+ *   txflip:N flip the lowest bit of data byte 0 of every Nth */
+#define _GNU_SOURCE
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "zn_node.h"
+#include "zn_port_can.h"
+#include "zn_port_os.h"
+#include "zn_port_zenoh.h"
+#include "zn_wire.h"
+
+int __real_zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
+int __real_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		  size_t attachment_len);
+void __real_zn_undeclare_publisher(zn_publisher_t *pub);
+esp_err_t __real_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
+
+int __wrap_zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
+int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		  size_t attachment_len);
+void __wrap_zn_undeclare_publisher(zn_publisher_t *pub);
+esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
+
+enum kind { NONE, DROP, DUP, SWAP, FLIP, DELAY, WRONGKEY, TXDROP, TXFLIP, KINDS };
+static const char *const names[KINDS] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey", "txdrop", "txflip" };
+
+static struct {
+	pthread_once_t once;
+	enum kind kind;
+	unsigned n, tx_count;
+} fault = { .once = PTHREAD_ONCE_INIT };
+
+/* The handle the component holds: the real publisher, and for the rx keys
+ * what a fault needs (a second publisher, a sample held back). */
+struct faulty_pub {
+	zn_publisher_t *real, *misrouted;
+	int faulted; /* an rx key: the CAN -> Zenoh faults apply */
+	uint64_t count;
+	uint8_t held[ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE], held_att[ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES)];
+	size_t held_len, held_att_len;
+	uint8_t copy[ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE];
+};
+
+static void parse_fault(void)
+{
+	const char *spec = getenv("ZN_FAULT");
+	if (!spec || !*spec)
+		return;
+	for (int k = 1; k < KINDS; k++) {
+		size_t len = strlen(names[k]);
+		if (strncmp(spec, names[k], len) == 0 && (spec[len] == ':' || spec[len] == '\0')) {
+			fault.kind = (enum kind)k;
+			fault.n = spec[len] == ':' ? (unsigned)strtoul(spec + len + 1, NULL, 10) : 1;
+			if (fault.n == 0)
+				fault.n = 1;
+			zn_log("W", "SEEDED FAULT ACTIVE: %s (n=%u) - this bridge is broken on purpose", names[k], fault.n);
+			return;
+		}
+	}
+	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N or wrongkey; no fault seeded", spec);
+}
+
+static int is_rx_key(const char *key)
+{
+	size_t n = strlen(key);
+	return n >= 3 && strcmp(key + n - 3, "/rx") == 0;
+}
+
+int __wrap_zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out)
+{
+	pthread_once(&fault.once, parse_fault);
+	struct faulty_pub *p = calloc(1, sizeof(*p));
+	if (!p)
+		return -1;
+	p->faulted = is_rx_key(key);
+	if (__real_zn_declare_publisher(s, key, qos, &p->real) != 0) {
+		free(p);
+		return -1;
+	}
+	if (p->faulted && fault.kind == WRONGKEY) {
+		char misrouted[ZN_KEY_MAX + 16];
+		snprintf(misrouted, sizeof(misrouted), "%s_misrouted", key);
+		if (__real_zn_declare_publisher(s, misrouted, qos, &p->misrouted) != 0) {
+			__real_zn_undeclare_publisher(p->real);
+			free(p);
+			return -1;
+		}
+	}
+	*out = (zn_publisher_t *)p;
+	return 0;
+}
+
+void __wrap_zn_undeclare_publisher(zn_publisher_t *pub)
+{
+	struct faulty_pub *p = (struct faulty_pub *)pub;
+	if (!p)
+		return;
+	__real_zn_undeclare_publisher(p->real);
+	if (p->misrouted)
+		__real_zn_undeclare_publisher(p->misrouted);
+	free(p);
+}
+
+/* A pipeline delay, not a throughput cap: hold until CAN receive time + n ms. */
+static void delay_until_due(const uint8_t *att, size_t att_len)
+{
+	if (att_len < ZN_ATTACHMENT_SIZE(1))
+		return;
+	int64_t rx_ns = 0;
+	for (int i = 7; i >= 0; i--)
+		rx_ns = rx_ns << 8 | att[ZN_ATTACHMENT_HEADER + i];
+	int64_t due = rx_ns + (int64_t)fault.n * 1000000;
+	struct timespec ts = { .tv_sec = due / 1000000000, .tv_nsec = due % 1000000000 };
+	while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, NULL) != 0)
+		;
+}
+
+int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
+{
+	struct faulty_pub *p = (struct faulty_pub *)pub;
+	if (!p->faulted || fault.kind == NONE || fault.kind == TXDROP || fault.kind == TXFLIP ||
+	    len > sizeof(p->copy) || att_len > sizeof(p->held_att))
+		return __real_zn_put(p->real, payload, len, att, att_len);
+	int nth = ++p->count % fault.n == 0;
+	switch (fault.kind) {
+	case DROP:
+		return nth ? 0 : __real_zn_put(p->real, payload, len, att, att_len); /* "published", silently lost */
+	case DUP:
+		if (nth)
+			__real_zn_put(p->real, payload, len, att, att_len);
+		return __real_zn_put(p->real, payload, len, att, att_len);
+	case SWAP:
+		if (nth && p->held_len == 0) { /* hold this one back until the next sample is out */
+			memcpy(p->held, payload, len);
+			memcpy(p->held_att, att, att_len);
+			p->held_len = len;
+			p->held_att_len = att_len;
+			return 0;
+		}
+		if (__real_zn_put(p->real, payload, len, att, att_len) != 0)
+			return -1;
+		if (p->held_len) {
+			__real_zn_put(p->real, p->held, p->held_len, p->held_att, p->held_att_len);
+			p->held_len = 0;
+		}
+		return 0;
+	case FLIP:
+		memcpy(p->copy, payload, len);
+		if (nth && len >= ZN_WIRE_FRAME_SIZE && p->copy[4] > 0 && !(p->copy[5] & ZN_WIRE_FLAG_RTR))
+			p->copy[8] ^= 0x01;
+		return __real_zn_put(p->real, p->copy, len, att, att_len);
+	case DELAY:
+		delay_until_due(att, att_len);
+		return __real_zn_put(p->real, payload, len, att, att_len);
+	case WRONGKEY:
+		return __real_zn_put(p->misrouted, payload, len, att, att_len);
+	case NONE:
+	case TXDROP:
+	case TXFLIP:
+	case KINDS:
+		break;
+	}
+	return __real_zn_put(p->real, payload, len, att, att_len);
+}
+
+esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
+{
+	if ((fault.kind != TXDROP && fault.kind != TXFLIP) || __atomic_add_fetch(&fault.tx_count, 1, __ATOMIC_RELAXED) % fault.n)
+		return __real_zn_can_transmit(can, msg, timeout_ms);
+	if (fault.kind == TXDROP)
+		return ESP_OK; /* "written", silently lost */
+	can_message_t flipped = *msg;
+	if (flipped.data_length_code > 0 && !flipped.rtr)
+		flipped.data[0] ^= 0x01;
+	return __real_zn_can_transmit(can, &flipped, timeout_ms);
+}

@@ -1,0 +1,65 @@
+/* test_faults.c - the seeded-fault port (ports/faulty) wrapped around the mock
+ * ports, linked as zenoh-node-faulty is: each fault breaks exactly its path,
+ * and without ZN_FAULT the wrapped bridge behaves as the plain one. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "zn_mock.h"
+#include "zn_node.h"
+#include "zn_wire.h"
+
+#define WAIT_MS 5000
+
+static zn_node_config_t immediate(void)
+{
+	zn_node_config_t cfg;
+	zn_node_default_config(&cfg);
+	cfg.publish_period_ms = 0;
+	cfg.rx_queue_frames = 1024;
+	return cfg;
+}
+
+static void inject(int n)
+{
+	for (int i = 0; i < n; i++) {
+		can_message_t m = { .identifier = (uint32_t)i, .data_length_code = 1, .data = { (uint8_t)(0x10 + i) } };
+		mock_can_inject("vcan0", &m, 1000 + i);
+	}
+}
+
+/* Only the first fault spec of a process is read (as in the bridge): one per run. */
+static void test_drop_every_second_sample(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = immediate();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	inject(6);
+	/* three of six arrive; the stats still claim six (what bridge_stats_agree catches) */
+	CHECK(mock_zenoh_wait_puts(3, WAIT_MS) == 3);
+	char buf[8192];
+	for (int tries = 0; tries < WAIT_MS; tries++) {
+		size_t n = mock_zenoh_query("vehicle/can/bridges/zenoh-node/stats", buf, sizeof(buf));
+		if (n && strstr(buf, "\"published_samples\": 6"))
+			break;
+		mock_zenoh_wait_puts(4, 1);
+	}
+	CHECK(strstr(buf, "\"published_samples\": 6") != NULL);
+	CHECK(mock_zenoh_put_count() == 3);
+	for (size_t i = 0; i < 3; i++) /* samples 1, 3, 5 (ids 0, 2, 4) */
+		CHECK(mock_zenoh_put(i)->payload[0] == 2 * i);
+	/* commands are untouched by a CAN -> Zenoh fault */
+	uint8_t wire[16];
+	can_message_t c = { .identifier = 0x321, .data_length_code = 1, .data = { 0x42 } };
+	zn_wire_encode(&c, wire, sizeof(wire));
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", wire, 16, NULL, 0) == 0);
+	CHECK(mock_can_tx_count("vcan0") == 1 && mock_can_tx("vcan0", 0).data[0] == 0x42);
+	zn_node_stop();
+}
+
+int main(void)
+{
+	setenv("ZN_FAULT", "drop:2", 1);
+	test_drop_every_second_sample();
+	CHECK_DONE("test_faults");
+}
