@@ -8,6 +8,7 @@
  * up gets frames queued in the hub up to its limit, then dropped and counted;
  * no reader ever blocks the bus. */
 #define _GNU_SOURCE
+#include <assert.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
@@ -248,9 +249,13 @@ static void client_close(uint32_t idx, const char *why)
 	free(c->filters);
 	free(c->queue);
 	uint32_t generation = c->generation + 1;
+	/* a slot on the flush list stays there until flush_dirty: a client that
+	 * reuses the slot in the same round must not be listed a second time */
+	int dirty = c->dirty;
 	memset(c, 0, sizeof(*c));
 	c->fd = -1;
 	c->generation = generation;
+	c->dirty = dirty;
 }
 
 static uint32_t client_alloc(void)
@@ -354,6 +359,7 @@ static enum send_result client_send(uint32_t idx, const void *msg, size_t len, i
 	m->len = (uint8_t)len;
 	memcpy(m->data, msg, len);
 	if (!c->dirty) {
+		assert(hub.ndirty < hub.nclients_alloc); /* one entry per slot at most */
 		c->dirty = 1;
 		hub.dirty[hub.ndirty++] = idx;
 	}

@@ -1,0 +1,55 @@
+"""The userspace hub against hostile and broken clients (issue 19, defects 1-5):
+raw connections (hubclient.py) doing what no well-behaved program does, the hub
+paused (SIGSTOP) so that a whole sequence lands in one loop round. Every test
+checks the hub still serves, and its memory stays under a stated ceiling."""
+from __future__ import annotations
+
+import pytest
+from conftest import require_userspace
+from hubclient import Client, Stopped, barrier, frame, rss_kib, sockopts
+
+pytestmark = pytest.mark.bus
+
+# The hub's RSS may grow by at most this much under any abuse below (its queues for the
+# well-behaved clients of a test are a few hundred KiB; the ASan hub's shadow adds some).
+RSS_GROWTH_CEILING_KIB = 16 * 1024
+
+
+@pytest.fixture
+def hub(bus):
+    require_userspace(bus, "raw clients of the hub's protocol")
+    bus.rss_before = rss_kib(bus.hub.pid)
+    yield bus
+    assert bus.hub.poll() is None, bus.hub_log.read_text()[-3000:]
+    grown = rss_kib(bus.hub.pid) - bus.rss_before
+    assert grown < RSS_GROWTH_CEILING_KIB, f"hub RSS grew by {grown} KiB"
+
+
+def still_serves(bus) -> None:
+    reader, sender = Client(bus.workdir), Client(bus.workdir)
+    reader.bind()
+    sender.send(frame(0x7AB, b"\x01"))
+    assert reader.recv() == frame(0x7AB, b"\x01")[8:]
+
+
+def test_slot_reused_in_the_round_it_was_freed_is_flushed_once(hub):
+    """Defect 1: 64 clients (every slot) all have a frame queued, one closes, a new client takes
+    its slot and is named by a BARRIER in the same round: its reply must not be listed twice
+    (the ASan hub found a heap-buffer-overflow in client_send)."""
+    clients = [Client(hub.workdir) for _ in range(64)]
+    sender, closing, barrier_sender = clients[0], clients[1], clients[2]
+    sender.bind(recv_own=True)  # its own echo makes every slot dirty, its own too
+    for c in clients[1:]:
+        c.bind()
+    with Stopped(hub.hub.pid):
+        sender.send(frame(0x123, b"\x11"))
+        closing.close()
+        newcomer = Client(hub.workdir)  # accepted into the closed client's slot
+        newcomer.send(sockopts())
+        barrier_sender.send(barrier(newcomer.cookie))
+    assert barrier_sender.recv() == frame(0x123, b"\x11")[8:]
+    assert barrier_sender.ack() == 0
+    assert newcomer.ack() == 0
+    for c in clients[3:]:
+        assert c.recv() == frame(0x123, b"\x11")[8:]
+    still_serves(hub)
