@@ -13,6 +13,7 @@ from pathlib import Path
 import yaml
 
 from .trace import read_trace
+from .wire import id_hex
 
 
 def frame_bits_worst(dlc: int, extended: bool, remote: bool = False) -> int:
@@ -68,7 +69,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         gaps = [(b.timestamp - a.timestamp) * 1000 for a, b in zip(msgs, msgs[1:], strict=False)]
         cycle = statistics.median(gaps) if gaps else None
         jitter = statistics.median(abs(g - cycle) for g in gaps) if gaps and cycle is not None else None
-        ids.append(IdSummary(f"{can_id:08X}" if extended else f"{can_id:03X}", extended, len(msgs),
+        ids.append(IdSummary(id_hex(can_id, extended), extended, len(msgs),
                              max(m.dlc for m in msgs), cycle, jitter, sum(m.is_remote_frame for m in msgs)))
     interfaces = sorted({str(tf.message.channel) for tf in frames if tf.message.channel is not None})
     return TraceSummary(path, len(frames), span, interfaces or ["vcan0"], ids,

@@ -7,14 +7,18 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
 from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import zenoh
 
+from . import wire
 from .runkeys import wait_token, wait_until
 
 
@@ -31,14 +35,22 @@ def kernel_can_receivers() -> int:
     return count
 
 
+def _hub_clients() -> list[dict] | None:
+    """The userspace hub's clients (ucanctl stats), None on kernel CAN or if the hub does not answer."""
+    ucan_dir = os.environ.get("UCAN_DIR", "/run/ucan")
+    if not (os.environ.get("LD_PRELOAD") and os.path.exists(f"{ucan_dir}/hub.sock")):
+        return None
+    out = subprocess.run(["ucanctl", "-d", ucan_dir, "stats", "-j"], capture_output=True, text=True,
+                         env={k: v for k, v in os.environ.items() if k != "LD_PRELOAD"})
+    return json.loads(out.stdout)["clients"] if out.returncode == 0 else None
+
+
 def bound_can_receivers() -> int:
     """Bound CAN_RAW sockets on the bus: the hub's count, or the kernel's receive lists."""
-    ucan_dir = os.environ.get("UCAN_DIR", "/run/ucan")
-    if os.environ.get("LD_PRELOAD") and os.path.exists(f"{ucan_dir}/hub.sock"):
-        out = subprocess.run(["ucanctl", "-d", ucan_dir, "stats", "-j"], capture_output=True, text=True,
-                             env={k: v for k, v in os.environ.items() if k != "LD_PRELOAD"})
-        return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
-    return kernel_can_receivers()
+    clients = _hub_clients()
+    if clients is None:
+        return kernel_can_receivers()
+    return sum(1 for c in clients if c["bound"])
 
 
 # candump -r: a deep receive queue, so the bench's own capture rides out a flood or a
@@ -48,13 +60,15 @@ CAPTURE_RCVBUF = 64 << 20
 
 
 class CanCapture:
-    """candump -L of the given interfaces into a file."""
+    """candump -L of the given interfaces into a file. Its drops are counted twice over: candump -d
+    writes the kernel's per-socket drop counter (SO_RXQ_OVFL) into the file as DROPCOUNT lines;
+    on the userspace bus the hub counts what it dropped for candump's sockets (read at stop)."""
 
     def __init__(self, path: Path, interfaces: list[str]):
         self.path = path
         before = bound_can_receivers()
         self.out = open(path, "w")
-        self.proc = subprocess.Popen(["candump", "-L", "-r", str(CAPTURE_RCVBUF), *interfaces], stdout=self.out,
+        self.proc = subprocess.Popen(["candump", "-L", "-d", "-r", str(CAPTURE_RCVBUF), *interfaces], stdout=self.out,
                                      stderr=subprocess.PIPE)
         wait_until(lambda: bound_can_receivers() >= before + len(interfaces) or self.proc.poll() is not None,
                    10, "candump bound to the bus")
@@ -62,6 +76,12 @@ class CanCapture:
             raise RuntimeError(f"candump exited: {self.proc.stderr.read().decode() if self.proc.stderr else ''}")
 
     def stop(self) -> None:
+        clients = _hub_clients() if self.proc.poll() is None else None
+        if clients is not None:
+            pid = self.proc.pid
+            mine = [c for c in clients if c.get("pid") == pid or c.get("cookie", "").startswith(f"ucan/{pid}/")]
+            write_capture_stats(self.path.parent, "can", {"hub_rx_drops": sum(c["rx_drops"] for c in mine),
+                                                       "hub_sockets": len(mine)})
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
             self.proc.wait(timeout=10)
@@ -92,6 +112,8 @@ class ZenohCapture:
                                      stdin=subprocess.PIPE, stderr=subprocess.PIPE)
         self._offset = 0
         self._partial = b""
+        self._samples = 0                          # lines read so far
+        self.reported: int | None = None           # zn-capture's own sample count, at stop
         self._frames: Counter = Counter()          # key -> 16-byte frames
         self._ids: dict[str, Counter] = {}         # key -> id -> frames
         try:
@@ -110,13 +132,14 @@ class ZenohCapture:
         lines = data.split(b"\n")
         self._partial = lines.pop()
         for line in lines:
-            _, key_b, payload_hex, _ = line.split(b"\t")
-            key = key_b.decode()
-            n = len(payload_hex) // 32
-            self._frames[key] += n
-            ids = self._ids.setdefault(key, Counter())
-            for i in range(n):
-                ids[int.from_bytes(bytes.fromhex(payload_hex[32 * i:32 * i + 8].decode()), "little")] += 1
+            sample = parse_sample_line(line.decode())
+            self._samples += 1
+            self._frames[sample.key] += len(sample.payload) // wire.WIRE_SIZE
+            ids = self._ids.setdefault(sample.key, Counter())
+            try:
+                ids.update(f.can_id for f in wire.decode_batch(sample.payload))
+            except wire.WireError:
+                pass  # not a bridge frame: the oracle reports it; nothing to wait for here
 
     def frames_on(self, keys: set[str]) -> int:
         """16-byte frames received so far on these keys."""
@@ -137,15 +160,67 @@ class ZenohCapture:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 raise RuntimeError("zn-capture did not stop within 10 s") from None
+        err = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
         if self.proc.returncode != 0:
-            err = self.proc.stderr.read().decode(errors="replace") if self.proc.stderr else ""
             raise RuntimeError(f"zn-capture failed (exit {self.proc.returncode}): {err.strip()}")
+        counted = re.search(r"zn-capture: (\d+) samples on", err)
+        self.reported = int(counted[1]) if counted else None
+        self._poll()
+        write_capture_stats(self.path.parent, "zenoh", {"samples_reported": self.reported,
+                                                         "samples_written": self._samples})
 
 
-def read_zenoh_capture(path: Path) -> list[tuple[int, str, bytes, bytes | None]]:
-    """zn-capture's file: (receive time ns, key, payload, attachment or None) per sample."""
-    out = []
-    for line in open(path):
-        t_ns, key, payload, att = line.rstrip("\n").split("\t")
-        out.append((int(t_ns), key, bytes.fromhex(payload), None if att == "-" else bytes.fromhex(att)))
-    return out
+class Sample(NamedTuple):
+    t_ns: int                # receive time, ns since the epoch
+    key: str
+    payload: bytes
+    attachment: bytes | None
+
+
+def parse_sample_line(line: str) -> Sample:
+    """One line of zn-capture's file (grammar in zn-capture.rs), e.g.
+    '1700000000000400000<TAB>vehicle/can/rx<TAB>2301000002000000dead000000000000<TAB>-'."""
+    fields = line.rstrip("\n").split("\t")
+    if len(fields) != 4:
+        raise ValueError(f"not a zn-capture line ({len(fields)} fields, not 4): {line[:80]!r}")
+    t_ns, key, payload, att = fields
+    return Sample(int(t_ns), key, bytes.fromhex(payload), None if att == "-" else bytes.fromhex(att))
+
+
+def format_sample_line(sample: Sample) -> str:
+    """The line zn-capture writes for a sample (tests and benchmarks write captures with it)."""
+    att = "-" if sample.attachment is None else sample.attachment.hex()
+    return f"{sample.t_ns}\t{sample.key}\t{sample.payload.hex()}\t{att}\n"
+
+
+def iter_zenoh_capture(path: Path) -> Iterator[Sample]:
+    with open(path) as f:
+        for lineno, line in enumerate(f, 1):
+            try:
+                yield parse_sample_line(line)
+            except ValueError as e:
+                raise ValueError(f"{path}:{lineno}: {e}") from None
+
+
+def read_zenoh_capture(path: Path) -> list[Sample]:
+    """zn-capture's file: every sample in arrival order."""
+    return list(iter_zenoh_capture(path))
+
+
+CAPTURE_STATS = "captures.json"
+
+
+def write_capture_stats(run_dir: Path, side: str, stats: dict) -> None:
+    """A capture's own counters at stop, by side ("can", "zenoh"), in captures.json: what the
+    analysis needs to tell a capture that could not keep up from a bridge that lost frames."""
+    path = run_dir / CAPTURE_STATS
+    merged = json.loads(path.read_text()) if path.exists() else {}
+    merged[side] = stats
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(merged, indent=2))
+    tmp.replace(path)
+
+
+def read_capture_stats(run_dir: Path) -> dict:
+    path = run_dir / CAPTURE_STATS
+    return json.loads(path.read_text()) if path.exists() else {}

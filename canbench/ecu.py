@@ -25,8 +25,8 @@ from pathlib import Path
 import can
 
 from . import runkeys, tracegen
-from .oracle import percentile
 from .scenario import Ecu, Scenario
+from .stats import percentile
 from .trace import read_trace
 from .wire import Frame
 

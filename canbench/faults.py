@@ -29,6 +29,7 @@ import time
 from dataclasses import dataclass, field
 
 from .scenario import Fault
+from .wire import id_hex
 
 ACTION_SERVICE = {"router_restart": "router", "router_kill": "router", "router_pause": "router",
                   "router_replace": "router", "bridge_term": "bridge", "bridge_kill": "bridge",
@@ -162,7 +163,7 @@ class Injector:
     @staticmethod
     def _flood(fault: Fault) -> None:
         """cangen with no gap (-g 0) ignoring ENOBUFS (-i): all the bus takes, bounded in count and time."""
-        proc = subprocess.Popen(["cangen", fault.bus, "-g", "0", "-i", "-I", f"{fault.can_id:03X}", "-L", "8",
+        proc = subprocess.Popen(["cangen", fault.bus, "-g", "0", "-i", "-I", id_hex(fault.can_id, False), "-L", "8",
                                  "-D", "i", "-n", str(fault.max_frames)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         try:

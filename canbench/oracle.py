@@ -19,14 +19,15 @@ frame at the same place in the stream, if that one has the same id and length
 from __future__ import annotations
 
 import bisect
-import re
 from collections import Counter, defaultdict, deque
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import wire
-
-CANDUMP = re.compile(r"^\((\d+)\.(\d+)\)\s+(\S+)\s+([0-9A-Fa-f]+)#(R\d?|[0-9A-Fa-f]*)")
+from . import trace, wire
+from .capture import Sample
+from .errors import TraceError
+from .stats import latency_stats, percentile
 
 
 @dataclass(frozen=True)
@@ -41,28 +42,10 @@ class Observed:
     origin: str = "can.log"  # the file `line` refers to
 
 
-FRAME_TEXT = re.compile(r"^(\S+)\s+([0-9A-Fa-f]+)#(R\d?|[0-9A-Fa-f]*)$")
-
-
-def parse_frame(ident: str, body: str) -> wire.Frame:
-    """A frame from candump's '<id>#<body>' parts (8 hex digits = 29-bit id)."""
-    extended = len(ident) == 8
-    if body.startswith("R"):
-        return wire.Frame(int(ident, 16), int(body[1:] or 0), b"", extended, True)
-    data = bytes.fromhex(body)
-    return wire.Frame(int(ident, 16), len(data), data, extended)
-
-
-def read_candump(path: Path, interface: str | None = None) -> list[Observed]:
-    out: list[Observed] = []
-    for lineno, line in enumerate(open(path), 1):
-        m = CANDUMP.match(line)
-        if not m or (interface and m[3] != interface):
-            continue
-        sec, frac, _, ident, body = m.groups()
-        t_ns = int(sec) * 1_000_000_000 + int(frac.ljust(9, "0")[:9])
-        out.append(Observed(parse_frame(ident, body), t_ns, len(out), line=lineno))
-    return out
+def read_candump(path: Path, interface: str | None = None, drops: dict[str, int] | None = None) -> list[Observed]:
+    """The frames of a candump -L capture (of one interface), each with its line."""
+    return [Observed(frame, t_ns, i, line=lineno)
+            for i, (lineno, t_ns, _, frame) in enumerate(trace.iter_candump(path, interface, drops))]
 
 
 @dataclass(frozen=True)
@@ -81,15 +64,15 @@ def read_sent_log(path: Path) -> list[SentRecord]:
     for lineno, raw in enumerate(open(path), 1):
         if raw.startswith("#") or not raw.strip():
             continue
-        line, t_ns, text = raw.rstrip("\n").split("\t")
-        m = FRAME_TEXT.match(text)
-        if not m:
-            raise ValueError(f"{path}: not a frame: {text!r}")
-        out.append(SentRecord(lineno, m[1], int(line), int(t_ns), parse_frame(m[2], m[3])))
+        fields = raw.rstrip("\n").split("\t")
+        if len(fields) != 3:
+            raise TraceError(str(path), lineno, f"not a send-log line ({len(fields)} fields, not 3)")
+        bus, frame = trace.parse_frame_text(fields[2], str(path), lineno)
+        out.append(SentRecord(lineno, bus, int(fields[0]), int(fields[1]), frame))
     return out
 
 
-def zenoh_frames(samples, key: str) -> tuple[list[Observed], list[str]]:
+def zenoh_frames(samples: Iterable[Sample], key: str) -> tuple[list[Observed], list[str]]:
     """Frames of the samples on key, in arrival order; and problems (bad payloads, other keys)."""
     out: list[Observed] = []
     problems: list[str] = []
@@ -111,18 +94,6 @@ def zenoh_frames(samples, key: str) -> tuple[list[Observed], list[str]]:
 
 def _key(f: wire.Frame) -> tuple:
     return (f.can_id, f.extended, f.remote, f.dlc, f.data)
-
-
-def percentile(values: list[float], q: float) -> float | None:
-    if not values:
-        return None
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
-
-
-def latency_stats(values_ms: list[float]) -> dict:
-    return {"count": len(values_ms), "p50_ms": percentile(values_ms, 0.5), "p90_ms": percentile(values_ms, 0.9),
-            "p99_ms": percentile(values_ms, 0.99), "max_ms": max(values_ms) if values_ms else None}
 
 
 @dataclass
@@ -305,8 +276,7 @@ def cycle_times(frames: list[Observed]) -> dict[str, dict]:
     """Per id: count and cycle time statistics (ms) of a CAN stream."""
     by_id: dict[str, list[int]] = defaultdict(list)
     for o in frames:
-        ident = f"{o.frame.can_id:08X}" if o.frame.extended else f"{o.frame.can_id:03X}"
-        by_id[ident].append(o.t_ns)
+        by_id[wire.id_hex(o.frame.can_id, o.frame.extended)].append(o.t_ns)
     out = {}
     for ident, times in sorted(by_id.items()):
         gaps = [(b - a) / 1e6 for a, b in zip(times, times[1:], strict=False)]

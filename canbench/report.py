@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import cantools
 from mcap.writer import Writer
 
-from . import oracle
+from . import oracle, wire
 
 if TYPE_CHECKING:
     from .run import RunResult
@@ -44,7 +44,7 @@ SCHEMAS = {
 
 def _frame_json(bus: str, o: oracle.Observed) -> dict:
     f = o.frame
-    return {"bus": bus, "id": f.can_id, "id_hex": f"{f.can_id:08X}" if f.extended else f"{f.can_id:03X}",
+    return {"bus": bus, "id": f.can_id, "id_hex": wire.id_hex(f.can_id, f.extended),
             "extended": f.extended, "remote": f.remote, "dlc": f.dlc, "data": f.data.hex().upper(),
             "source": f"{o.origin}:{o.line}" if o.line else ""}
 
@@ -231,7 +231,7 @@ def write_html(result: RunResult, path: Path) -> None:
     for b in result.buses:
         lost_by_id: dict[str, int] = {}
         for o in b.comparison.lost:
-            ident = f"{o.frame.can_id:08X}" if o.frame.extended else f"{o.frame.can_id:03X}"
+            ident = wire.id_hex(o.frame.can_id, o.frame.extended)
             lost_by_id[ident] = lost_by_id.get(ident, 0) + 1
         for ident, sides in b.cycle_times.items():
             can, zen = sides["can"], sides["zenoh"] or {}

@@ -19,10 +19,12 @@ import argparse
 import heapq
 import math
 from collections.abc import Iterator
+from decimal import Decimal
 from pathlib import Path
 
 import can
 
+from .trace import format_line
 from .wire import Frame
 
 MESSAGES = [
@@ -129,7 +131,7 @@ def write(path: Path, frames: list[can.Message]) -> None:
         for m in frames:
             frame = Frame(m.arbitration_id, m.dlc, b"" if m.is_remote_frame else bytes(m.data), m.is_extended_id,
                           m.is_remote_frame)
-            out.write(f"({m.timestamp:.6f}) {frame.candump(str(m.channel))}\n")
+            out.write(format_line(round(Decimal(m.timestamp) * 1_000_000) * 1000, str(m.channel), frame) + "\n")
 
 
 def main() -> None:

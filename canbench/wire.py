@@ -26,6 +26,11 @@ class WireError(ValueError):
         self.reason = reason
 
 
+def id_hex(can_id: int, extended: bool) -> str:
+    """A CAN id as candump writes it: 3 hex digits for 11-bit ids, 8 for 29-bit ids."""
+    return f"{can_id:08X}" if extended else f"{can_id:03X}"
+
+
 @dataclass(frozen=True)
 class Frame:
     can_id: int
@@ -36,7 +41,7 @@ class Frame:
 
     def candump(self, iface: str = "vcan0") -> str:
         """The frame as candump -L writes it after the timestamp: 'vcan0 123#DEAD'."""
-        ident = f"{self.can_id:08X}" if self.extended else f"{self.can_id:03X}"
+        ident = id_hex(self.can_id, self.extended)
         if self.remote:
             return f"{iface} {ident}#R{self.dlc if self.dlc else ''}"
         return f"{iface} {ident}#{self.data.hex().upper()}"

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from canbench import wire
+from canbench.capture import iter_zenoh_capture
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data" / "compose"
@@ -107,12 +108,11 @@ def test_viewer_records_the_scenarios_traffic():
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
     logged = viewer.read_rrd(run_dir / "traffic.rrd")
     on_zenoh: dict[str, int] = {}
-    for line in (run_dir / "zenoh.tsv").read_text().splitlines():
-        _, key, payload, _ = line.split("\t")
-        if not key.endswith("/rx"):
+    for sample in iter_zenoh_capture(run_dir / "zenoh.tsv"):
+        if not sample.key.endswith("/rx"):
             continue
-        for f in wire.decode_batch(bytes.fromhex(payload)):
-            ident = f"{f.can_id:08X}" if f.extended else f"{f.can_id:03X}"
+        for f in wire.decode_batch(sample.payload):
+            ident = wire.id_hex(f.can_id, f.extended)
             on_zenoh[ident] = on_zenoh.get(ident, 0) + 1
     def recorded(prefix: str) -> dict[str, int]:
         return {path[len(prefix):-len("/raw")]: len(v) for path, v in logged.items()
