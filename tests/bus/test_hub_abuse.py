@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 from conftest import require_userspace
-from hubclient import Client, Stopped, barrier, frame, rss_kib, sockopts
+from hubclient import MSG_RESET_STATS, Client, Stopped, barrier, frame, query, rss_kib, sockopts
 
 pytestmark = pytest.mark.bus
 
@@ -53,3 +53,28 @@ def test_slot_reused_in_the_round_it_was_freed_is_flushed_once(hub):
     for c in clients[3:]:
         assert c.recv() == frame(0x123, b"\x11")[8:]
     still_serves(hub)
+
+
+def test_client_that_never_reads_its_replies_is_closed_not_queued_for(hub):
+    """Defect 2: control replies were queued past every limit: 1M RESET_STATS from a client that
+    never reads grew the hub from 1.5 MB to 81 MB. Now UCAN_CTL_RESERVE replies past a full queue
+    close it, counted."""
+    greedy = Client(hub.workdir)
+    sent = 0
+    with pytest.raises(OSError):  # the hub hangs up on it
+        while sent < 400_000:
+            greedy.send(query(MSG_RESET_STATS))
+            sent += 1
+    assert sent < 100_000, sent
+    assert hub.stats()["hub"]["unread_closes"] == 1
+    still_serves(hub)
+
+
+def test_receive_buffer_asked_is_clamped(hub):
+    """Defect 2: SO_RCVBUF set the reader's queue limit unclamped (4 GiB asked: ~59 M frames)."""
+    huge, plain = Client(hub.workdir), Client(hub.workdir)
+    huge.bind(rcvbuf=0xFFFFFFFF)
+    plain.bind(rcvbuf=64 * 72 * 1000)  # 64 k frames: honoured
+    limits = {c["cookie"]: c["queue_limit"] for c in hub.stats()["clients"]}
+    assert limits[huge.cookie] == (64 << 20) // 72  # UCAN_MAX_RCVBUF
+    assert limits[plain.cookie] == 64_000

@@ -33,6 +33,11 @@
 #define UCAN_MAX_FILTERS CAN_RAW_FILTER_MAX
 #define UCAN_COOKIE_MAX 64
 #define UCAN_STATS_MAX_CLIENTS 1024
+/* Control replies a client may leave unread beyond its full frame queue before
+ * the hub closes it (a well-behaved client has one query outstanding). */
+#define UCAN_CTL_RESERVE 64
+/* SO_RCVBUF is honoured up to this (bench captures ask 64 MiB: candump -r) */
+#define UCAN_MAX_RCVBUF (64u << 20)
 
 enum ucan_msg_type {
 	UCAN_MSG_ACK = 1,	  /* hub -> client: result of BIND / query */
@@ -117,8 +122,18 @@ struct ucan_clientstats {
 	int32_t pid; /* SO_PEERCRED, as seen from the hub's pid namespace */
 	uint32_t ifindex;
 	uint32_t bound;
-	uint32_t queued; /* frames waiting in the hub for this reader */
+	uint32_t queued;      /* frames waiting in the hub for this reader */
+	uint32_t queue_limit; /* frames it may have waiting before drops */
+	uint32_t pad;
 	uint64_t tx_frames, rx_frames, rx_bytes, rx_drops;
+};
+
+/* What the hub refused, since it started (never reset). */
+struct ucan_hubstats {
+	uint64_t proto_errors;	      /* connections closed for a malformed message */
+	uint64_t unread_closes;	      /* closed: left UCAN_CTL_RESERVE replies unread past a full queue */
+	uint64_t refused_connections; /* accepted and closed at once: the hub was out of descriptors */
+	uint64_t barriers_refused;    /* BARRIERs naming a client already being drained (nested) */
 };
 
 struct ucan_stats {
@@ -127,6 +142,7 @@ struct ucan_stats {
 	uint32_t nclients;
 	uint32_t pad;
 	uint64_t uptime_ms;
+	struct ucan_hubstats hub;
 	struct ucan_ifinfo ifs[UCAN_MAX_IFACES];
 	struct ucan_ifstats ifstats[UCAN_MAX_IFACES];
 	struct ucan_clientstats clients[]; /* nclients entries */

@@ -93,7 +93,7 @@ static struct {
 	uint32_t *dirty; /* clients with queued messages to flush this round */
 	uint32_t ndirty;
 	struct timespec start;
-	uint64_t proto_errors;
+	struct ucan_hubstats counters;
 	volatile sig_atomic_t stop;
 } hub = { .listen_fd = -1, .lock_fd = -1, .epoll_fd = -1, .stats_timer_fd = -1, .default_queue = HUB_DEFAULT_QUEUE_FRAMES };
 
@@ -337,23 +337,26 @@ static int client_queue_grow(struct client *c, uint32_t cap)
 	return 0;
 }
 
-enum send_result { QUEUED, DROPPED };
+enum send_result { QUEUED, DROPPED, NO_MEMORY };
+enum send_kind { FRAME, CONTROL };
 
 /* Queues a message for a client; queues are flushed once per event-loop
  * round with sendmmsg (flush_dirty), so a burst costs one syscall per reader
- * instead of one per frame. force: queue past the reader's limit (control
- * messages must never be lost, or the client would lose track of the stream). */
-static enum send_result client_send(uint32_t idx, const void *msg, size_t len, int force)
+ * instead of one per frame. Frames are dropped at the reader's limit; control
+ * messages may go UCAN_CTL_RESERVE past it (losing one would make the client
+ * lose track of the stream), then the client is not reading at all. */
+static enum send_result client_send(uint32_t idx, const void *msg, size_t len, enum send_kind kind)
 {
 	struct client *c = &hub.clients[idx];
-	if (c->queue_len >= c->queue_limit && !force)
+	uint32_t limit = c->queue_limit + (kind == CONTROL ? UCAN_CTL_RESERVE : 0);
+	if (c->queue_len >= limit)
 		return DROPPED;
 	if (c->queue_len == c->queue_cap) {
 		uint32_t cap = c->queue_cap ? c->queue_cap * 2 : 64;
-		if (cap > c->queue_limit && !force)
-			cap = c->queue_limit;
+		if (cap > c->queue_limit + UCAN_CTL_RESERVE)
+			cap = c->queue_limit + UCAN_CTL_RESERVE;
 		if (client_queue_grow(c, cap) < 0)
-			return DROPPED;
+			return NO_MEMORY;
 	}
 	struct outmsg *m = &c->queue[(c->queue_head + c->queue_len++) % c->queue_cap];
 	m->len = (uint8_t)len;
@@ -369,8 +372,17 @@ static enum send_result client_send(uint32_t idx, const void *msg, size_t len, i
 static void client_send_ctl(uint32_t idx, uint32_t type, int status)
 {
 	struct ucan_ctl ctl = { .type = type, .status = status };
-	if (client_send(idx, &ctl, sizeof(ctl), 1) == DROPPED)
+	switch (client_send(idx, &ctl, sizeof(ctl), CONTROL)) {
+	case QUEUED:
+		break;
+	case DROPPED:
+		hub.counters.unread_closes++;
+		client_close(idx, "does not read its replies");
+		break;
+	case NO_MEMORY:
 		client_close(idx, "out of memory");
+		break;
+	}
 }
 
 static void client_flush(uint32_t idx)
@@ -435,7 +447,7 @@ static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame
 	memcpy(msg + len, frame, size);
 	len += size;
 
-	if (client_send(idx, msg, len, 0) == QUEUED) {
+	if (client_send(idx, msg, len, FRAME) == QUEUED) {
 		c->rx_frames++;
 		c->rx_bytes += frame->len;
 		ifc->stats.rx_deliveries++;
@@ -597,9 +609,9 @@ static void apply_sockopts(uint32_t idx, const uint8_t *msg, size_t len)
 	free(c->filters);
 	c->filters = filters;
 	c->opts = opts;
-	uint32_t limit = hub.default_queue;
-	if (opts.rcvbuf / CANFD_MTU > limit)
-		limit = opts.rcvbuf / CANFD_MTU;
+	uint32_t limit = hub.default_queue, rcvbuf = opts.rcvbuf < UCAN_MAX_RCVBUF ? opts.rcvbuf : UCAN_MAX_RCVBUF;
+	if (rcvbuf / CANFD_MTU > limit)
+		limit = rcvbuf / CANFD_MTU;
 	c->queue_limit = limit;
 }
 
@@ -623,6 +635,7 @@ static void handle_stats(uint32_t idx)
 	clock_gettime(CLOCK_MONOTONIC, &now);
 	st->type = UCAN_MSG_STATS;
 	st->nifs = hub.nifs;
+	st->hub = hub.counters;
 	st->uptime_ms = (uint64_t)(now.tv_sec - hub.start.tv_sec) * 1000u +
 			(uint64_t)((now.tv_nsec - hub.start.tv_nsec) / 1000000);
 	for (unsigned i = 0; i < hub.nifs; i++) {
@@ -640,6 +653,7 @@ static void handle_stats(uint32_t idx)
 		cs->ifindex = c->opts.ifindex;
 		cs->bound = (uint32_t)c->bound;
 		cs->queued = c->queue_len;
+		cs->queue_limit = c->queue_limit;
 		cs->tx_frames = c->tx_frames;
 		cs->rx_frames = c->rx_frames;
 		cs->rx_bytes = c->rx_bytes;
@@ -689,14 +703,14 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 	struct client *c = &hub.clients[idx];
 	int type = ucan_msg_validate(msg, len, hub.ifinfos, hub.nifs);
 	if (type < 0) {
-		hub.proto_errors++;
+		hub.counters.proto_errors++;
 		client_close(idx, ucan_msg_strerror(type));
 		return;
 	}
 	switch (type) {
 	case UCAN_MSG_BIND:
 		if (c->bound) {
-			hub.proto_errors++;
+			hub.counters.proto_errors++;
 			client_close(idx, "second BIND");
 			return;
 		}
@@ -803,7 +817,7 @@ static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
 				return;
 			}
 			if (msgs[i].msg_hdr.msg_flags & MSG_TRUNC) {
-				hub.proto_errors++;
+				hub.counters.proto_errors++;
 				client_close(idx, "message too long");
 				return;
 			}
@@ -974,7 +988,7 @@ int hub_run(void)
 		if (n > 0 && hub.spin_us)
 			last_event_ns = now_ns();
 	}
-	hub_log("stopping (%" PRIu64 " protocol errors)", hub.proto_errors);
+	hub_log("stopping (%" PRIu64 " protocol errors)", hub.counters.proto_errors);
 	return 0;
 }
 
