@@ -10,6 +10,7 @@
   canbench compose-override SCENARIO       compose override: bus, bridge settings, one service per ECU
   canbench ecu --scenario S --name N ...   run one emulated ECU (inside its container)
   canbench gen-trace --kind K --out F      write a synthetic trace (powertrain, mixed, burst)
+  canbench suite plan|summary ...          make test's shards and its suite summary (scripts/bench-suite)
 
 Errors are one line (file:line where it applies); --debug shows the traceback.
 Exit codes: 0 ok, 1 run failure, 2 bad input."""
@@ -23,9 +24,8 @@ from pathlib import Path
 
 import yaml
 
-from . import authoring, compare, ecu, faults, scenario, tracegen
+from . import authoring, compare, ecu, faults, scenario, suite, tracegen, validate
 from .errors import BenchError, InputError
-from .trace import read_trace
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,13 +36,7 @@ def _add_view_arguments(p) -> None:
 
 
 def cmd_validate(args) -> int:
-    for path in args.scenarios:
-        sc = scenario.load(path)
-        for trace in [e.trace for e in sc.ecus] + [c.trace for c in sc.commands]:
-            if trace:
-                read_trace(trace, None)
-        print(f"{path}: ok ({len(sc.ecus)} ECUs on {', '.join(sc.bus_names)})")
-    return 0
+    return validate.run(args.scenarios)
 
 
 BRIDGE_ENV = {  # scenario bridge key -> the bridge's environment variable (its Kconfig name)
@@ -242,6 +236,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("run", nargs="?", type=Path)
     p.add_argument("--print-only", action="store_true", help="print the path, do not start a browser")
     p.set_defaults(func=cmd_open)
+    p = sub.add_parser("suite", help="a make test suite: its shard plan, its summary (scripts/bench-suite)")
+    suite.add_arguments(p)
+    p.set_defaults(func=suite.main)
     p = sub.add_parser("view", help="bridges and ROS 2 topics on a Zenoh network (or a recording) in Rerun")
     _add_view_arguments(p)
     p.set_defaults(func=cmd_view)

@@ -113,6 +113,7 @@ class Fault:
     bus: str = ""        # can_flood: the bus (default: the first)
     can_id: int = 0x7F0  # can_flood: the flood's identifier
     max_frames: int = 1_000_000  # can_flood: stops at this count even if duration_s has not passed
+    step: int = 0        # its index in the scenario's faults list (a repeated step expands to several)
 
 
 @dataclass(frozen=True)
@@ -144,7 +145,8 @@ def schema() -> dict:
     return json.loads(SCHEMA_PATH.read_text())
 
 
-def load(path: str | Path) -> Scenario:
+def parse(path: str | Path) -> Any:
+    """The scenario's YAML document, every mapping and list knowing its lines."""
     path = Path(path)
     try:
         text = path.read_text()
@@ -157,99 +159,151 @@ def load(path: str | Path) -> Scenario:
         raise ScenarioError(str(path), mark.line + 1 if mark else None, f"not valid YAML: {e}") from None
     if not isinstance(doc, dict):
         raise ScenarioError(str(path), 1, "a scenario is a mapping of keys (name, ecus, expect, ...)")
-    validator = jsonschema.Draft202012Validator(schema())
-    errors = sorted(validator.iter_errors(doc), key=lambda e: _line_of(doc, list(e.absolute_path)))
-    if errors:
-        first = errors[0]
-        where = ".".join(str(p) for p in first.absolute_path) or "(top level)"
-        line_path = list(first.absolute_path)
-        if first.validator == "additionalProperties" and isinstance(first.instance, dict):
-            # point at the unknown key itself, not at the mapping that holds it
-            allowed = set(first.schema.get("properties", {}))
-            unknown = [k for k in first.instance if k not in allowed]
-            if unknown:
-                line_path.append(unknown[0])
-        raise ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {first.message}")
-    buses = {b["name"] for b in doc["buses"]}
+    return doc
 
-    def fail(where: list, message: str) -> ScenarioError:
-        return ScenarioError(str(path), _line_of(doc, where), f"{'.'.join(map(str, where))}: {message}")
+
+def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
+    problems = []
+    for error in jsonschema.Draft202012Validator(schema()).iter_errors(doc):
+        where = ".".join(str(p) for p in error.absolute_path) or "(top level)"
+        line_path = list(error.absolute_path)
+        if error.validator == "additionalProperties" and isinstance(error.instance, dict):
+            # point at the unknown key itself, not at the mapping that holds it
+            allowed = set(error.schema.get("properties", {}))
+            line_path += [k for k in error.instance if k not in allowed][:1]
+        problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}"))
+    return problems
+
+
+def problems_error(problems: list[ScenarioError]) -> ScenarioError:
+    """One error for several problems: the first names file:line, then one line per further problem."""
+    first, rest = problems[0], problems[1:]
+    message = str(first).removeprefix(f"{first.path}:{first.line}: " if first.line else f"{first.path}: ")
+    error = ScenarioError(first.path, first.line, "\n".join([message, *map(str, rest)]))
+    error.problems = problems  # type: ignore[attr-defined]
+    return error
+
+
+def load(path: str | Path) -> Scenario:
+    """The scenario, or a ScenarioError naming every problem (file:line each, in line order)."""
+    path = Path(path)
+    doc = parse(path)
+    problems = schema_problems(path, doc)
+    sc = None
+    try:
+        sc = _build(path, doc, problems)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError):
+        if not problems:  # a shape the schema let through: still a bad input, never a traceback
+            raise
+    if problems or sc is None:
+        problems.sort(key=lambda p: p.line or 0)
+        raise problems_error(problems)
+    return sc
+
+
+def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | None:
+    """The scenario model and its cross-field checks; problems appended, never raised. Parts that
+    the schema already refused are skipped (the checks below rely on the schema's shape)."""
+    buses = {b["name"] for b in doc.get("buses", []) if isinstance(b, dict) and "name" in b}
+
+    def fail(where: list, message: str) -> None:
+        problems.append(ScenarioError(str(path), _line_of(doc, where), f"{'.'.join(map(str, where))}: {message}"))
 
     def trace_of(spec: dict, where: list) -> Path | None:
         if "trace" not in spec:
             return None
-        trace = (path.parent / spec["trace"]).resolve()
-        if not trace.is_file():
-            raise fail([*where, "trace"], f"no such file {trace}")
-        return trace
+        shown = path.parent / spec["trace"]  # as the user wrote it, relative to the scenario
+        if not shown.is_file():
+            fail([*where, "trace"], f"no such file {shown}")
+        return shown.resolve()
 
     def messages_of(spec: dict) -> tuple[Message, ...]:
         return tuple(Message(int(m["id"], 16), m["cycle_ms"], m.get("dlc", 8), m.get("extended", False),
                              m.get("remote", False)) for m in spec.get("messages", []))
 
+    def items(key: str) -> list[tuple[int, dict]]:
+        """The list's mappings (anything else the schema refused already)."""
+        return [(i, spec) for i, spec in enumerate(doc.get(key, []) or []) if isinstance(spec, dict)]
+
     ecus: list[Ecu] = []
-    for i, spec in enumerate(doc["ecus"]):
-        if spec["bus"] not in buses:
-            raise fail(["ecus", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
-        role = spec.get("role", "replay")
-        trace = trace_of(spec, ["ecus", i])
-        needs = {"replay": ["trace"], "echo": ["echo_ids"], "periodic": ["messages", "run_s"]}[role]
-        for key in needs:
-            if key not in spec:
-                raise fail(["ecus", i], f"role {role} needs {key}")
-        remap = {int(k, 16): int(v, 16) for k, v in spec.get("id_remap", {}).items()}
-        ecus.append(Ecu(spec["name"], spec["bus"], role, trace, spec.get("speed", 1.0), spec.get("loops", 1),
-                        spec.get("start_offset_s", 0.0), remap,
-                        frozenset(int(x, 16) for x in spec.get("echo_ids", [])), spec.get("answer_id_offset", 1),
-                        messages_of(spec), spec.get("run_s", 0.0)))
+    for i, spec in items("ecus"):
+        try:
+            if spec["bus"] not in buses:
+                fail(["ecus", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
+            role = spec.get("role", "replay")
+            trace = trace_of(spec, ["ecus", i])
+            needs = {"replay": ["trace"], "echo": ["echo_ids"], "periodic": ["messages", "run_s"]}[role]
+            for key in needs:
+                if key not in spec:
+                    fail(["ecus", i], f"role {role} needs {key}")
+            remap = {int(k, 16): int(v, 16) for k, v in spec.get("id_remap", {}).items()}
+            ecus.append(Ecu(spec["name"], spec["bus"], role, trace, spec.get("speed", 1.0), spec.get("loops", 1),
+                            spec.get("start_offset_s", 0.0), remap,
+                            frozenset(int(x, 16) for x in spec.get("echo_ids", [])),
+                            spec.get("answer_id_offset", 1), messages_of(spec), spec.get("run_s", 0.0)))
+        except (KeyError, TypeError, ValueError, AttributeError):
+            continue  # refused by the schema already
     names = [e.name for e in ecus]
     if len(set(names)) != len(names):
-        raise ScenarioError(str(path), _line_of(doc, ["ecus"]), "ecus: names must be unique")
+        fail(["ecus"], "names must be unique")
     commands: list[Commands] = []
-    for i, spec in enumerate(doc.get("commands", [])):
-        if spec["bus"] not in buses:
-            raise fail(["commands", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
-        if ("trace" in spec) == ("messages" in spec):
-            raise fail(["commands", i], "give either trace or messages (with run_s)")
-        if "messages" in spec and "run_s" not in spec:
-            raise fail(["commands", i], "messages need run_s")
-        commands.append(Commands(spec["bus"], trace_of(spec, ["commands", i]), spec.get("speed", 1.0),
-                                 messages_of(spec), spec.get("run_s", 0.0), spec.get("start_offset_s", 0.0)))
+    for i, spec in items("commands"):
+        try:
+            if spec["bus"] not in buses:
+                fail(["commands", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
+            if ("trace" in spec) == ("messages" in spec):
+                fail(["commands", i], "give either trace or messages (with run_s)")
+            elif "messages" in spec and "run_s" not in spec:
+                fail(["commands", i], "messages need run_s")
+            commands.append(Commands(spec["bus"], trace_of(spec, ["commands", i]), spec.get("speed", 1.0),
+                                     messages_of(spec), spec.get("run_s", 0.0), spec.get("start_offset_s", 0.0)))
+        except (KeyError, TypeError, ValueError, AttributeError):
+            continue
     bridge = dict(doc.get("bridge", {}))
     consumer = doc.get("topology", {}).get("consumer", "router")
     if consumer == "bridge" and bridge.get("mode", "client") == "client":
-        raise fail(["topology", "consumer"], "a consumer can connect to the bridge only in bridge.mode peer or router")
+        fail(["topology", "consumer"], "a consumer can connect to the bridge only in bridge.mode peer or router")
+    first_bus = next(iter(b["name"] for b in doc.get("buses", []) if isinstance(b, dict) and "name" in b), "")
     faults = []
-    for i, spec in enumerate(doc.get("faults", [])):
-        if (spec["action"] == "ecu_kill") != ("target" in spec):
-            raise fail(["faults", i], "ecu_kill needs target (an ECU name); other actions take none")
-        if "target" in spec and spec["target"] not in names:
-            raise fail(["faults", i, "target"], f"'{spec['target']}' is not one of the ECUs {sorted(names)}")
-        if "bus" in spec and spec["bus"] not in buses:
-            raise fail(["faults", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
-        if spec["action"] != "can_flood" and ({"bus", "id", "max_frames"} & set(spec)):
-            raise fail(["faults", i], "bus, id and max_frames belong to can_flood only")
-        if "every_s" in spec and spec["every_s"] <= spec.get("duration_s", 1.0):
-            raise fail(["faults", i, "every_s"], "must be longer than duration_s (steps would overlap)")
-        # a repeated step (soak): at at_s, at_s + every_s, ... up to until_s (default: duration_s)
-        until = spec.get("until_s", doc["duration_s"]) if "every_s" in spec else spec["at_s"]
-        at = spec["at_s"]
-        while at <= until:
-            faults.append(Fault(at, spec["action"], spec.get("duration_s", 1.0), spec.get("target", ""),
-                                spec.get("bus", doc["buses"][0]["name"]), int(spec.get("id", "7F0"), 16),
-                                spec.get("max_frames", 1_000_000)))
-            at += spec.get("every_s", float("inf"))
+    for i, spec in items("faults"):
+        try:
+            if (spec["action"] == "ecu_kill") != ("target" in spec):
+                fail(["faults", i], "ecu_kill needs target (an ECU name); other actions take none")
+            if "target" in spec and spec["target"] not in names:
+                fail(["faults", i, "target"], f"'{spec['target']}' is not one of the ECUs {sorted(names)}")
+            if "bus" in spec and spec["bus"] not in buses:
+                fail(["faults", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
+            if spec["action"] != "can_flood" and ({"bus", "id", "max_frames"} & set(spec)):
+                fail(["faults", i], "bus, id and max_frames belong to can_flood only")
+            if "every_s" in spec and spec["every_s"] <= spec.get("duration_s", 1.0):
+                fail(["faults", i, "every_s"], "must be longer than duration_s (steps would overlap)")
+                continue
+            # a repeated step (soak): at at_s, at_s + every_s, ... up to until_s (default: duration_s)
+            until = spec.get("until_s", doc["duration_s"]) if "every_s" in spec else spec["at_s"]
+            at = spec["at_s"]
+            while at <= until:
+                faults.append(Fault(at, spec["action"], spec.get("duration_s", 1.0), spec.get("target", ""),
+                                    spec.get("bus", first_bus), int(spec.get("id", "7F0"), 16),
+                                    spec.get("max_frames", 1_000_000), i))
+                at += spec.get("every_s", float("inf"))
+        except (KeyError, TypeError, ValueError, AttributeError):
+            continue
     # flood frames are told from the bridge's writes by their id (standard): it must be the flood's alone
     senders: list[Ecu | Commands] = [*ecus, *commands]
     used_ids = {m.can_id for x in senders for m in x.messages if not m.extended}
-    for i, f in enumerate(faults):
-        if f.action == "can_flood" and f.can_id in used_ids:
-            raise fail(["faults", i], f"can_flood id {f.can_id:03X} is sent by an ECU or a command too; "
-                       "give the flood an id of its own")
+    flagged = set()
+    for f in faults:
+        if f.action == "can_flood" and f.can_id in used_ids and f.step not in flagged:
+            flagged.add(f.step)
+            fail(["faults", f.step], f"can_flood id {f.can_id:03X} is sent by an ECU or a command too; "
+                 "give the flood an id of its own")
     dbc = None
     if "dbc" in doc:
-        dbc = (path.parent / doc["dbc"]).resolve()
-        if not dbc.is_file():
-            raise fail(["dbc"], f"no such file {dbc}")
+        shown = path.parent / str(doc["dbc"])
+        if not shown.is_file():
+            fail(["dbc"], f"no such file {shown}")
+        dbc = shown.resolve()
+    if problems:
+        return None
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
                     bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc, faults)

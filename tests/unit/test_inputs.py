@@ -101,7 +101,7 @@ def test_cli_exit_code_2_and_one_line(tmp_path, capsys):
     path = write(tmp_path, "s.yaml", scenario_text(duration_s="'ten'"))
     assert cli.main(["validate", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"canbench: {path}:2: ")
+    assert len(err) == 2 and err[0].startswith(f"{path}:2: ") and err[1].startswith("canbench validate: 1 problem")
 
 
 def test_repeated_fault_steps_expand_until_their_end(tmp_path):

@@ -1,0 +1,199 @@
+"""`canbench suite`: the scenarios of one `make test` as a suite (scripts/bench-suite).
+
+  canbench suite plan [--shard K/N] SCENARIO...   the share of runner K of N, longest first:
+                                                  one "<expected s>\\t<scenario>" line each
+  canbench suite summary SUITE_DIR                index.html, junit.xml and summary.json of the
+                                                  runs listed in SUITE_DIR/runs.tsv; exit code
+                                                  of the suite
+
+Shards are balanced by expected duration (longest first onto the least loaded shard) and
+depend only on the scenario files, so n runners given the same files split them exactly,
+each scenario on one runner."""
+from __future__ import annotations
+
+import argparse
+import html
+import json
+import os
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from . import scenario
+from .errors import InputError, ScenarioError
+
+# A run's fixed cost on top of its traffic phase (compose up, readiness, analysis, reports,
+# down): measured 15-25 s for the shipped scenarios on 2 cores.
+SETUP_S = 20.0
+
+
+def expected_s(path: Path) -> float:
+    """What a run of the scenario is expected to take; only the file decides (shards must agree)."""
+    try:
+        duration = scenario.parse(path).get("duration_s", 0)
+    except ScenarioError:
+        duration = 0
+    return SETUP_S + (float(duration) if isinstance(duration, int | float) else 0.0)
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise InputError("SHARD", None, f"{text!r} is not K/N (e.g. 1/2)") from None
+    if not 1 <= k <= n:
+        raise InputError("SHARD", None, f"{text!r}: K must be 1..N")
+    return k, n
+
+
+def shards(expected: dict[str, float], n: int) -> list[list[str]]:
+    """n shares of the scenarios with totals as even as greedy allows; each share longest first.
+    Ties are broken by name, so the split is the same on every runner."""
+    shares: list[list[str]] = [[] for _ in range(n)]
+    totals = [0.0] * n
+    for name in sorted(expected, key=lambda s: (-expected[s], s)):
+        i = min(range(n), key=lambda j: (totals[j], j))
+        shares[i].append(name)
+        totals[i] += expected[name]
+    return shares
+
+
+def plan(paths: list[str], shard: str | None = None) -> list[tuple[float, str]]:
+    expected = {p: expected_s(Path(p)) for p in dict.fromkeys(paths)}
+    k, n = parse_shard(shard) if shard else (1, 1)
+    return [(expected[p], p) for p in shards(expected, n)[k - 1]]
+
+
+@dataclass
+class Run:
+    scenario: str
+    run_id: str | None  # None: bench-run stopped before a run existed (invalid scenario)
+    exit_code: int
+    seconds: int
+    expected_s: float = 0.0
+    verdict: str = ""
+    checks: dict[str, str] = field(default_factory=dict)
+
+
+def read_runs(suite_dir: Path) -> list[Run]:
+    expected = {}
+    if (suite_dir / "plan.tsv").exists():
+        for line in (suite_dir / "plan.tsv").read_text().splitlines():
+            seconds, path = line.split("\t", 1)
+            expected[path] = float(seconds)
+    runs = []
+    tsv = suite_dir / "runs.tsv"
+    for line in tsv.read_text().splitlines() if tsv.exists() else []:
+        path, run_id, code, seconds = line.split("\t")
+        runs.append(Run(path, None if run_id == "-" else run_id, int(code), int(seconds), expected.get(path, 0.0)))
+    # scenarios that never reported (the suite was interrupted) count as failed
+    for path in expected.keys() - {r.scenario for r in runs}:
+        runs.append(Run(path, None, 1, 0, expected[path], "not run"))
+    order = list(expected)
+    runs.sort(key=lambda r: (order.index(r.scenario) if r.scenario in order else len(order), r.scenario))
+    return runs
+
+
+def _case_outcome(case: ET.Element) -> str:
+    if case.find("failure") is not None or case.find("error") is not None:
+        return "failed"
+    return "skipped" if case.find("skipped") is not None else "passed"
+
+
+def merged_junit(runs: list[Run], reports: Path, suite: str) -> ET.Element:
+    root = ET.Element("testsuites", name=suite)
+    for r in runs:
+        name = Path(r.scenario).stem
+        junit = reports / r.run_id / "junit.xml" if r.run_id else None
+        suites = []
+        if junit is not None and junit.exists():
+            parsed = ET.parse(junit).getroot()
+            suites = [parsed] if parsed.tag == "testsuite" else list(parsed.iter("testsuite"))
+        if not suites:
+            suites = [ET.Element("testsuite", tests="0", failures="0", errors="0", skipped="0", time="0")]
+        for ts in suites:
+            ts.set("name", name)
+            for case in ts.iter("testcase"):
+                case.set("classname", f"{name}.{case.get('classname', '')}".rstrip("."))
+                r.checks[case.get("name", "?")] = _case_outcome(case)
+            # the run as a whole: an ECU that crashed or a run that never started fails here too
+            run_case = ET.SubElement(ts, "testcase", classname=name, name="bench_run", time=str(r.seconds))
+            if r.exit_code != 0:
+                ET.SubElement(run_case, "failure", message=f"{r.scenario}: {r.verdict} (exit {r.exit_code})")
+            cases = list(ts.iter("testcase"))
+            ts.set("tests", str(len(cases)))
+            ts.set("failures", str(sum(c.find("failure") is not None for c in cases)))
+            ts.set("errors", str(sum(c.find("error") is not None for c in cases)))
+            ts.set("skipped", str(sum(c.find("skipped") is not None for c in cases)))
+            root.append(ts)
+    for key in ("tests", "failures", "errors", "skipped"):
+        root.set(key, str(sum(int(ts.get(key, "0")) for ts in root)))
+    return root
+
+
+def verdict(code: int, run_id: str | None) -> str:
+    if code == 0:
+        return "passed"
+    if code == 2 and run_id is None:
+        return "invalid scenario"
+    return "failed" if run_id else "bench error"
+
+
+def exit_code(runs: list[Run]) -> int:
+    codes = {r.exit_code for r in runs}
+    return 0 if codes <= {0} else 2 if codes <= {0, 2} else 1
+
+
+def index_html(runs: list[Run], suite: str, code: int) -> str:
+    rows = []
+    for r in runs:
+        link = (f'<a href="../{html.escape(r.run_id)}/report.html">{html.escape(r.run_id)}</a>'
+                if r.run_id else "-")
+        failed = [c for c, o in r.checks.items() if o == "failed" and c != "bench_run"]
+        rows.append(f"<tr class={'ok' if r.exit_code == 0 else 'bad'}><td>{html.escape(r.scenario)}</td>"
+                    f"<td>{html.escape(r.verdict)}</td><td>{r.seconds} s</td><td>~{r.expected_s:.0f} s</td>"
+                    f"<td>{link}</td><td>{html.escape(', '.join(failed))}</td></tr>")
+    passed = sum(r.exit_code == 0 for r in runs)
+    return ("<!doctype html><meta charset=utf-8><title>" + html.escape(suite) + "</title>"
+            "<style>body{font-family:sans-serif}td,th{padding:2px 8px;text-align:left}"
+            ".ok td:nth-child(2){color:#070}.bad td:nth-child(2){color:#b00}</style>"
+            f"<h1>{html.escape(suite)}</h1><p>{passed} of {len(runs)} scenarios passed; exit code {code}; "
+            "<a href=junit.xml>junit.xml</a>, <a href=summary.json>summary.json</a></p>"
+            "<table><tr><th>scenario</th><th>verdict</th><th>took</th><th>expected</th><th>run</th>"
+            "<th>failed checks</th></tr>" + "".join(rows) + "</table>\n")
+
+
+def summarise(suite_dir: Path) -> int:
+    """Write the suite's index.html, junit.xml and summary.json; its exit code."""
+    runs = read_runs(suite_dir)
+    for r in runs:
+        r.verdict = r.verdict or verdict(r.exit_code, r.run_id)
+    junit = merged_junit(runs, suite_dir.parent, suite_dir.name)
+    code = exit_code(runs)
+    ET.ElementTree(junit).write(suite_dir / "junit.xml", encoding="utf-8", xml_declaration=True)
+    (suite_dir / "index.html").write_text(index_html(runs, suite_dir.name, code))
+    summary = {"schema_version": 1, "suite": suite_dir.name, "shard": os.environ.get("SHARD") or "1/1",
+               "jobs": int(os.environ.get("JOBS") or 1), "passed": code == 0, "exit_code": code,
+               "runs": [asdict(r) for r in runs]}
+    (suite_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return code
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="suite_cmd", required=True)
+    q = sub.add_parser("plan", help="the scenarios of one shard, longest first, with expected seconds")
+    q.add_argument("scenarios", nargs="+")
+    q.add_argument("--shard", help="K/N: the K-th of N balanced shares (default: all)")
+    q = sub.add_parser("summary", help="index.html, junit.xml and summary.json of a suite's runs")
+    q.add_argument("suite_dir", type=Path)
+
+
+def main(args: argparse.Namespace) -> int:
+    if args.suite_cmd == "plan":
+        for seconds, path in plan(args.scenarios, args.shard):
+            print(f"{seconds:.0f}\t{path}")
+        return 0
+    code = summarise(args.suite_dir)
+    print(f"suite: {args.suite_dir}/index.html", file=sys.stderr)
+    return code

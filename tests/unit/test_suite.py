@@ -1,0 +1,96 @@
+"""make test's suite logic (canbench.suite): shards balanced by expected duration and the same
+on every runner, and one summary (index.html, merged junit.xml, summary.json, exit code)."""
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from canbench import cli, suite
+from canbench.errors import InputError
+
+pytestmark = pytest.mark.unit
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_shards_cover_every_scenario_once_and_balance():
+    expected = {f"s{i}.yaml": float(d) for i, d in enumerate([70, 60, 60, 50, 40, 30, 30, 30, 30, 30, 20])}
+    for n in range(1, 5):
+        shares = suite.shards(expected, n)
+        names = [s for share in shares for s in share]
+        assert sorted(names) == sorted(expected)  # each exactly once
+        totals = [sum(expected[s] for s in share) for share in shares]
+        # greedy longest-first: no share exceeds the mean by more than the longest single scenario
+        assert max(totals) - sum(totals) / n <= max(expected.values())
+        assert shares == suite.shards(dict(reversed(list(expected.items()))), n)  # input order is irrelevant
+    a, b = (sum(expected[s] for s in share) for share in suite.shards(expected, 2))
+    assert abs(a - b) <= min(expected.values())  # 220 / 230 of 450
+
+
+def test_plan_of_the_shipped_scenarios(capsys):
+    paths = sorted(str(p.relative_to(REPO)) for p in (REPO / "scenarios").glob("*.yaml"))
+    halves = [suite.plan(paths, f"{k}/2") for k in (1, 2)]
+    assert sorted(p for half in halves for _, p in half) == paths
+    assert abs(sum(s for s, _ in halves[0]) - sum(s for s, _ in halves[1])) <= max(s for s, _ in suite.plan(paths))
+    for half in halves:
+        assert [s for s, _ in half] == sorted((s for s, _ in half), reverse=True)  # longest first
+    assert suite.expected_s(REPO / "scenarios" / "smoke.yaml") == suite.SETUP_S + 10
+
+
+@pytest.mark.parametrize("text", ["3/2", "0/2", "1", "a/b"])
+def test_bad_shard_is_input_error(text):
+    with pytest.raises(InputError, match="SHARD"):
+        suite.plan(["x.yaml"], text)
+
+
+JUNIT = """<?xml version="1.0" encoding="utf-8"?><testsuites><testsuite name="pytest" errors="0" failures="{f}"
+ skipped="1" tests="3" time="1.0"><testcase classname="tests.scenarios.test_scenario" name="test_check[integrity]"
+ time="0.1">{failure}</testcase><testcase classname="tests.scenarios.test_scenario" name="test_check[ordering]"
+ time="0.1"/><testcase classname="tests.scenarios.test_scenario" name="test_check[round_trip]" time="0">
+ <skipped message="not asked for"/></testcase></testsuite></testsuites>"""
+
+
+def make_suite(tmp_path: Path, runs: list[tuple[str, str, int]]) -> Path:
+    reports = tmp_path / "reports"
+    suite_dir = reports / "suite-x"
+    suite_dir.mkdir(parents=True)
+    (suite_dir / "plan.tsv").write_text("".join(f"40\t{s}\n" for s, _, _ in runs) + "30\tscenarios/late.yaml\n")
+    lines = []
+    for s, run_id, code in runs:
+        if run_id != "-":
+            (reports / run_id).mkdir()
+            failed = code == 1
+            (reports / run_id / "junit.xml").write_text(JUNIT.format(
+                f=int(failed), failure='<failure message="3 frames lost"/>' if failed else ""))
+        lines.append(f"{s}\t{run_id}\t{code}\t33\n")
+    (suite_dir / "runs.tsv").write_text("".join(lines))
+    return suite_dir
+
+
+def test_summary_merges_every_run(tmp_path):
+    suite_dir = make_suite(tmp_path, [("scenarios/smoke.yaml", "r1-smoke", 0), ("scenarios/burst.yaml", "r2-burst", 1),
+                                      ("bad/x.yaml", "-", 2)])
+    assert cli.main(["suite", "summary", str(suite_dir)]) == 1
+    summary = json.loads((suite_dir / "summary.json").read_text())
+    assert [(r["scenario"], r["verdict"]) for r in summary["runs"]] == [
+        ("scenarios/smoke.yaml", "passed"), ("scenarios/burst.yaml", "failed"), ("bad/x.yaml", "invalid scenario"),
+        ("scenarios/late.yaml", "not run")]
+    assert summary["runs"][1]["checks"]["test_check[integrity]"] == "failed" and not summary["passed"]
+    root = ET.parse(suite_dir / "junit.xml").getroot()
+    assert [ts.get("name") for ts in root] == ["smoke", "burst", "x", "late"]
+    # 3 checks + the run itself for each run with a junit.xml, the run alone otherwise
+    assert (root.get("tests"), root.get("failures"), root.get("skipped")) == ("10", "4", "2")
+    case = root.find("testsuite/testcase")
+    assert case is not None and case.get("classname") == "smoke.tests.scenarios.test_scenario"
+    page = (suite_dir / "index.html").read_text()
+    assert '<a href="../r1-smoke/report.html">' in page and '<a href="../r2-burst/report.html">' in page
+    assert "1 of 4 scenarios passed; exit code 1" in page
+
+
+@pytest.mark.parametrize("codes,expected", [((0, 0), 0), ((0, 2), 2), ((2, 1), 1)])
+def test_suite_exit_code(codes, expected):
+    runs = [suite.Run(f"s{i}", None if c == 2 else f"r{i}", c, 1) for i, c in enumerate(codes)]
+    assert suite.exit_code(runs) == expected
