@@ -103,3 +103,45 @@ class Stopped:
 
     def __exit__(self, *exc):
         os.kill(self.pid, signal.SIGCONT)
+
+
+
+class OwnHub:
+    """A hub of the test's own in a directory of its own, started with a descriptor limit
+    (the bus fixture's hub stays as it is). A context manager: stopped on exit."""
+
+    def __init__(self, directory: Path, *args: str, nofile: int | None = None):
+        import resource
+        import subprocess
+
+        from conftest import BUILD
+
+        def limit() -> None:
+            if nofile is not None:
+                resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile))
+
+        directory.mkdir()
+        self.workdir, self.log, self.build = directory, directory / "hub.log", BUILD
+        read_fd, write_fd = os.pipe()
+        with open(self.log, "ab") as log:
+            self.proc = subprocess.Popen([str(BUILD / "ucan-hub"), "-d", str(directory), "-r", str(write_fd), *args],
+                                         stdout=log, stderr=log, pass_fds=(write_fd,), preexec_fn=limit,
+                                         env={k: v for k, v in os.environ.items() if k != "LD_PRELOAD"})
+        os.close(write_fd)
+        with os.fdopen(read_fd) as ready:
+            assert ready.readline().strip() == "ready", self.log.read_text()
+
+    def stats(self) -> dict:
+        import json
+        import subprocess
+        out = subprocess.run([str(self.build / "ucanctl"), "-d", str(self.workdir), "stats", "-j"],
+                             capture_output=True, text=True, check=True)
+        return json.loads(out.stdout)
+
+    def __enter__(self) -> OwnHub:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            self.proc.wait(timeout=10)

@@ -4,9 +4,11 @@ paused (SIGSTOP) so that a whole sequence lands in one loop round. Every test
 checks the hub still serves, and its memory stays under a stated ceiling."""
 from __future__ import annotations
 
+import time
+
 import pytest
 from conftest import require_userspace
-from hubclient import MSG_RESET_STATS, Client, Stopped, barrier, frame, query, rss_kib, sockopts
+from hubclient import MSG_RESET_STATS, Client, OwnHub, Stopped, barrier, cpu_seconds, frame, query, rss_kib, sockopts
 
 pytestmark = pytest.mark.bus
 
@@ -78,3 +80,24 @@ def test_receive_buffer_asked_is_clamped(hub):
     limits = {c["cookie"]: c["queue_limit"] for c in hub.stats()["clients"]}
     assert limits[huge.cookie] == (64 << 20) // 72  # UCAN_MAX_RCVBUF
     assert limits[plain.cookie] == 64_000
+
+
+
+def test_out_of_descriptors_refuses_connections_without_spinning(hub):
+    """Defect 3: with level-triggered epoll a failed accept (EMFILE) left the listening socket
+    readable forever: 1.7 s of CPU per 2 s idle and a 27 MB log under --nofile=32. Now the
+    connection is accepted on a spare descriptor and closed at once, counted."""
+    with OwnHub(hub.workdir / "nofile", "vcan0", nofile=32) as small:
+        clients = [Client(small.workdir) for _ in range(40)]  # more than 32 descriptors can hold
+        start_cpu, start = cpu_seconds(small.proc.pid), time.monotonic()
+        while time.monotonic() - start < 1.0:  # a measurement window, not a wait for something
+            time.sleep(0.1)
+        busy = cpu_seconds(small.proc.pid) - start_cpu
+        assert busy < 0.2, f"hub used {busy:.2f} s of CPU in 1 s with connections it cannot accept"
+        assert clients[-1].recv() == b""  # refused: the hub hung up
+        assert small.log.stat().st_size < 10_000
+        for c in clients:
+            c.close()
+        assert small.stats()["hub"]["refused_connections"] >= 8
+        assert small.proc.poll() is None
+        still_serves(small)

@@ -82,6 +82,9 @@ static struct {
 	const char *dir;
 	char sock_path[sizeof(((struct sockaddr_un *)0)->sun_path)];
 	int listen_fd, lock_fd, epoll_fd, stats_timer_fd, verbose;
+	int spare_fd;	      /* kept open to refuse connections when out of descriptors */
+	int listen_paused;    /* accept failed otherwise: resumed by the stats tick */
+	uint64_t refusal_logged_ns;
 	unsigned spin_us; /* -s: keep polling this long after the last event before sleeping */
 	uint32_t default_queue;
 	struct iface ifaces[UCAN_MAX_IFACES];
@@ -95,7 +98,7 @@ static struct {
 	struct timespec start;
 	struct ucan_hubstats counters;
 	volatile sig_atomic_t stop;
-} hub = { .listen_fd = -1, .lock_fd = -1, .epoll_fd = -1, .stats_timer_fd = -1, .default_queue = HUB_DEFAULT_QUEUE_FRAMES };
+} hub = { .listen_fd = -1, .lock_fd = -1, .spare_fd = -1, .epoll_fd = -1, .stats_timer_fd = -1, .default_queue = HUB_DEFAULT_QUEUE_FRAMES };
 
 void hub_log(const char *fmt, ...)
 {
@@ -280,6 +283,41 @@ static uint32_t client_alloc(void)
 	return old;
 }
 
+/* Out of descriptors, a pending connection would keep the (level-triggered)
+ * listening socket readable forever: accept it on the spare descriptor and
+ * close it at once, so the client sees the hub hang up rather than wait. */
+static int refuse_connection(int err)
+{
+	if (hub.spare_fd < 0)
+		return -1;
+	close(hub.spare_fd);
+	int fd = accept4(hub.listen_fd, NULL, NULL, SOCK_CLOEXEC);
+	if (fd >= 0)
+		close(fd);
+	hub.spare_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
+	if (fd < 0)
+		return -1;
+	hub.counters.refused_connections++;
+	uint64_t now = now_ns();
+	if (now - hub.refusal_logged_ns >= 1000000000u || !hub.refusal_logged_ns) { /* one line a second at most */
+		hub.refusal_logged_ns = now;
+		hub_log("refusing connections: %s (%" PRIu64 " refused so far)", strerror(err),
+			hub.counters.refused_connections);
+	}
+	return 0;
+}
+
+/* Any other accept failure that would repeat (ENOBUFS, ENOMEM, no spare
+ * descriptor): stop listening until the next stats tick, a second. */
+static void pause_listening(int err)
+{
+	if (hub.listen_paused)
+		return;
+	hub_log("accept: %s: not accepting connections for a second", strerror(err));
+	hub.listen_paused = 1;
+	epoll_set(hub.listen_fd, 0, TAG_LISTEN, EPOLL_CTL_MOD);
+}
+
 static void accept_clients(void)
 {
 	for (;;) {
@@ -287,8 +325,12 @@ static void accept_clients(void)
 		socklen_t addrlen = sizeof(addr);
 		int fd = accept4(hub.listen_fd, (struct sockaddr *)&addr, &addrlen, SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd < 0) {
-			if (errno != EAGAIN && errno != EINTR && errno != ECONNABORTED)
-				hub_log("accept: %s", strerror(errno));
+			int err = errno;
+			if (err == EAGAIN || err == EINTR || err == ECONNABORTED)
+				return;
+			if ((err == EMFILE || err == ENFILE) && refuse_connection(err) == 0)
+				continue;
+			pause_listening(err);
 			return;
 		}
 		uint32_t idx = client_alloc();
@@ -886,6 +928,10 @@ static void stats_tick(void)
 	uint64_t expirations;
 	if (read(hub.stats_timer_fd, &expirations, sizeof(expirations)) < 0)
 		return;
+	if (hub.listen_paused) {
+		hub.listen_paused = 0;
+		epoll_set(hub.listen_fd, EPOLLIN, TAG_LISTEN, EPOLL_CTL_MOD);
+	}
 	for (unsigned i = 0; i < hub.nifs; i++) {
 		struct iface *ifc = &hub.ifaces[i];
 		ifc->stats.bits_per_s = ifc->window_bits / (expirations ? expirations : 1);
@@ -911,6 +957,7 @@ int hub_start(const struct hub_options *opts)
 	clock_gettime(CLOCK_MONOTONIC, &hub.start);
 	if (listen_socket() < 0)
 		return -1;
+	hub.spare_fd = open("/dev/null", O_RDONLY | O_CLOEXEC);
 	hub.epoll_fd = epoll_create1(EPOLL_CLOEXEC);
 	hub.stats_timer_fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
 	struct itimerspec second = { .it_interval = { 1, 0 }, .it_value = { 1, 0 } };
@@ -1014,11 +1061,13 @@ void hub_shutdown(void)
 	}
 	if (hub.lock_fd >= 0)
 		close(hub.lock_fd);
+	if (hub.spare_fd >= 0)
+		close(hub.spare_fd);
 	if (hub.epoll_fd >= 0)
 		close(hub.epoll_fd);
 	if (hub.stats_timer_fd >= 0)
 		close(hub.stats_timer_fd);
 	memset(&hub, 0, sizeof(hub));
-	hub.listen_fd = hub.epoll_fd = hub.stats_timer_fd = hub.lock_fd = -1;
+	hub.listen_fd = hub.epoll_fd = hub.stats_timer_fd = hub.lock_fd = hub.spare_fd = -1;
 	hub.default_queue = HUB_DEFAULT_QUEUE_FRAMES;
 }
