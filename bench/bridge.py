@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -41,18 +40,19 @@ import tempfile
 import time
 from pathlib import Path
 
-from canbench.runkeys import open_session, wait_token
+from canbench.errors import RunError
+from canbench.rig import Rig, Router, start_bridge, zn_capture
+from canbench.runkeys import open_session
 
 from .common import (
     REPO,
     add_tool_arguments,
     cpu_s,
     cpu_split_s,
-    free_port,
     machine_line,
     rss_mib,
     run_id_and_output,
-    stop,
+    settle,
 )
 from .stamps import load_rate, zenoh_stamps
 
@@ -85,42 +85,24 @@ def sustained_fps(frames: int, first_send_ns: int, last_receive_ns: int) -> int 
     return round(frames / span_s) if frames and span_s > 0 else None
 
 
-class Bench:
+class Bench(Rig):
     """One measurement: a fresh hub with the buses, zenohd, the bridge instances of one system."""
 
     def __init__(self, args, workdir: Path):
-        self.args, self.workdir = args, workdir
-        self.build = Path(args.ucan_build)
-        self.env = dict(os.environ, UCAN_DIR=str(workdir), LD_PRELOAD=str(self.build / "libucan-preload.so"))
-        self.procs: list[subprocess.Popen] = []
-
-    def spawn(self, cmd, **kw) -> subprocess.Popen:
-        p = subprocess.Popen([str(c) for c in cmd], **kw)
-        self.procs.append(p)
-        return p
-
-    def bound_sockets(self) -> int:
-        """CAN sockets bound on the hub (its own count: readiness of a reader without a signal of its own)."""
-        out = subprocess.run([self.build / "ucanctl", "-d", self.workdir, "stats", "-j"], capture_output=True,
-                             text=True)
-        return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
+        super().__init__(Path(args.ucan_build), workdir)
+        self.args = args
 
     def run_one(self, system: str, buses: int, direction: str = "can-to-zenoh") -> dict:
         names = [f"vcan{i}" for i in range(buses)]
-        self.spawn([self.build / "ucan-hub", "-d", self.workdir, *names], stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 10
-        while not (self.workdir / "hub.sock").exists() and time.monotonic() < deadline:
-            time.sleep(0.01)  # the hub's socket file is its readiness
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        self.spawn([self.args.zenohd, "--no-multicast-scouting", "-l", endpoint],
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.hub.start(names)
+        router = Router(self.args.zenohd)
+        self.procs.add(router.start())
+        endpoint = router.endpoint
         session = open_session(endpoint)
         capture_file = self.workdir / f"{system}-{buses}.tsv"
         if direction == "can-to-zenoh":
-            self.spawn([self.args.zn_capture, "--connect", endpoint, "--key", "vehicle/can/**",
-                                  "--ready-token", "bench/capture", "--out", capture_file], stdin=subprocess.PIPE,
-                                 stderr=subprocess.DEVNULL)
-            wait_token(session, "bench/capture", 20)
+            zn_capture(self.procs, self.args.zn_capture, endpoint, "vehicle/can/**", capture_file, session,
+                       "bench/capture")
         per_node = BUSES_PER_NODE if system.startswith("zenoh-node") else buses
         groups = [names[k:k + per_node] for k in range(0, buses, per_node)]
         bridges = []
@@ -131,14 +113,11 @@ class Bench:
                        period, "--name", f"zenoh-node-{k}"]
             else:
                 cmd = [sys.executable, "-m", "bench.refbridge", "--router", endpoint, "--can", ",".join(group)]
-            log = open(self.workdir / f"{system}-{k}.log", "w")
-            bridges.append(self.spawn(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO))
-        try:
-            for group in groups:
-                wait_token(session, f"vehicle/can/bridges/*/{group[0]}/**", 30)
-        except TimeoutError:
-            sys.exit(f"{system} with {buses} buses did not come up:\n"
-                     + "".join(f.read_text()[-1000:] for f in self.workdir.glob(f"{system}-*.log")))
+            try:
+                bridges.append(start_bridge(self.procs, cmd, self.env, self.workdir / f"{system}-{k}.log", session,
+                                            f"vehicle/can/bridges/*/{group[0]}/**", cwd=REPO))
+            except RunError as e:
+                sys.exit(f"{system} with {buses} buses did not come up: {e}")
         per_bus = int(FRAMES_PER_S * LOAD_S)
         offered = per_bus * buses
         sys0 = sum(cpu_split_s(b.pid)[1] for b in bridges)
@@ -150,34 +129,20 @@ class Bench:
             peak_rss = max([peak_rss] + [rss_mib(b.pid) for b in bridges])
 
         if direction == "can-to-zenoh":
-            gen = self.spawn([self.args.can_load, "send", ",".join(names), "100", FRAMES_PER_S, per_bus],
+            gen = self.procs.spawn([self.args.can_load, "send", ",".join(names), "100", FRAMES_PER_S, per_bus],
                              env=self.env, stdout=subprocess.PIPE, text=True)
             while gen.poll() is None:
                 sample_rss()
                 time.sleep(0.05)  # sampling period of the RSS probe
             offered_fps = round(offered / json.loads(gen.stdout.read())["seconds"])
-            # wait until every frame arrived, or nothing more arrives for a second (bounded)
-            received, last_change, previous = 0, time.monotonic(), -1
-            end = time.monotonic() + SETTLE_S
-            while time.monotonic() < end:
-                received = count_frames(capture_file)
-                if received >= offered:
-                    break
-                if received != previous:
-                    previous, last_change = received, time.monotonic()
-                elif time.monotonic() - last_change > 1.0:
-                    break
-                sample_rss()
-                time.sleep(0.1)  # polling the capture file, bounded
+            settle(lambda: count_frames(capture_file), offered, SETTLE_S, 0.1, tick=sample_rss)
         else:  # Zenoh -> CAN: stamped commands on every bus's tx key, one counting reader on all buses
-            before = self.bound_sockets()
-            reader = self.spawn([self.args.can_load, "count", ",".join(names), offered, 1000], env=self.env,
-                                stdout=subprocess.PIPE, text=True)
-            deadline = time.monotonic() + 10
-            while self.bound_sockets() < before + buses and time.monotonic() < deadline:
-                time.sleep(0.01)  # polling the hub's own count of bound sockets, bounded
+            before = self.hub.bound_sockets()
+            reader = self.procs.spawn([self.args.can_load, "count", ",".join(names), offered, 1000], env=self.env,
+                                      stdout=subprocess.PIPE, text=True)
+            self.hub.wait_bound(before + buses)
             keys = [key for group in groups for key in bus_keys("vehicle/can", group, "tx")]
-            gen = self.spawn([self.args.zn_flood, "--connect", endpoint, "--key", ",".join(keys), "--count",
+            gen = self.procs.spawn([self.args.zn_flood, "--connect", endpoint, "--key", ",".join(keys), "--count",
                               per_bus, "--rate", FRAMES_PER_S, "--stamp-data", "--id", "200"],
                              stdout=subprocess.PIPE, text=True)
             while gen.poll() is None:
@@ -189,9 +154,7 @@ class Bench:
             counted = json.loads(reader.communicate(timeout=SETTLE_S + 5)[0])  # stops after 1 s idle
         cpu = sum(cpu_s(b.pid) for b in bridges) - cpu0
         system_cpu = sum(cpu_split_s(b.pid)[1] for b in bridges) - sys0
-        for p in self.procs:
-            if p.poll() is None:
-                stop(p, close_stdin=p.stdin is not None)
+        self.procs.close()
         session.close()
         if direction == "can-to-zenoh":
             stamps = zenoh_stamps(capture_file)
@@ -210,9 +173,10 @@ class Bench:
                 "kernel_share": round(system_cpu / cpu, 2) if cpu else None, "peak_rss_mib": round(peak_rss, 1)}
 
     def cleanup(self) -> None:
-        for p in self.procs:
+        for p in self.procs.procs:
             if p.poll() is None:
                 p.kill()
+        self.close()
 
 
 def best_lossless(results: list[dict], system: str) -> int:

@@ -26,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from canbench.rig import Hub
+
 from .common import REPO
 
 READERS = 3
@@ -37,58 +39,42 @@ PACED_RATES = (100_000, 150_000)
 SPIN_US = 50
 
 
-def start_hub(build: Path, workdir: Path, *hub_args: str) -> tuple[subprocess.Popen, dict]:
-    env = dict(os.environ, UCAN_DIR=str(workdir), LD_PRELOAD=str(build / "libucan-preload.so"))
-    read_fd, write_fd = os.pipe()
-    hub = subprocess.Popen([str(build / "ucan-hub"), "-d", str(workdir), "-r", str(write_fd), *hub_args, "vcan0"],
-                           pass_fds=(write_fd,), stderr=subprocess.DEVNULL, env={**env, "LD_PRELOAD": ""})
-    os.close(write_fd)
-    with os.fdopen(read_fd) as ready:
-        if ready.readline().strip() != "ready":
-            sys.exit("ucan-hub did not start")
-    return hub, env
+def start_hub(build: Path, workdir: Path, *hub_args: str) -> Hub:
+    hub = Hub(build, workdir)
+    hub.start(["vcan0"], *hub_args)
+    return hub
 
 
-def bound_readers(build: Path, workdir: Path) -> int:
-    out = subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "stats", "-j"], capture_output=True, text=True)
-    return sum(1 for c in json.loads(out.stdout)["clients"] if c["bound"]) if out.returncode == 0 else 0
-
-
-def throughput(build: Path, workdir: Path, env: dict, per_ms: int) -> dict:
-    files = [workdir / f"reader{i}.log" for i in range(READERS)]
-    readers = [subprocess.Popen(["candump", "-L", "vcan0"], stdout=open(f, "w"), env=env) for f in files]
-    deadline = time.monotonic() + 10
-    while bound_readers(build, workdir) < READERS and time.monotonic() < deadline:
-        time.sleep(0.01)  # polling the hub's own readiness count, bounded
+def throughput(hub: Hub, per_ms: int) -> dict:
+    files = [hub.workdir / f"reader{i}.log" for i in range(READERS)]
+    readers = [subprocess.Popen(["candump", "-L", "vcan0"], stdout=open(f, "w"), env=hub.env) for f in files]
+    hub.wait_bound(READERS)
     start = time.monotonic()
     subprocess.run(["cangen", "vcan0", "-I", "123", "-L", "8", "-D", "i", "-g", "1", "-c", str(per_ms),
-                    "-n", str(THROUGHPUT_FRAMES), "-p", "100"], env=env, check=True, timeout=120)
+                    "-n", str(THROUGHPUT_FRAMES), "-p", "100"], env=hub.env, check=True, timeout=120)
     elapsed = time.monotonic() - start
-    stats = json.loads(subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "stats", "-j"],
-                                      capture_output=True, text=True, check=True).stdout)
+    stats = hub.stats()
     for r in readers:
         r.send_signal(signal.SIGINT)
         r.wait(timeout=30)
     received = [sum(1 for line in open(f) if line.startswith("(")) for f in files]
-    subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "reset"], check=True)
+    hub.reset()
     return {"offered_per_s": per_ms * 1000, "achieved_per_s": round(THROUGHPUT_FRAMES / elapsed),
             "frames": THROUGHPUT_FRAMES, "received": received,
             "lossless": all(n == THROUGHPUT_FRAMES for n in received),
             "hub_drops": stats["interfaces"][0]["rx_drops"]}
 
 
-def paced(build: Path, tools: Path, workdir: Path, env: dict, rate: int) -> dict:
+def paced(hub: Hub, tools: Path, rate: int) -> dict:
     """can-load at an exact pace into 3 counting readers (no text formatting anywhere)."""
     readers = [subprocess.Popen([str(tools / "can-load"), "count", "vcan0", str(THROUGHPUT_FRAMES), "2000"],
-                                stdout=subprocess.PIPE, text=True, env=env) for _ in range(READERS)]
-    deadline = time.monotonic() + 10
-    while bound_readers(build, workdir) < READERS and time.monotonic() < deadline:
-        time.sleep(0.01)  # polling the hub's own readiness count, bounded
+                                stdout=subprocess.PIPE, text=True, env=hub.env) for _ in range(READERS)]
+    hub.wait_bound(READERS)
     sent = json.loads(subprocess.run([str(tools / "can-load"), "send", "vcan0", "123", str(rate),
-                                      str(THROUGHPUT_FRAMES)], capture_output=True, text=True, env=env,
+                                      str(THROUGHPUT_FRAMES)], capture_output=True, text=True, env=hub.env,
                                      check=True, timeout=120).stdout)
     counted = [json.loads(r.communicate(timeout=30)[0]) for r in readers]
-    subprocess.run([str(build / "ucanctl"), "-d", str(workdir), "reset"], check=True)
+    hub.reset()
     return {"offered_per_s": rate, "achieved_per_s": round(sent["frames"] / sent["seconds"]),
             "frames": THROUGHPUT_FRAMES, "received": [c["frames"] for c in counted],
             "out_of_order": sum(c["out_of_order"] for c in counted),
@@ -109,33 +95,31 @@ def main() -> int:
     args = ap.parse_args()
     build, tools = args.build.resolve(), args.tools.resolve()
     workdir = Path(tempfile.mkdtemp(prefix="ucan-bench-", dir="/tmp"))
-    hub, env = start_hub(build, workdir)
+    hub = start_hub(build, workdir)
     try:
         results = {
             "machine": {"cpus": os.cpu_count(), "kernel": os.uname().release},
-            "throughput": [throughput(build, workdir, env, r) for r in THROUGHPUT_RATES_PER_MS],
+            "throughput": [throughput(hub, r) for r in THROUGHPUT_RATES_PER_MS],
             "latency": [],
         }
-        results["paced"] = [paced(build, tools, workdir, env, r) for r in PACED_RATES]
+        results["paced"] = [paced(hub, tools, r) for r in PACED_RATES]
         for rate in LATENCY_RATES:
-            hub_lat, floor = latency(tools, env, "can", rate), latency(tools, env, "socketpair", rate)
+            hub_lat, floor = latency(tools, hub.env, "can", rate), latency(tools, hub.env, "socketpair", rate)
             results["latency"] += [hub_lat, floor]
             hub_lat["p50_ratio_to_socketpair"] = round(hub_lat["p50_us"] / max(floor["p50_us"], 0.01), 1)
     finally:
-        hub.terminate()
-        hub.wait()
+        hub.stop()
     spin_dir = Path(tempfile.mkdtemp(prefix="ucan-bench-spin-", dir="/tmp"))
-    hub, env = start_hub(build, spin_dir, "-s", str(SPIN_US))
+    hub = start_hub(build, spin_dir, "-s", str(SPIN_US))
     try:
         for rate in LATENCY_RATES:
-            spun = latency(tools, env, "can", rate)
+            spun = latency(tools, hub.env, "can", rate)
             floor = next(r for r in results["latency"] if r["mode"] == "socketpair" and r["rate"] == rate)
             spun.update(mode=f"can-spin{SPIN_US}",
                         p50_ratio_to_socketpair=round(spun["p50_us"] / max(floor["p50_us"], 0.01), 1))
             results["latency"].append(spun)
     finally:
-        hub.terminate()
-        hub.wait()
+        hub.stop()
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / f"bus-{time.strftime('%Y%m%d-%H%M%S')}.json"
     path.write_text(json.dumps(results, indent=2))

@@ -29,9 +29,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from canbench.runkeys import open_session, wait_token
+from canbench.rig import Rig, Router, candump, start_bridge, stop, zn_capture
+from canbench.runkeys import open_session
 
-from .common import REPO, add_tool_arguments, free_port, run_id_and_output, stop
+from .common import REPO, add_tool_arguments, run_id_and_output
 from .stamps import candump_stamps, zenoh_stamps
 
 FRAMES = 5000
@@ -41,11 +42,11 @@ HISTORY = REPO / "docs" / "callgrind-history.csv"
 STAGES = {
     "can_read": ("zn_can_receive", "rx"),
     "put": ("zn_put", "rx"),
-    "command": ("on_command", "tx"),
+    "command": ("zn_tx_on_command", "tx"),
     "can_write": ("zn_can_transmit", "tx"),
 }
 # the component's own code: self counts of the functions in these files (inlined code stays in its file)
-COMPONENT_FILES = ("zenoh_node.c", "zenoh_serialize.c")
+COMPONENT_DIR = "components/zenoh-node/src/"  # every source file of the component, whatever its name
 
 
 def annotate(callgrind_out: Path, inclusive: bool) -> list[tuple[int, str, str]]:
@@ -66,7 +67,7 @@ def counts_of(callgrind_out: Path) -> dict[str, int]:
     for n, _, fn in annotate(callgrind_out, inclusive=True):
         counts[fn] = counts.get(fn, 0) + n
     counts["<component>"] = sum(n for n, file, _ in annotate(callgrind_out, inclusive=False)
-                                if file.endswith(COMPONENT_FILES))
+                                if COMPONENT_DIR in file)
     return counts
 
 
@@ -79,33 +80,21 @@ def program_total(callgrind_out: Path) -> int:
 
 def run(args, work: Path, rx_frames: int, tx_frames: int) -> tuple[dict[str, int], int]:
     """One bridge under callgrind for FRAMES / RATE seconds of load (or idle): inclusive counts and total."""
-    build = Path(args.ucan_build)
-    env = dict(os.environ, UCAN_DIR=str(work), LD_PRELOAD=str(build / "libucan-preload.so"))
-    procs: list[subprocess.Popen] = []
-
-    def spawn(cmd, **kw) -> subprocess.Popen:
-        p = subprocess.Popen([str(c) for c in cmd], **kw)
-        procs.append(p)
-        return p
+    rig = Rig(Path(args.ucan_build), work)
+    env, spawn, procs = rig.env, rig.spawn, rig.procs
     try:
-        spawn([build / "ucan-hub", "-d", work, "vcan0"], stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 10
-        while not (work / "hub.sock").exists() and time.monotonic() < deadline:
-            time.sleep(0.01)  # the hub's socket file is its readiness
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
-        spawn([args.zenohd, "--no-multicast-scouting", "-l", endpoint], stdout=subprocess.DEVNULL,
-              stderr=subprocess.DEVNULL)
+        rig.hub.start(["vcan0"])
+        router = Router(args.zenohd)
+        endpoint = router.endpoint
+        procs.add(router.start())
         session = open_session(endpoint)
         zn_out, can_out = work / "zenoh.tsv", work / "can.log"
-        capture = spawn([args.zn_capture, "--connect", endpoint, "--key", "vehicle/can/rx", "--ready-token",
-                         "bench/capture", "--out", zn_out], stdin=subprocess.PIPE, stderr=subprocess.DEVNULL)
-        wait_token(session, "bench/capture", 20)
-        candump = spawn(["candump", "-L", "vcan0"], env=env, stdout=open(can_out, "w"), stderr=subprocess.DEVNULL)
+        capture = zn_capture(procs, args.zn_capture, endpoint, "vehicle/can/rx", zn_out, session, "bench/capture")
+        dump = candump(procs, env, "vcan0", can_out)
         out = work / "callgrind.out"
-        bridge = spawn(["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", args.bridge,
-                        "--router", endpoint, "--can", "vcan0", "--publish-period-ms", "0"],
-                       env=env, stdout=open(work / "bridge.log", "w"), stderr=subprocess.STDOUT)
-        wait_token(session, "vehicle/can/bridges/**", 180)
+        bridge = start_bridge(procs, ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", args.bridge,
+                                      "--router", endpoint, "--can", "vcan0", "--publish-period-ms", "0"],
+                              env, work / "bridge.log", session, "vehicle/can/bridges/**", timeout=180)
         t0 = time.monotonic()
         if rx_frames:
             spawn([args.can_load, "send", "vcan0", "100", RATE, rx_frames], env=env,
@@ -127,13 +116,11 @@ def run(args, work: Path, rx_frames: int, tx_frames: int) -> tuple[dict[str, int
         if rx != rx_frames or tx != tx_frames:
             sys.exit(f"bench-callgrind: the bridge forwarded {rx} of {rx_frames} frames to Zenoh and {tx} of "
                      f"{tx_frames} commands to CAN:\n" + (work / "bridge.log").read_text()[-2000:])
-        stop(candump)
+        stop(dump)
         stop(capture, close_stdin=True)
         return counts_of(out), program_total(out)
     finally:
-        for p in reversed(procs):
-            if p.poll() is None:
-                stop(p)
+        rig.close()
 
 
 def measure(args) -> dict:
@@ -148,7 +135,7 @@ def measure(args) -> dict:
             sys.exit(f"bench-callgrind: no callgrind count for {fn} (symbols stripped?)")
         per_frame[stage] = round(counts[fn] / FRAMES)
     if not runs["rx"][0]["<component>"]:
-        sys.exit(f"bench-callgrind: no instructions attributed to {COMPONENT_FILES}: {args.bridge} lacks debug info")
+        sys.exit(f"bench-callgrind: no instructions attributed to {COMPONENT_DIR}: {args.bridge} lacks debug info")
     per_frame["component_rx"] = round(runs["rx"][0]["<component>"] / FRAMES)
     per_frame["component_tx"] = round(runs["tx"][0]["<component>"] / FRAMES)
     idle_total = runs["idle"][1]
@@ -178,8 +165,8 @@ def main() -> int:
     ipf = result["instructions_per_frame"]
     md = ["| stage | function (inclusive) | instructions per frame |", "|---|---|---|"]
     md += [f"| {stage} | {fn} | {ipf[stage]} |" for stage, (fn, _) in STAGES.items()]
-    md.append(f"| component_rx | self: {', '.join(COMPONENT_FILES)} in the CAN -> Zenoh run | {ipf['component_rx']} |")
-    md.append(f"| component_tx | self: {', '.join(COMPONENT_FILES)} in the Zenoh -> CAN run | {ipf['component_tx']} |")
+    md.append(f"| component_rx | self: {COMPONENT_DIR}*.c in the CAN -> Zenoh run | {ipf['component_rx']} |")
+    md.append(f"| component_tx | self: {COMPONENT_DIR}*.c in the Zenoh -> CAN run | {ipf['component_tx']} |")
     md.append(f"| process_rx | whole process, CAN -> Zenoh run minus idle run | {ipf['process_rx']} |")
     md.append(f"| process_tx | whole process, Zenoh -> CAN run minus idle run | {ipf['process_tx']} |")
     text = f"callgrind {run_id} at {commit}: {FRAMES} frames each way at {RATE} frames/s\n\n" + "\n".join(md)

@@ -30,10 +30,11 @@ import time
 from pathlib import Path
 
 from canbench.capture import CAPTURE_RCVBUF
-from canbench.runkeys import open_session, wait_token
+from canbench.rig import Procs, Router, stop, zn_capture
+from canbench.runkeys import open_session
 
 from .bus import start_hub
-from .common import add_tool_arguments, free_port, machine_line, run_id_and_output, stop
+from .common import add_tool_arguments, machine_line, run_id_and_output, settle
 
 TARGET_FPS = 100_000
 ZENOH_RATES = (50_000, 100_000, 150_000)
@@ -45,33 +46,19 @@ SETTLE_S = 10.0
 
 def wait_lines(path: Path, expected: int) -> int:
     """Lines in path once it holds `expected`, or once nothing arrived for a second (bounded)."""
-    previous, last_change, end = -1, time.monotonic(), time.monotonic() + SETTLE_S
-    lines = 0
-    while time.monotonic() < end:
-        lines = sum(1 for _ in open(path, "rb")) if path.exists() else 0
-        if lines >= expected:
-            break
-        if lines != previous:
-            previous, last_change = lines, time.monotonic()
-        elif time.monotonic() - last_change > 1.0:
-            break
-        time.sleep(0.1)  # polling the capture file, bounded by SETTLE_S
-    return lines
+    return settle(lambda: sum(1 for _ in open(path, "rb")) if path.exists() else 0, expected, SETTLE_S, 0.1)
 
 
 def zenoh_run(args, workdir: Path, rate: int, block: bool) -> dict:
     """One zn-flood load through a fresh zenohd into a fresh zn-capture."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = subprocess.Popen([args.zenohd, "--no-multicast-scouting", "-l", endpoint],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    router = Router(args.zenohd)
+    endpoint = router.endpoint
     session = capture = None
     try:
+        router.start()
         session = open_session(endpoint)
         tsv = workdir / f"zenoh-{rate}-{block}.tsv"
-        capture = subprocess.Popen([args.zn_capture, "--connect", endpoint, "--key", "bench/flood",
-                                    "--ready-token", "bench/capture", "--out", str(tsv)],
-                                   stdin=subprocess.PIPE, stderr=subprocess.DEVNULL)
-        wait_token(session, "bench/capture", 20)
+        capture = zn_capture(Procs(), args.zn_capture, endpoint, "bench/flood", tsv, session, "bench/capture")
         flood = subprocess.run([args.zn_flood, "--connect", endpoint, "--key", "bench/flood", "--count",
                                 str(ZENOH_COUNT), "--rate", str(rate), *(["--block"] if block else [])],
                                capture_output=True, text=True, timeout=120, check=True)
@@ -95,29 +82,28 @@ def zenoh_run(args, workdir: Path, rate: int, block: bool) -> dict:
             capture.kill()
         if session:
             session.close()
-        stop(router)
+        router.stop()
 
 
 def can_run(args, workdir: Path, per_ms: int, reader: bool) -> dict:
     """cangen on a private hub (per_ms frames per millisecond, 0: unpaced), candump -L -r into a
     file as the orchestrator runs it (or no reader: the hub's ceiling)."""
-    hub, env = start_hub(Path(args.ucan_build), workdir)  # returns once the hub says it is ready
+    hub = start_hub(Path(args.ucan_build), workdir)  # returns once the hub says it is ready
+    env = hub.env
     dump = None
     log = workdir / f"can-{per_ms}-{reader}.log"
     try:
         if reader:
             dump = subprocess.Popen(["candump", "-L", "-r", str(CAPTURE_RCVBUF), "vcan0"], env=env,
                                     stdout=open(log, "wb"), stderr=subprocess.DEVNULL)
-            deadline = time.monotonic() + 10
-            while not any(c["bound"] for c in hub_stats(args, env)["clients"]) and time.monotonic() < deadline:
-                time.sleep(0.01)  # candump bound: the hub lists it
+            hub.wait_bound(1)  # candump bound: the hub lists it
         pacing = ["-g", "1", "-c", str(per_ms)] if per_ms else ["-g", "0"]
         t0 = time.monotonic()
         subprocess.run(["cangen", "vcan0", *pacing, "-I", "123", "-L", "8", "-D", "i", "-n", str(CAN_COUNT)],
                        env=env, check=True, timeout=120)
         offered = CAN_COUNT / (time.monotonic() - t0)
         recorded = wait_lines(log, CAN_COUNT) if reader else None
-        drops = sum(c["rx_drops"] for c in hub_stats(args, env)["clients"])
+        drops = sum(c["rx_drops"] for c in hub.stats()["clients"])
         sustained = None
         if reader and recorded:
             stamps = [float(line[1:line.index(b")")]) for line in open(log, "rb")]
@@ -130,13 +116,7 @@ def can_run(args, workdir: Path, per_ms: int, reader: bool) -> dict:
     finally:
         if dump:
             stop(dump)
-        stop(hub)
-
-
-def hub_stats(args, env) -> dict:
-    out = subprocess.run([str(Path(args.ucan_build) / "ucanctl"), "stats", "-j"], env=env, capture_output=True,
-                         text=True, check=True)
-    return json.loads(out.stdout)
+        hub.stop()
 
 
 def table(results: list[dict]) -> str:

@@ -1,23 +1,15 @@
 """What every benchmark script shares: the tool options make bench passes to all of them, the
-run's output directory, a process's CPU time and RSS from /proc, stopping a process."""
+run's output directory, a process's CPU time and RSS from /proc. Starting and stopping the
+processes is the rig's (canbench/rig.py), which the tests use too."""
 from __future__ import annotations
 
 import argparse
 import os
 import platform
-import signal
-import socket
-import subprocess
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def cpu_split_s(pid: int) -> tuple[float, float]:
@@ -38,25 +30,17 @@ def rss_mib(pid: int) -> float:
     return 0.0
 
 
-def stop(proc: subprocess.Popen, close_stdin: bool = False) -> None:
-    """SIGTERM (or end of stdin for zn-capture), then SIGKILL after 10 s."""
-    if close_stdin:
-        proc.stdin.close()
-    else:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-
-
-def add_tool_arguments(ap: argparse.ArgumentParser) -> None:
-    """The tools every benchmark script takes (make bench passes one list to all of them)."""
+def add_rig_arguments(ap: argparse.ArgumentParser) -> None:
+    """The rig's programs: the userspace bus's build, the bridge, zn-capture, zenohd."""
     ap.add_argument("--ucan-build", default=str(REPO / "build" / "ucan"))
     ap.add_argument("--bridge", default=str(REPO / "build" / "firmware" / "zenoh-node"))
     ap.add_argument("--zn-capture", default=str(REPO / "build" / "firmware" / "zn-capture"))
     ap.add_argument("--zenohd", default=os.environ.get("ZENOHD", "zenohd"))
+
+
+def add_tool_arguments(ap: argparse.ArgumentParser) -> None:
+    """The tools every benchmark script takes (make bench passes one list to all of them)."""
+    add_rig_arguments(ap)
     ap.add_argument("--can-load", default=str(REPO / "build" / "bench-tools" / "can-load"))
     ap.add_argument("--zn-flood", default=str(REPO / "build" / "rust" / "release" / "zn-flood"))
     ap.add_argument("--out", help="output directory (default reports/bench/<run-id>)")
@@ -72,3 +56,22 @@ def run_id_and_output(args) -> tuple[str, Path]:
 
 def machine_line() -> str:
     return f"{platform.node()}: {os.cpu_count()} cores, {platform.machine()}, Linux {platform.release()}"
+
+
+def settle(count, expected: int, settle_s: float, step_s: float, tick=None) -> int:
+    """count() until it reaches expected, or nothing more arrived for a second, or settle_s passed
+    (a capture file still being written); tick() runs at each poll (e.g. an RSS probe)."""
+    n, previous, last_change = 0, -1, time.monotonic()
+    end = time.monotonic() + settle_s
+    while time.monotonic() < end:
+        n = count()
+        if n >= expected:
+            break
+        if n != previous:
+            previous, last_change = n, time.monotonic()
+        elif time.monotonic() - last_change > 1.0:
+            break
+        if tick:
+            tick()
+        time.sleep(step_s)  # polling a capture file, bounded by settle_s
+    return n

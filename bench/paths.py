@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -34,9 +32,11 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from canbench.runkeys import open_session, wait_token
+from canbench.errors import RunError
+from canbench.rig import Rig, Router, candump, free_port, start_bridge, stop, zn_capture
+from canbench.runkeys import open_session
 
-from .common import REPO, add_tool_arguments, cpu_s, free_port, machine_line, rss_mib, run_id_and_output, stop
+from .common import REPO, add_tool_arguments, cpu_s, machine_line, rss_mib, run_id_and_output, settle
 from .stamps import can_stamp_split, candump_stamps, load_rate, zenoh_stamps
 
 BUS_FPS = 9000  # one saturated 1 Mbit/s bus of 8-byte frames
@@ -67,50 +67,25 @@ def latency_summary(stamps: list[tuple[int, int]], sent: int) -> dict:
     return result
 
 
-def wait_listening(endpoint: str, timeout_s: float = 10) -> None:
-    host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
-    deadline = time.monotonic() + timeout_s
-    while True:
-        try:
-            socket.create_connection((host, int(port)), timeout=1).close()
-            return
-        except OSError:
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"nothing listens on {endpoint} after {timeout_s:.0f} s") from None
-            time.sleep(0.02)  # polling the router's port, bounded
-
-
-class Rig:
+class PathRig(Rig):
     """A private hub, optionally zenohd, optionally a bridge; the processes of one measurement."""
 
     def __init__(self, args, workdir: Path):
-        self.args, self.workdir = args, workdir
-        build = Path(args.ucan_build)
-        self.hub_bin = build / "ucan-hub"
-        self.env = dict(os.environ, UCAN_DIR=str(workdir), LD_PRELOAD=str(build / "libucan-preload.so"))
-        self.procs: list[subprocess.Popen] = []
+        super().__init__(Path(args.ucan_build), workdir)
+        self.args = args
         self.bridge: subprocess.Popen | None = None
         self.endpoint = ""
 
-    def spawn(self, cmd, **kw) -> subprocess.Popen:
-        p = subprocess.Popen([str(c) for c in cmd], **kw)
-        self.procs.append(p)
-        return p
-
     def start(self, bridge: str | None, mode: str = "client") -> None:
-        self.spawn([self.hub_bin, "-d", self.workdir, "vcan0"], stderr=subprocess.DEVNULL)
-        deadline = time.monotonic() + 10
-        while not (self.workdir / "hub.sock").exists() and time.monotonic() < deadline:
-            time.sleep(0.01)  # the hub's socket file is its readiness
+        self.hub.start(["vcan0"])
         router = f"tcp/127.0.0.1:{free_port()}"
         if mode != "router":
-            self.spawn([self.args.zenohd, "--no-multicast-scouting", "-l", router],
-                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            wait_listening(router)  # zn-capture and zn-flood try their router once
+            zenohd = Router(self.args.zenohd)
+            router = zenohd.endpoint
+            self.procs.add(zenohd.start())
         self.endpoint = router
         if bridge is None:
             return
-        log = open(self.workdir / "bridge.log", "w")
         if bridge == "python-ref":
             cmd = [sys.executable, "-m", "bench.refbridge", "--router", router, "--can", "vcan0"]
         else:
@@ -122,12 +97,12 @@ class Rig:
                 listen = f"tcp/127.0.0.1:{free_port()}"
                 cmd += ["--listen", listen] + (["--router", router] if mode == "peer" else [])
                 self.endpoint = listen
-        self.bridge = self.spawn(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
         with self.session() as s:
             try:
-                wait_token(s, "vehicle/can/bridges/**", 30)
-            except TimeoutError:
-                sys.exit(f"{bridge} ({mode}) did not come up:\n" + (self.workdir / "bridge.log").read_text()[-2000:])
+                self.bridge = start_bridge(self.procs, cmd, self.env, self.workdir / "bridge.log", s,
+                                           "vehicle/can/bridges/**", cwd=REPO)
+            except RunError as e:
+                sys.exit(f"{bridge} ({mode}) did not come up: {e}")
 
     @contextmanager
     def session(self):
@@ -138,24 +113,11 @@ class Rig:
             s.close()
 
     def zn_capture(self, key: str, out: Path) -> subprocess.Popen:
-        token = f"bench/capture/{out.stem}"
-        p = self.spawn([self.args.zn_capture, "--connect", self.endpoint, "--key", key, "--ready-token", token,
-                        "--out", out], stdin=subprocess.PIPE, stderr=subprocess.DEVNULL)
         with self.session() as s:
-            wait_token(s, token, 20)
-        return p
+            return zn_capture(self.procs, self.args.zn_capture, self.endpoint, key, out, s, f"bench/capture/{out.stem}")
 
     def candump(self, out: Path) -> subprocess.Popen:
-        p = self.spawn(["candump", "-L", "-r", str(64 << 20), "vcan0"], env=self.env, stdout=open(out, "w"),
-                       stderr=subprocess.DEVNULL)
-        # candump has no readiness signal: a probe frame seen in its log says it is reading
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline:
-            subprocess.run(["cansend", "vcan0", "7FF#"], env=self.env, check=True)
-            if out.stat().st_size:
-                return p
-            time.sleep(0.05)  # bounded retry of the probe
-        raise TimeoutError("candump did not start reading")
+        return candump(self.procs, self.env, "vcan0", out, "-r", str(64 << 20))
 
     def can_load(self, *args) -> subprocess.Popen:
         return self.spawn([self.args.can_load, *map(str, args)], env=self.env, stdout=subprocess.PIPE)
@@ -164,24 +126,6 @@ class Rig:
         return self.spawn([self.args.zn_flood, "--connect", self.endpoint, "--key", key, "--count", count,
                            "--rate", rate, "--stamp-data", "--id", f"{can_id:X}"], stdout=subprocess.PIPE)
 
-    def close(self) -> None:
-        for p in reversed(self.procs):
-            if p.poll() is None:
-                stop(p, close_stdin=p.stdin is not None)
-
-
-def wait_for(count_fn, expected: int) -> None:
-    """Until expected frames arrived, or nothing more arrived for a second (bounded by SETTLE_S)."""
-    end, last, last_change = time.monotonic() + SETTLE_S, -1, time.monotonic()
-    while time.monotonic() < end:
-        n = count_fn()
-        if n >= expected:
-            return
-        if n != last:
-            last, last_change = n, time.monotonic()
-        elif time.monotonic() - last_change > 1.0:
-            return
-        time.sleep(0.05)  # polling a capture file, bounded
 
 
 def measure(args, path: str, system: str | None, mode: str, rate: int, seconds: float) -> dict:
@@ -189,7 +133,7 @@ def measure(args, path: str, system: str | None, mode: str, rate: int, seconds: 
     count = int(rate * seconds)
     with tempfile.TemporaryDirectory(prefix="bench-paths-") as tmp:
         work = Path(tmp)
-        rig = Rig(args, work)
+        rig = PathRig(args, work)
         try:
             rig.start(system, mode)
             zn_out, can_out = work / "zenoh.tsv", work / "can.log"
@@ -224,7 +168,7 @@ def measure(args, path: str, system: str | None, mode: str, rate: int, seconds: 
                 if p.returncode != 0:
                     raise RuntimeError(f"{path}: load exited {p.returncode}")
             offered_fps = load_rate(load[0].stdout.read().decode(), count)
-            wait_for(lambda: len(collect()), count)
+            settle(lambda: len(collect()), count, SETTLE_S, 0.05)
             wall = time.monotonic() - t0
             cpu = (cpu_s(pid) - cpu0) if pid else 0.0
             if path == "round-trip":

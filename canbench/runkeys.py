@@ -33,14 +33,17 @@ def ecu_stop(run_id: str) -> str:
     return f"bench/runs/{run_id}/stop"
 
 
-def open_session(endpoint: str) -> zenoh.Session:
+def open_session(endpoint: str, wait: bool = True) -> zenoh.Session:
+    """wait: for the router rather than fail, and back within a second of a router restart;
+    without, zenoh's defaults (the tests: a router they started is already listening)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("connect/timeout_ms", "-1")  # wait for the router rather than fail
-    # back within a second of a router restart (fault steps), like the bridge's own retry
-    conf.insert_json5("connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}")
+    if wait:
+        conf.insert_json5("connect/timeout_ms", "-1")
+        # like the bridge's own retry (fault steps restart the router)
+        conf.insert_json5("connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}")
     return zenoh.open(conf)
 
 

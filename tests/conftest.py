@@ -1,10 +1,10 @@
 """Shared fixtures: one CAN bus per test (kernel vcan where the kernel has it,
 else the userspace hub), a zenohd router on a free loopback port, and the
-bridge. Tools run as subprocesses so the preload library applies to them
-exactly as it would to a user's program."""
+bridge, all from the rig the benchmarks use too (canbench/rig.py). Tools run as
+subprocesses so the preload library applies to them exactly as it would to a
+user's program."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -15,8 +15,9 @@ from pathlib import Path
 
 import pytest
 
+from canbench import rig
 from canbench.capture import kernel_can_receivers
-from canbench.runkeys import wait_until
+from canbench.runkeys import open_session, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 BUILD = Path(os.environ.get("UCAN_BUILD", REPO / "build" / "ucan"))
@@ -47,36 +48,25 @@ class Bus:
         self.workdir = workdir
         self.env = dict(os.environ)
         self.env.pop("LD_PRELOAD", None)
-        self.hub: subprocess.Popen | None = None
-        self.hub_log = workdir / "hub.log"
+        self._hub = rig.Hub(BUILD, workdir)
+        self.hub_log = self._hub.log
         self.hub_args: list[str] = []
 
     # -- userspace hub ----------------------------------------------------
+    @property
+    def hub(self) -> subprocess.Popen | None:
+        return self._hub.proc
+
     def start_hub(self, *ifaces: str) -> None:
         self.hub_args = list(ifaces) or ["vcan0", "vcan1", "vcan2:mtu=16"]
-        self.env["UCAN_DIR"] = str(self.workdir)
-        self.env["LD_PRELOAD"] = str(BUILD / "libucan-preload.so")
-        read_fd, write_fd = os.pipe()
-        with open(self.hub_log, "ab") as log:
-            self.hub = subprocess.Popen(
-                [str(BUILD / "ucan-hub"), "-d", str(self.workdir), "-r", str(write_fd), *self.hub_args],
-                stdout=log, stderr=log, pass_fds=(write_fd,), env={**self.env, "LD_PRELOAD": "",
-                     "UCAN_HUB_TEST_FAULT": os.environ.get("UCAN_HUB_TEST_FAULT", "")},
-            )
-        os.close(write_fd)
-        with os.fdopen(read_fd) as ready:
-            if ready.readline().strip() != "ready":
-                raise RuntimeError(f"ucan-hub did not start: {self.hub_log.read_text()}")
+        self.env = dict(self._hub.env)
+        self._hub.start(self.hub_args, extra_env={"UCAN_HUB_TEST_FAULT": os.environ.get("UCAN_HUB_TEST_FAULT", "")})
 
     def stop_hub(self, sig: int = signal.SIGTERM) -> None:
-        if self.hub and self.hub.poll() is None:
-            self.hub.send_signal(sig)
-            self.hub.wait(timeout=10)
+        self._hub.stop(sig)
 
     def stats(self) -> dict:
-        out = subprocess.run([str(BUILD / "ucanctl"), "-d", str(self.workdir), "stats", "-j"],
-                             capture_output=True, text=True, check=True)
-        return json.loads(out.stdout)
+        return self._hub.stats()
 
     # -- either kind ------------------------------------------------------
     def receivers(self) -> int:
@@ -166,62 +156,23 @@ def require_userspace(bus: Bus, why: str) -> None:
 
 # -- Zenoh router and bridge ------------------------------------------------------
 
-ZENOHD_VERSION = "1.10.2"
 BRIDGE = Path(os.environ.get("ZN_BRIDGE", REPO / "build" / "firmware" / "zenoh-node"))
 
 
-def find_zenohd() -> str | None:
-    candidates = [os.environ.get("ZENOHD"), shutil.which("zenohd"),
-                  str(Path.home() / ".cache" / "canbench" / f"zenohd-{ZENOHD_VERSION}" / "bin" / "zenohd"),
-                  f"/opt/zenohd-{ZENOHD_VERSION}/bin/zenohd"]
-    return next((c for c in candidates if c and os.access(c, os.X_OK)), None)
-
-
-def free_port() -> int:
-    import socket as pysocket
-    with pysocket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def port_open(port: int) -> bool:
-    import socket as pysocket
-    with pysocket.socket() as s:
-        return s.connect_ex(("127.0.0.1", port)) == 0
-
-
-class Router:
-    """zenohd on a loopback port; multicast scouting off (network safety)."""
+class Router(rig.Router):
+    """zenohd on a loopback port of the test's directory (skips where there is no zenohd)."""
 
     def __init__(self, workdir: Path):
-        self.binary = find_zenohd()
-        if not self.binary:
-            pytest.skip(f"zenohd {ZENOHD_VERSION} not found (make zenohd, or set ZENOHD)")
-        self.port = free_port()
-        self.endpoint = f"tcp/127.0.0.1:{self.port}"
-        self.log = workdir / f"zenohd-{self.port}.log"
-        self.proc: subprocess.Popen | None = None
-
-    def start(self, *extra: str) -> None:
-        with open(self.log, "ab") as log:
-            self.proc = subprocess.Popen([self.binary, "--no-multicast-scouting", "-l", self.endpoint, *extra],
-                                         stdout=log, stderr=log)
-        wait_for(lambda: port_open(self.port) or self.proc.poll() is not None, f"zenohd on {self.endpoint}")
-        assert self.proc.poll() is None, self.log.read_text()
-
-    def stop(self, sig: int = signal.SIGTERM) -> None:
-        if self.proc and self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            self.proc.wait(timeout=10)
+        binary = rig.find_zenohd()
+        if not binary:
+            pytest.skip(f"zenohd {rig.ZENOHD_VERSION} not found (make zenohd, or set ZENOHD)")
+        port = rig.free_port()
+        super().__init__(binary, workdir / f"zenohd-{port}.log", port)
 
 
 def zenoh_session(endpoint: str):
-    import zenoh
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    return zenoh.open(conf)
+    """A client session that fails at once when nothing listens (no retry: tests wait on readiness)."""
+    return open_session(endpoint, wait=False)
 
 
 class Bridge:
@@ -245,14 +196,12 @@ class Bridge:
         """Readiness is the bridge's liveliness token, declared once it forwards both ways."""
         def tokens():
             assert self.proc is None or self.proc.poll() is None, self.log.read_text()
-            return [str(r.ok.key_expr) for r in session.liveliness().get(f"{prefix}/bridges/**") if r.ok]
+            return rig.bridge_tokens(session, prefix)
         return wait_for(tokens, "the bridge's liveliness token", timeout=30)
 
     def try_stats(self, session, prefix: str = "vehicle/can", name: str = "zenoh-node") -> dict | None:
         """The bridge's stats queryable, or None while it is unreachable (e.g. reconnecting)."""
-        replies = [r for r in session.get(f"{prefix}/bridges/{name}/stats") if r.ok]
-        assert len(replies) <= 1, replies
-        return json.loads(bytes(replies[0].ok.payload.to_bytes())) if replies else None
+        return rig.bridge_stats(session, prefix, name)
 
     def stats(self, session, prefix: str = "vehicle/can", name: str = "zenoh-node") -> dict:
         stats = self.try_stats(session, prefix, name)
