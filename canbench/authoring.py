@@ -15,6 +15,12 @@ import yaml
 from .trace import read_trace
 from .wire import id_hex
 
+# An id is periodic when nearly all its gaps sit near the median gap: a median alone
+# (or its absolute deviation) also "finds" a cycle in two interleaved streams of one id
+# (gaps 1, 9, 1, 9 ms) or in bursts, and a gate on such a median flips with one frame.
+STEADY_PCT = 10  # a gap within +-10 % of the cycle is steady
+PERIODIC_STEADY_PCT = 90  # ... and an id with at least 90 % steady gaps is periodic
+
 
 def frame_bits_worst(dlc: int, extended: bool, remote: bool = False) -> int:
     """Worst-case stuffed length of a classic CAN frame incl. 3 bits interframe space
@@ -32,6 +38,7 @@ class IdSummary:
     cycle_ms: float | None
     jitter_ms: float | None  # median absolute deviation of the gaps
     remote: int
+    steady_pct: float | None = None  # share of the gaps within STEADY_PCT of the cycle
 
 
 @dataclass
@@ -47,11 +54,12 @@ class TraceSummary:
     def table(self) -> str:
         lines = [f"{self.path}: {self.frames} frames over {self.span_s:.3f} s on {', '.join(self.interfaces)}; "
                  f"bus load {self.load_pct:.1f}% of {self.bitrate // 1000} kbit/s (worst-case stuffing)",
-                 f"  {'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  {'jitter ms':>9}  remote"]
+                 f"  {'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  {'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:
             cycle = f"{s.cycle_ms:9.2f}" if s.cycle_ms is not None else f"{'-':>9}"
             jitter = f"{s.jitter_ms:9.3f}" if s.jitter_ms is not None else f"{'-':>9}"
-            lines.append(f"  {s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {s.remote}")
+            steady = f"{s.steady_pct:8.0f}" if s.steady_pct is not None else f"{'-':>8}"
+            lines.append(f"  {s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
         return "\n".join(lines)
 
 
@@ -69,8 +77,10 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         gaps = [(b.timestamp - a.timestamp) * 1000 for a, b in zip(msgs, msgs[1:], strict=False)]
         cycle = statistics.median(gaps) if gaps else None
         jitter = statistics.median(abs(g - cycle) for g in gaps) if gaps and cycle is not None else None
+        steady = (100 * sum(abs(g - cycle) <= cycle * STEADY_PCT / 100 for g in gaps) / len(gaps)
+                  if gaps and cycle else None)
         ids.append(IdSummary(id_hex(can_id, extended), extended, len(msgs),
-                             max(m.dlc for m in msgs), cycle, jitter, sum(m.is_remote_frame for m in msgs)))
+                             max(m.dlc for m in msgs), cycle, jitter, sum(m.is_remote_frame for m in msgs), steady))
     interfaces = sorted({str(tf.message.channel) for tf in frames if tf.message.channel is not None})
     return TraceSummary(path, len(frames), span, interfaces or ["vcan0"], ids,
                         100 * bits / bitrate / span if span > 0 else 0.0, bitrate)
@@ -87,16 +97,20 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
         copy.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(trace, copy)
         trace = copy
-    buses = [i if i.startswith("vcan") else "vcan0" for i in s.interfaces]
-    periodic = [i for i in s.ids if i.cycle_ms and i.count >= 5 and i.jitter_ms is not None
-                and i.jitter_ms < 0.1 * i.cycle_ms]
+    # The replay ECU sends every frame of its trace on its one bus: a trace of several
+    # interfaces is replayed merged, and its cycles are inferred from the merged stream.
+    bus = s.interfaces[0] if len(s.interfaces) == 1 and s.interfaces[0].startswith("vcan") else "vcan0"
+    merged = (f"# The trace's interfaces {', '.join(s.interfaces)} are replayed merged onto {bus} "
+              f"(one replay ECU, one bus).\n" if len(s.interfaces) > 1 else "")
+    periodic = [i for i in s.ids if i.cycle_ms and i.count >= 5 and i.steady_pct is not None
+                and i.steady_pct >= PERIODIC_STEADY_PCT]
     doc = {
         "name": name,
         "description": f"Replay of {trace.name} ({s.frames} frames, {s.span_s:.1f} s, "
                        f"{len(s.ids)} ids, {s.load_pct:.0f}% load at {bitrate // 1000} kbit/s).",
         "duration_s": max(10, int(s.span_s * 1.5) + 5),
-        "buses": [{"name": b} for b in sorted(set(buses))],
-        "ecus": [{"name": "recorded", "bus": buses[0],
+        "buses": [{"name": bus}],
+        "ecus": [{"name": "recorded", "bus": bus,
                   "trace": os.path.relpath(trace.resolve(), home)}],
         "bridge": {"mode": "client", "publish_period_ms": 0},
         "expect": {
@@ -108,6 +122,8 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
     }
     header = (f"# Scaffolded by `canbench scaffold` from {trace.name}: review the gates, then run\n"
               f"#   make test SCENARIO={scenario_path}\n"
-              f"# Periodic ids (cycle inferred from the trace, jitter < 10%) are gated in cycle_time.ids.\n")
+              f"{merged}"
+              f"# Periodic ids (cycle inferred from the trace, >= {PERIODIC_STEADY_PCT}% of the gaps within "
+              f"+-{STEADY_PCT}% of it) are gated in cycle_time.ids.\n")
     return header + yaml.safe_dump(doc, sort_keys=False)
 

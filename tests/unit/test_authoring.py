@@ -34,6 +34,25 @@ def test_scaffold_copies_the_trace_and_validates(tmp_path):
     assert cli.main(["scaffold", str(trace), "--name", "drive", "--out", str(out)]) == 2  # no silent overwrite
 
 
+def test_scaffold_merges_interfaces_and_gates_only_steady_cycles(tmp_path):
+    # id 100 every 10 ms on each of two interfaces, 1 ms apart: merged, its gaps are 1, 9, 1, 9 ms
+    # (median 1 ms, median deviation 0): no cycle to gate; id 200 every 20 ms on vcan0 is periodic
+    trace = tmp_path / "two.log"
+    lines = []
+    for i in range(100):
+        t = 1_700_000_000 + i * 0.01
+        lines += [f"({t:.6f}) vcan0 100#{i:02X}", f"({t + 0.001:.6f}) vcan1 100#{i:02X}"]
+        if i % 2 == 0:
+            lines.append(f"({t + 0.005:.6f}) vcan0 200#00")
+    trace.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "two.yaml"
+    assert cli.main(["scaffold", str(trace), "--name", "two", "--out", str(out)]) == 0
+    sc = scenario.load(out)
+    assert sc.bus_names == ["vcan0"] and sc.ecus[0].bus == "vcan0"  # no bus left without traffic
+    assert sc.expect["cycle_time"]["ids"] == {"200": pytest.approx(20.0)}
+    assert "vcan0, vcan1 are replayed merged onto vcan0" in out.read_text()
+
+
 def metrics(p50=0.5, lost=0, verdict="passed") -> dict:
     summary = {"sent": 100, "matched": 100 - lost, "lost": lost, "duplicates": 0, "corrupted": 0, "reordered": 0,
                "latency": {"count": 100, "p50_ms": p50, "p90_ms": p50 * 2, "p99_ms": p50 * 3, "max_ms": p50 * 4}}
