@@ -101,3 +101,35 @@ def test_out_of_descriptors_refuses_connections_without_spinning(hub):
         assert small.stats()["hub"]["refused_connections"] >= 8
         assert small.proc.poll() is None
         still_serves(small)
+
+
+def test_barrier_drains_its_target_without_losing_the_rest_of_its_batch(hub):
+    """Defect 4: a BARRIER drained its target into the static buffers the outer loop was still
+    reading: the frame sent after the BARRIER in the same batch was lost, another duplicated."""
+    reader, querier, target = Client(hub.workdir), Client(hub.workdir), Client(hub.workdir)
+    reader.bind()
+    with Stopped(hub.hub.pid):
+        querier.send(barrier(target.cookie))  # readable first: handled first when the hub continues
+        querier.send(frame(0x100, b"\xf1"))
+        target.send(frame(0x200, b"\x01"))
+        target.send(frame(0x201, b"\x02"))
+    got = [reader.recv() for _ in range(3)]
+    assert got == [frame(i, d)[8:] for i, d in ((0x200, b"\x01"), (0x201, b"\x02"), (0x100, b"\xf1"))]
+    assert querier.ack() == 0
+    by_cookie = {c["cookie"]: c["tx_frames"] for c in hub.stats()["clients"]}
+    assert (by_cookie[querier.cookie], by_cookie[target.cookie]) == (1, 2)
+
+
+def test_barrier_on_a_data_connection_is_answered_not_nested(hub):
+    """A BARRIER inside a drained client's input (no well-behaved program sends one there)
+    is answered without draining again, and counted."""
+    reader, querier, target, third = (Client(hub.workdir) for _ in range(4))
+    reader.bind()
+    with Stopped(hub.hub.pid):
+        querier.send(barrier(target.cookie))
+        target.send(barrier(third.cookie))
+        target.send(barrier(querier.cookie))
+        third.send(frame(0x300, b"\x03"))
+    assert querier.ack() == 0 and target.ack() == 0 and target.ack() == 0
+    assert reader.recv() == frame(0x300, b"\x03")[8:]
+    assert hub.stats()["hub"]["barriers_refused"] == 2

@@ -51,7 +51,7 @@ struct client {
 	uint32_t generation;
 	pid_t pid;
 	char cookie[UCAN_COOKIE_MAX];
-	int bound, header_mode, epollout, paused, dirty;
+	int bound, header_mode, epollout, paused, dirty, draining;
 	struct ucan_sockopts opts;
 	struct can_filter *filters;
 	struct outmsg *queue; /* ring, grown on demand up to queue_limit */
@@ -414,6 +414,8 @@ static enum send_result client_send(uint32_t idx, const void *msg, size_t len, e
 static void client_send_ctl(uint32_t idx, uint32_t type, int status)
 {
 	struct ucan_ctl ctl = { .type = type, .status = status };
+	if (hub.clients[idx].fd < 0)
+		return;
 	switch (client_send(idx, &ctl, sizeof(ctl), CONTROL)) {
 	case QUEUED:
 		break;
@@ -708,6 +710,7 @@ static void handle_stats(uint32_t idx)
 }
 
 static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused);
+static int can_drain_nested(uint32_t idx);
 
 /* Settings of the connection named by a cookie: lets a program that inherited
  * an emulated socket across exec pick it up where its parent left it. */
@@ -801,9 +804,14 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 	case UCAN_MSG_BARRIER: {
 		struct ucan_barrier barrier;
 		memcpy(&barrier, msg, sizeof(barrier));
-		for (uint32_t i = 0; i < hub.nclients_alloc; i++)
-			if (i != idx && hub.clients[i].fd >= 0 && strcmp(hub.clients[i].cookie, barrier.cookie) == 0)
+		for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
+			if (i == idx || hub.clients[i].fd < 0 || strcmp(hub.clients[i].cookie, barrier.cookie) != 0)
+				continue;
+			if (can_drain_nested(i))
 				drain_client(i, UINT32_MAX, 1);
+			else
+				hub.counters.barriers_refused++;
+		}
 		client_send_ctl(idx, UCAN_MSG_ACK, 0);
 		break;
 	}
@@ -825,11 +833,16 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 	}
 }
 
-/* even_if_paused: a sender that hung up cannot be slowed down any more; read
- * what it wrote before it went, rather than losing it. */
-static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
+/* A BARRIER (read at depth 0) drains the client it names (depth 1) from
+ * inside the outer drain: each depth reads into buffers of its own, so the
+ * outer loop's unhandled messages survive. A BARRIER read at depth 1 (only
+ * a hostile client sends one on its data connection) is answered without
+ * draining, counted. */
+#define DRAIN_DEPTH 2
+static unsigned drain_depth;
+
+static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uint8_t (*bufs)[MAX_MSG])
 {
-	static uint8_t bufs[RECV_BATCH][MAX_MSG];
 	struct mmsghdr msgs[RECV_BATCH];
 	struct iovec iovs[RECV_BATCH];
 	unsigned done = 0;
@@ -869,6 +882,25 @@ static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
 		if ((unsigned)n < want)
 			return; /* drained */
 	}
+}
+
+/* even_if_paused: a sender that hung up cannot be slowed down any more; read
+ * what it wrote before it went, rather than losing it. */
+static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
+{
+	static uint8_t bufs[DRAIN_DEPTH][RECV_BATCH][MAX_MSG];
+	assert(drain_depth < DRAIN_DEPTH);
+	uint32_t generation = hub.clients[idx].generation;
+	hub.clients[idx].draining = 1;
+	drain_batch(idx, max_msgs, even_if_paused, bufs[drain_depth++]);
+	drain_depth--;
+	if (hub.clients[idx].generation == generation)
+		hub.clients[idx].draining = 0;
+}
+
+static int can_drain_nested(uint32_t idx)
+{
+	return drain_depth < DRAIN_DEPTH && !hub.clients[idx].draining;
 }
 
 /* ---- startup ---- */
