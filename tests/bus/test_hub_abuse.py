@@ -4,6 +4,7 @@ paused (SIGSTOP) so that a whole sequence lands in one loop round. Every test
 checks the hub still serves, and its memory stays under a stated ceiling."""
 from __future__ import annotations
 
+import stat
 import time
 
 import pytest
@@ -133,3 +134,9 @@ def test_barrier_on_a_data_connection_is_answered_not_nested(hub):
     assert querier.ack() == 0 and target.ack() == 0 and target.ack() == 0
     assert reader.recv() == frame(0x300, b"\x03")[8:]
     assert hub.stats()["hub"]["barriers_refused"] == 2
+
+
+def test_socket_is_for_the_hubs_owner_and_group_only(hub):
+    """Defect 5: the socket was world-writable (umask 0): any local user could send frames."""
+    assert stat.S_IMODE((hub.workdir / "hub.sock").stat().st_mode) == 0o660
+    assert stat.S_IMODE((hub.workdir / "hub.lock").stat().st_mode) & 0o007 == 0

@@ -907,7 +907,7 @@ static int can_drain_nested(uint32_t idx)
 
 static int make_dir(const char *dir)
 {
-	if (mkdir(dir, 0777) < 0 && errno != EEXIST) {
+	if (mkdir(dir, 0770) < 0 && errno != EEXIST) {
 		hub_log("cannot create %s: %s", dir, strerror(errno));
 		return -1;
 	}
@@ -928,7 +928,7 @@ static int listen_socket(void)
 	if (make_dir(hub.dir) < 0)
 		return -1;
 	/* the lock, held for the hub's lifetime, tells a live hub from a stale socket file */
-	int lock_fd = hub.lock_fd = open(lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+	int lock_fd = hub.lock_fd = open(lock_path, O_RDWR | O_CREAT | O_CLOEXEC, 0660);
 	if (lock_fd < 0) {
 		hub_log("cannot open %s: %s", lock_path, strerror(errno));
 		return -1;
@@ -945,7 +945,9 @@ static int listen_socket(void)
 		return -1;
 	}
 	strcpy(addr.sun_path, hub.sock_path);
-	mode_t old = umask(0);
+	/* owner and group only (0660): whoever may use the bus shares the hub's
+	 * group (compose: BENCH_GID, docs/userspace-bus.md), nobody else can send */
+	mode_t old = umask(0117);
 	int rc = bind(hub.listen_fd, (struct sockaddr *)&addr, sizeof(addr));
 	umask(old);
 	if (rc < 0 || listen(hub.listen_fd, SOMAXCONN) < 0) {
