@@ -6,7 +6,9 @@ for the fault it exists for."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import wraps
 
+from . import validity
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import describe
 from .run import RunResult
@@ -21,6 +23,37 @@ def _frames(items) -> str:
 
 def _expect(result: RunResult, name: str, default=None):
     return result.scenario.expect.get(name, default)
+
+
+def assess(result: RunResult) -> dict:
+    """Whether the run is a valid test of the bridge (canbench.validity), once per result;
+    kept in metrics.json as `validity`."""
+    if "validity" not in result.metrics:
+        result.metrics["validity"] = validity.assess(result)
+    return result.metrics["validity"]
+
+
+def valid_run(result: RunResult) -> list[str] | None:
+    """The bench itself worked: no impossible latency (bench error), captures that kept up,
+    emulators that kept to their traces. Otherwise the run fails with that outcome and the
+    bridge's checks are not judged."""
+    v = assess(result)
+    return [f"{outcome}: {p}" for outcome, problems in v["problems"].items() for p in problems]
+
+
+def skip_reason(result: RunResult, name: str) -> str:
+    outcome = assess(result)["outcome"]
+    if name != "valid_run" and outcome != "valid":
+        return f"{name} not judged: the run is {outcome} (see valid_run)"
+    return f"{name} not asked for by this scenario"
+
+
+def _on_the_bridge(check: Callable[[RunResult], list[str] | None]) -> Callable[[RunResult], list[str] | None]:
+    """A check of the bridge: not judged (None) on a run that is not a valid test of it."""
+    @wraps(check)
+    def judged(result: RunResult) -> list[str] | None:
+        return None if assess(result)["outcome"] != "valid" else check(result)
+    return judged
 
 
 def integrity(result: RunResult) -> list[str] | None:
@@ -307,7 +340,7 @@ def bridge_stats_agree(result: RunResult) -> list[str] | None:
     return problems
 
 
-CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
+_BRIDGE_CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "integrity": integrity,
     "ordering": ordering,
     "latency_can_to_zenoh": latency_can_to_zenoh,
@@ -325,6 +358,8 @@ CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,
 }
+CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
+    "valid_run": valid_run, **{name: _on_the_bridge(check) for name, check in _BRIDGE_CHECKS.items()}}
 
 
 def failing(result: RunResult) -> dict[str, list[str]]:

@@ -99,6 +99,10 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
     plan = schedule(ecu, scenario)
     sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
     errors_ms = array("d")  # 8 bytes per frame: an hour's worth stays small
+    # the part of each error that is the emulator's own: late beyond the moment the bus took the
+    # previous frame (a saturated bus makes a sender wait, as a real one does: not the emulator's fault)
+    own_ms = array("d")
+    freed = 0.0
     # line-buffered and written just before each send: an ECU killed by a fault step leaves a
     # log that accounts for every frame it put on the bus (the oracle relies on it)
     # our own copies of the last frame's id come back (CAN_RAW_RECV_OWN_MSGS, filtered to that id):
@@ -123,12 +127,14 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
             log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
             bus.send(synced, timeout=SEND_TIMEOUT_S)  # a busy bus makes a sender wait, as on a real one
             errors_ms.append((now - start - msg.timestamp) * 1000)
+            own_ms.append((now - max(start + msg.timestamp, freed)) * 1000)
+            freed = time.perf_counter()
             if last is not None:  # read the copies as they come: a long run would overflow the socket
                 seen += _own_copies(bus, last, timeout=0.0)
         if last is not None:
             _wait_own_copies(bus, last, plan.last_id_count, seen)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
-            "sent": plan.count, "fidelity_ms": fidelity(errors_ms)}
+            "sent": plan.count, "fidelity_ms": fidelity(errors_ms), "own_send_error_ms": fidelity(own_ms)}
 
 
 def _own_copies(bus: can.BusABC, last: can.Message, timeout: float) -> int:

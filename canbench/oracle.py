@@ -110,6 +110,11 @@ class Comparison:
     latency_ms: list[float] = field(default_factory=list)
     lost_in_faults: list[Observed] = field(default_factory=list)  # lost inside a fault window: allowed, counted
     recovery_s: list[float | None] = field(default_factory=list)  # per fault window: end -> first bridged frame
+    attachment: dict | None = None  # CAN -> Zenoh: where the bridge's own account disagrees (attachment_check)
+
+    def negative_latencies(self) -> list[tuple[Observed, Observed]]:
+        """Matched pairs that arrived before they were sent: the bench's clocks or stamps are wrong."""
+        return [(s, r) for s, r in self.matched if r.t_ns < s.t_ns]
 
     def summary(self) -> dict:
         return {
@@ -118,13 +123,46 @@ class Comparison:
             "unexpected": len(self.unexpected), "reordered": len(self.reordered),
             "reordered_per_id": self.reordered_per_id, "latency": latency_stats(self.latency_ms),
             "lost_in_faults": len(self.lost_in_faults), "recovery_s": self.recovery_s,
+            **({"attachment_disagrees": self.attachment} if self.attachment is not None else {}),
         }
 
 
 def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
     """sent: CAN frames in bus order; received: Zenoh frames in arrival order."""
     c, _ = _classify(sent, received, None)
+    c.attachment = attachment_check(sent, c.matched)
     return c
+
+
+EXAMPLES = 5  # disagreements listed per kind
+
+
+def attachment_check(sent: list[Observed], matched: list[tuple[Observed, Observed]]) -> dict:
+    """The bridge's own account (the attachment's sequence numbers and CAN receive stamps)
+    against the oracle's: reported, never used to match or judge (a broken bridge must not
+    hide its faults). can_stamp: the bridge's stamp of a frame is not the bus capture's (at the
+    capture's microseconds; with one stamp per frame they are equal). seq: two frames that
+    arrived one after the other are numbered further apart (or closer) than the bus had them."""
+    rank = {o.index: i for i, o in enumerate(sent)}
+    stamps: list[str] = []
+    stamp_count, stamp_max_ns = 0, 0
+    for s, r in matched:
+        if r.bridge_rx_ns and r.bridge_rx_ns // 1000 != s.t_ns // 1000:
+            stamp_count += 1
+            stamp_max_ns = max(stamp_max_ns, abs(r.bridge_rx_ns - s.t_ns))
+            if len(stamps) < EXAMPLES:
+                stamps.append(f"{describe(s)}: bridge stamp {(r.bridge_rx_ns - s.t_ns) / 1000:+.3f} us off")
+    seqs: list[str] = []
+    seq_count = 0
+    by_arrival = sorted((p for p in matched if p[1].seq >= 0), key=lambda p: p[1].index)
+    for (s0, r0), (s1, r1) in zip(by_arrival, by_arrival[1:], strict=False):
+        if r1.seq - r0.seq != rank[s1.index] - rank[s0.index]:
+            seq_count += 1
+            if len(seqs) < EXAMPLES:
+                seqs.append(f"seq {r0.seq} -> {r1.seq} for {describe(s0)} -> {describe(s1)} "
+                            f"({rank[s1.index] - rank[s0.index]:+d} on the bus)")
+    return {"can_stamp": {"count": stamp_count, "max_us": round(stamp_max_ns / 1000, 3), "examples": stamps},
+            "seq": {"count": seq_count, "examples": seqs}}
 
 
 def compare_commands(commands: list[Observed], bus: list[Observed],

@@ -217,9 +217,11 @@ def write_html(result: RunResult, path: Path) -> None:
     for label, key in directions:
         for bus, s in m.get(key, {}).items():
             lat = s["latency"]
+            disagrees = s.get("attachment_disagrees") or {}
             lat_rows.append([label, bus, s["sent"], s["matched"], s["lost"], s["duplicates"], s["corrupted"],
-                             s["reordered"], _ms(lat["p50_ms"]), _ms(lat["p90_ms"]), _ms(lat["p99_ms"]),
-                             _ms(lat["max_ms"])])
+                             s["reordered"], _ms(lat.get("min_ms")), _ms(lat["p50_ms"]), _ms(lat["p90_ms"]),
+                             _ms(lat["p99_ms"]), _ms(lat["max_ms"]),
+                             " · ".join(f"{k} {v['count']}" for k, v in disagrees.items() if v["count"])])
     series = {}
     for b in result.buses:
         series[f"{b.bus} CAN->Zenoh"] = b.comparison.latency_ms
@@ -247,7 +249,8 @@ def write_html(result: RunResult, path: Path) -> None:
     files += sorted(p.name for p in path.parent.glob("ecu-*"))
     links = " · ".join(f'<a href="{f}">{f}</a>' for f in files)
     passed = m.get("passed")
-    verdict = "PASSED" if passed else "FAILED"
+    outcome = (m.get("validity") or {}).get("outcome", "valid")
+    verdict = outcome.upper() if outcome != "valid" else "PASSED" if passed else "FAILED"
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(m['scenario'])} - canbench</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:1em 0}}
 td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}} .pass{{color:#080}}
@@ -258,8 +261,8 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
 <p>{links}</p>
 <h2>Verdicts</h2>{_table(["check", "verdict", "problems"], verdict_rows)}
 <h2>Frames and latency</h2>
-{_table(["direction", "bus", "sent", "matched", "lost", "dup", "corrupted", "reordered", "p50 ms", "p90 ms",
-         "p99 ms", "max ms"], lat_rows)}
+{_table(["direction", "bus", "sent", "matched", "lost", "dup", "corrupted", "reordered", "min ms", "p50 ms",
+         "p90 ms", "p99 ms", "max ms", "attachment disagrees"], lat_rows)}
 {_latency_plots(series)}
 <h2>Timeline</h2>{_timeline(result)}
 {_bridge_resources(result)}

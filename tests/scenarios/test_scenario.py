@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import pytest
 
-from canbench.checks import CHECKS
+from canbench.checks import CHECKS, skip_reason
 
 
 @pytest.mark.parametrize("check", list(CHECKS))
 def test_check(scenario_run, check):
     problems = CHECKS[check](scenario_run)
     if problems is None:
-        pytest.skip(f"{check} not asked for by this scenario")
+        pytest.skip(skip_reason(scenario_run, check))
     assert not problems, "\n".join(problems)

@@ -1,0 +1,118 @@
+"""A run is judged on the bridge only when the bench worked: seeded runs (a bus capture, a
+Zenoh capture, ECU summaries and send logs written by hand) where the bench's stamps, the
+emulator or a capture failed are reported as such, with their numbers, and the bridge's
+checks are not judged; the bridge's own account (attachment) is cross-checked, never trusted."""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from canbench import checks, oracle, run, scenario, wire
+from canbench.capture import Sample, format_sample_line
+
+pytestmark = pytest.mark.unit
+REPO = Path(__file__).resolve().parents[2]
+TRACE = REPO / "scenarios" / "traces" / "powertrain-2s.log"
+
+
+def seeded(tmp_path: Path, *, latency_ns=lambda i: 400_000, seq=lambda i: i, stamp=lambda i, t: t,
+           ecu: dict | None = None, expect: dict | None = None, send_log=None) -> run.RunResult:
+    sc = scenario.load(REPO / "scenarios" / "smoke.yaml")
+    if expect:
+        sc = dataclasses.replace(sc, expect={**sc.expect, **expect})
+    (tmp_path / "can.log").write_text(TRACE.read_text())
+    frames = oracle.read_candump(tmp_path / "can.log", "vcan0")
+    with open(tmp_path / "zenoh.tsv", "w") as f:
+        for i, o in enumerate(frames):
+            f.write(format_sample_line(Sample(o.t_ns + latency_ns(i), "vehicle/can/rx",
+                                              wire.encode(o.frame),
+                                              wire.encode_attachment(seq(i), [stamp(i, o.t_ns)]))))
+    log = send_log(frames) if send_log else "".join(f"{o.line}\t{o.t_ns - 50_000}\t{o.frame.candump('vcan0')}\n"
+                                                    for o in frames)
+    (tmp_path / "ecu-engine.sent.tsv").write_text("# trace_line\tsend_time_ns\tframe (candump form)\n" + log)
+    fid = {"p50": 0.1, "p99": 0.4, "max": 0.9, "mean": 0.12}
+    ecus = {"engine": {"name": "engine", "role": "replay", "bus": "vcan0", "sent": len(frames),
+                       "fidelity_ms": fid, "own_send_error_ms": fid, **(ecu or {})}}
+    return run.analyse(sc, "seeded", tmp_path, "vehicle/can", ecus, None, 2.0)
+
+
+def judged(r: run.RunResult) -> dict[str, list[str] | None]:
+    return {name: check(r) for name, check in checks.CHECKS.items()}
+
+
+def test_a_good_run_is_valid_and_judged(tmp_path):
+    r = seeded(tmp_path)
+    v = checks.assess(r)
+    assert v == {"outcome": "valid", "problems": {}}
+    out = judged(r)
+    assert out["valid_run"] == [] and out["integrity"] == [] and out["ordering"] == []
+    lat = r.metrics["can_to_zenoh"]["vcan0"]["latency"]
+    assert lat["min_ms"] == pytest.approx(0.4) and lat["max_ms"] == pytest.approx(0.4)
+    assert r.metrics["can_to_zenoh"]["vcan0"]["attachment_disagrees"] == {
+        "can_stamp": {"count": 0, "max_us": 0.0, "examples": []}, "seq": {"count": 0, "examples": []}}
+
+
+def test_a_frame_received_before_it_was_sent_is_a_bench_error_not_a_verdict(tmp_path):
+    r = seeded(tmp_path, latency_ns=lambda i: -120_000 if i in (7, 30) else 400_000)
+    assert r.metrics["can_to_zenoh"]["vcan0"]["latency"]["min_ms"] == pytest.approx(-0.12)
+    out = judged(r)
+    assert checks.assess(r)["outcome"] == "bench error"
+    assert len(out["valid_run"]) == 1
+    problem = out["valid_run"][0]
+    assert problem.startswith("bench error: vcan0 CAN -> Zenoh: 2 of 388 matched frames arrived before they were sent "
+                              "(min -0.120 ms)") and "can.log:8" in problem and "can.log:31" in problem
+    assert all(v is None for k, v in out.items() if k != "valid_run")
+    assert checks.skip_reason(r, "integrity") == "integrity not judged: the run is bench error (see valid_run)"
+
+
+def test_an_emulator_behind_its_trace_makes_the_run_invalid_with_its_numbers(tmp_path):
+    late = {"p50": 1.0, "p99": 12.5, "max": 30.0, "mean": 2.0}
+    r = seeded(tmp_path, ecu={"own_send_error_ms": late})
+    assert checks.assess(r)["outcome"] == "invalid: emulator"
+    assert checks.valid_run(r) == ["invalid: emulator: ECU engine: p99 send error 12.500 ms > 5.0 ms (p50 1.000, "
+                                   "max 30.000 ms): it fell behind its trace"]
+    assert checks.CHECKS["integrity"](r) is None
+    # the scenario's own threshold
+    assert checks.assess(seeded(tmp_path, ecu={"own_send_error_ms": late},
+                                expect={"emulator_max_send_error_ms": 20}))["outcome"] == "valid"
+
+
+def test_frames_sent_out_of_trace_order_make_the_run_invalid(tmp_path):
+    def swapped(frames):
+        lines = [f"{o.line}\t{o.t_ns - 50_000}\t{o.frame.candump('vcan0')}\n" for o in frames]
+        lines[10], lines[11] = lines[11], lines[10]
+        return "".join(lines)
+    problems = checks.valid_run(seeded(tmp_path, send_log=swapped))
+    assert problems and problems[0].startswith("invalid: emulator: ECU engine: 1 frames sent out of their trace "
+                                               "order, first ecu-engine.sent.tsv:13")
+    # and its frames on the bus in another order than it sent them
+    assert any("reached vcan0 out of the order it sent them" in p for p in problems)
+
+
+def test_a_capture_that_dropped_frames_makes_the_run_invalid(tmp_path):
+    r = seeded(tmp_path)
+    with open(tmp_path / "can.log", "a") as f:
+        f.write("DROPCOUNT: dropped 3 CAN frames on 'vcan0' socket (total drops 3)\n")
+    (tmp_path / "captures.json").write_text(json.dumps({"can": {"hub_rx_drops": 2, "hub_sockets": 1},
+                                                        "zenoh": {"samples_reported": 390, "samples_written": 388}}))
+    r.metrics.pop("validity", None)
+    assert checks.assess(r)["outcome"] == "invalid: capture"
+    assert checks.valid_run(r) == [
+        "invalid: capture: candump: the kernel dropped 3 frames on vcan0 (DROPCOUNT in can.log)",
+        "invalid: capture: candump: the userspace hub dropped 2 frames for candump's sockets (its queue was full)",
+        "invalid: capture: zn-capture counted 390 samples but zenoh.tsv holds 388"]
+
+
+def test_the_bridges_own_account_is_cross_checked_never_trusted(tmp_path):
+    # sequence numbers that skip at frame 100 and stamps 30 us off for frames 200..209
+    r = seeded(tmp_path, seq=lambda i: i + (5 if i >= 100 else 0),
+               stamp=lambda i, t: t + 30_000 if 200 <= i < 210 else t)
+    d = r.metrics["can_to_zenoh"]["vcan0"]["attachment_disagrees"]
+    assert d["can_stamp"]["count"] == 10 and d["can_stamp"]["max_us"] == 30.0
+    assert "(can.log:201): bridge stamp +30.000 us off" in d["can_stamp"]["examples"][0]
+    assert d["seq"]["count"] == 1 and d["seq"]["examples"][0].startswith("seq 99 -> 105 for ")
+    # reported, not a verdict: the run is valid and the frames are all there
+    assert checks.assess(r)["outcome"] == "valid" and checks.integrity(r) == []
