@@ -18,81 +18,23 @@ import statistics
 import threading
 import time
 from array import array
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import can
 
-from . import runkeys, tracegen
+from . import runkeys
+from .plans import SENT_LOG_HEADER, frame_of, schedule, sent_line
 from .scenario import Ecu, Scenario
 from .stats import percentile
-from .trace import read_trace
-from .wire import Frame
 
 SEND_TIMEOUT_S = 5.0
 ECHO_POLL_S = 0.05  # how often the echo loop looks at its stop flag while the bus is quiet
-
-
-@dataclass(frozen=True)
-class Plan:
-    """What an ECU sends, in send order. The frames are made as they are sent (frames() gives a
-    fresh iterator each call): an hour at 500 frames/s held as can.Message objects is ~0.6 GiB."""
-    frames: Callable[[], Iterator[tuple[int, can.Message]]]  # (trace line, message); generated: line 0
-    count: int
-    last: can.Message | None
-    last_id_count: int  # frames with the last frame's id and id format: the own copies to wait for
-
-
-def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
-    """The ECU's plan with speed, loops, offset and id remap applied."""
-    if ecu.role == "periodic":
-        msgs, run_s, start, bus = ecu.messages, ecu.run_s, ecu.start_offset_s, ecu.bus
-        last = tracegen.periodic_last(msgs, run_s, start, bus)
-        return Plan(frames=lambda: ((0, m) for m in tracegen.periodic_frames(msgs, run_s, start, bus)),
-                    count=sum(tracegen.periodic_count(m, run_s) for m in msgs), last=last,
-                    last_id_count=sum(tracegen.periodic_count(m, run_s) for m in msgs
-                                      if last and (m.can_id, m.extended) == (last.arbitration_id,
-                                                                             last.is_extended_id)))
-    frames = read_trace(ecu.trace, None) if ecu.trace else []
-    return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap)
-
-
-def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
-               id_remap: dict[int, int]) -> Plan:
-    """A trace's frames (canbench.trace.TraceFrame) looped `loops` times at `speed`."""
-    if not frames:
-        return Plan(frames=lambda: iter(()), count=0, last=None, last_id_count=0)
-    t0 = frames[0].message.timestamp
-    span = frames[-1].message.timestamp - t0
-    period = span + (frames[1].message.timestamp - t0 if len(frames) > 1 else 0.001)
-
-    def timed(tf, loop: int) -> can.Message:
-        m = tf.message
-        return can.Message(timestamp=start_offset_s + (m.timestamp - t0 + loop * period) / speed,
-                           arbitration_id=id_remap.get(m.arbitration_id, m.arbitration_id),
-                           is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame, dlc=m.dlc,
-                           data=b"" if m.is_remote_frame else m.data, channel=bus)
-
-    last = timed(frames[-1], loops - 1)
-    per_loop = sum(1 for tf in frames if (id_remap.get(tf.message.arbitration_id, tf.message.arbitration_id),
-                                          tf.message.is_extended_id) == (last.arbitration_id, last.is_extended_id))
-    return Plan(frames=lambda: ((tf.line, timed(tf, loop)) for loop in range(loops) for tf in frames),
-                count=loops * len(frames), last=last, last_id_count=loops * per_loop)
-
-
-def frame_of(msg: can.Message) -> Frame:
-    return Frame(msg.arbitration_id, msg.dlc, b"" if msg.is_remote_frame else bytes(msg.data),
-                 msg.is_extended_id, msg.is_remote_frame)
 
 
 def fidelity(errors_ms) -> dict:
     return {"p50": round(percentile(errors_ms, 0.5) or 0.0, 3), "p99": round(percentile(errors_ms, 0.99) or 0.0, 3),
             "max": round(max(errors_ms, default=0.0), 3),
             "mean": round(statistics.fmean(errors_ms), 3) if errors_ms else 0.0}
-
-
-SENT_LOG_HEADER = "# trace_line\tsend_time_ns\tframe (candump form)\n"
 
 
 def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
@@ -124,7 +66,7 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
         synced_messages = can.MessageSync((m for _, m in to_sync), timestamps=True, skip=3600)
         for (line, msg), synced in zip(timed, synced_messages, strict=True):
             now = time.perf_counter()
-            log.write(f"{line}\t{wall0 + int(now * 1e9)}\t{frame_of(msg).candump(ecu.bus)}\n")
+            log.write(sent_line(line, wall0 + int(now * 1e9), frame_of(msg), ecu.bus))
             bus.send(synced, timeout=SEND_TIMEOUT_S)  # a busy bus makes a sender wait, as on a real one
             errors_ms.append((now - start - msg.timestamp) * 1000)
             own_ms.append((now - max(start + msg.timestamp, freed)) * 1000)
@@ -182,7 +124,7 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
             answer = can.Message(arbitration_id=can_id, is_extended_id=msg.is_extended_id, data=data,
                                  dlc=msg.dlc, channel=ecu.bus)
             now_ns = time.time_ns()
-            log.write(f"0\t{now_ns}\t{frame_of(answer).candump(ecu.bus)}\n")
+            log.write(sent_line(0, now_ns, frame_of(answer), ecu.bus))
             bus.send(answer, timeout=SEND_TIMEOUT_S)
             answered += 1
             turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)

@@ -1,5 +1,3 @@
-# mypy: disable-error-code="valid-type,assignment,type-arg"
-# (pycdr2 declares CDR types with annotations such as array[float64, 9] that are not Python types)
 """ROS 2 over Zenoh as rmw_zenoh speaks it: liveliness tokens, data keys, type
 names, RIHS01 type hashes and CDR payloads of the message types the viewer and
 the bridge's ROS 2 output use.
@@ -12,17 +10,21 @@ Data key: <domain>/<topic without outer '/'>/<dds type>/<type hash>
 
 Type hashes follow REP-2011 (rosidl_generator_type_description): sha256 of
 the type description JSON without default values; checked in the unit tests
-against hashes published for std_msgs/String and sensor_msgs/Imu. CDR via
-pycdr2 (Eclipse Cyclone DDS's Python CDR)."""
+against hashes published for std_msgs/String and sensor_msgs/Imu. The type
+description is read off the CDR structs of ros2_msgs (one source for the
+wire format and the hash). CDR via pycdr2 (Eclipse Cyclone DDS's Python CDR)."""
 
 import hashlib
 import json
-from dataclasses import dataclass, field, replace
+import typing
+from dataclasses import dataclass, replace
 
-from pycdr2 import IdlStruct
-from pycdr2.types import array, float64, int32, uint8, uint32
+from pycdr2.types import array, sequence
 
 from .errors import BenchError
+from .ros2_msgs import MESSAGE_TYPES, CdrError, decode
+
+__all__ = ["MESSAGE_TYPES", "CdrError", "decode"]  # re-exported: the messages live in ros2_msgs
 
 LIVELINESS_PREFIX = "@ros2_lv"
 KINDS = {"NN": "node", "MP": "publisher", "MS": "subscription", "SS": "service server", "SC": "service client"}
@@ -107,143 +109,79 @@ def node_token(domain_id: int, zid: str, nid: int, namespace: str, node: str) ->
 
 # ---- type descriptions and RIHS01 hashes (REP-2011) ----
 
-T_NESTED, T_INT32, T_UINT32, T_UINT8, T_FLOAT, T_DOUBLE, T_BOOL, T_STRING = 1, 6, 7, 3, 10, 11, 15, 17
-ARRAY = 48  # fixed-size array type ids are the element's + 48
+# rosidl's FieldType ids (type_description_interfaces/msg/FieldType.msg)
+T_NESTED = 1
+PRIMITIVES = {"int8": 2, "uint8": 3, "int16": 4, "uint16": 5, "int32": 6, "uint32": 7, "int64": 8, "uint64": 9,
+              "float32": 10, "float64": 11, "char": 13, bool: 15, str: 17}
+ARRAY, BOUNDED_SEQUENCE, SEQUENCE = 48, 96, 144  # added to the element's id
 
 
-def _f(name: str, type_id: int, nested: str = "", capacity: int = 0) -> dict:
-    return {"name": name, "type": {"type_id": type_id, "capacity": capacity, "string_capacity": 0,
-                                   "nested_type_name": nested}}
+def _element(annotation) -> tuple[int, str]:
+    """(type id, nested type name) of a scalar annotation of a ros2_msgs struct."""
+    if isinstance(annotation, type) and hasattr(annotation, "__idl_typename__"):
+        return T_NESTED, annotation.__idl_typename__
+    key = annotation.__metadata__[0] if hasattr(annotation, "__metadata__") else annotation
+    return PRIMITIVES[key], ""
 
 
-TYPES: dict[str, list[dict]] = {
-    "builtin_interfaces/msg/Time": [_f("sec", T_INT32), _f("nanosec", T_UINT32)],
-    "std_msgs/msg/Header": [_f("stamp", T_NESTED, "builtin_interfaces/msg/Time"), _f("frame_id", T_STRING)],
-    "std_msgs/msg/String": [_f("data", T_STRING)],
-    "geometry_msgs/msg/Quaternion": [_f(n, T_DOUBLE) for n in "xyzw"],
-    "geometry_msgs/msg/Vector3": [_f(n, T_DOUBLE) for n in "xyz"],
-    "sensor_msgs/msg/Imu": [
-        _f("header", T_NESTED, "std_msgs/msg/Header"), _f("orientation", T_NESTED, "geometry_msgs/msg/Quaternion"),
-        _f("orientation_covariance", T_DOUBLE + ARRAY, capacity=9),
-        _f("angular_velocity", T_NESTED, "geometry_msgs/msg/Vector3"),
-        _f("angular_velocity_covariance", T_DOUBLE + ARRAY, capacity=9),
-        _f("linear_acceleration", T_NESTED, "geometry_msgs/msg/Vector3"),
-        _f("linear_acceleration_covariance", T_DOUBLE + ARRAY, capacity=9)],
-    "sensor_msgs/msg/Temperature": [_f("header", T_NESTED, "std_msgs/msg/Header"), _f("temperature", T_DOUBLE),
-                                    _f("variance", T_DOUBLE)],
-    "sensor_msgs/msg/FluidPressure": [_f("header", T_NESTED, "std_msgs/msg/Header"),
-                                      _f("fluid_pressure", T_DOUBLE), _f("variance", T_DOUBLE)],
-    "sensor_msgs/msg/RelativeHumidity": [_f("header", T_NESTED, "std_msgs/msg/Header"),
-                                         _f("relative_humidity", T_DOUBLE), _f("variance", T_DOUBLE)],
-    "sensor_msgs/msg/Illuminance": [_f("header", T_NESTED, "std_msgs/msg/Header"), _f("illuminance", T_DOUBLE),
-                                    _f("variance", T_DOUBLE)],
-    # can_msgs (ros-drivers/ros_canopen, ROS 2): Frame.msg
-    "can_msgs/msg/Frame": [_f("header", T_NESTED, "std_msgs/msg/Header"), _f("id", T_UINT32),
-                           _f("is_rtr", T_BOOL), _f("is_extended", T_BOOL), _f("is_error", T_BOOL),
-                           _f("dlc", T_UINT8), _f("data", T_UINT8 + ARRAY, capacity=8)],
-}
+def fields(ros_type: str) -> list[dict]:
+    out = []
+    for name, annotation in typing.get_type_hints(MESSAGE_TYPES[ros_type], include_extras=True).items():
+        meta = getattr(annotation, "__metadata__", (None,))[0]
+        capacity = 0
+        if isinstance(meta, array):
+            (type_id, nested), capacity = _element(meta.subtype), meta.length
+            type_id += ARRAY
+        elif isinstance(meta, sequence):
+            (type_id, nested), capacity = _element(meta.subtype), meta.max_length or 0
+            type_id += BOUNDED_SEQUENCE if capacity else SEQUENCE
+        else:
+            type_id, nested = _element(annotation)
+        out.append({"name": name, "type": {"type_id": type_id, "capacity": capacity, "string_capacity": 0,
+                                           "nested_type_name": nested}})
+    return out
 
 
 def type_hash(ros_type: str) -> str:
     """RIHS01_<sha256> of the type description, as rosidl computes it."""
     refs: set[str] = set()
-    queue = [f["type"]["nested_type_name"] for f in TYPES[ros_type] if f["type"]["nested_type_name"]]
+    queue = [f["type"]["nested_type_name"] for f in fields(ros_type) if f["type"]["nested_type_name"]]
     while queue:
         name = queue.pop()
         if name not in refs:
             refs.add(name)
-            queue += [f["type"]["nested_type_name"] for f in TYPES[name] if f["type"]["nested_type_name"]]
-    description = {"type_description": {"type_name": ros_type, "fields": TYPES[ros_type]},
-                   "referenced_type_descriptions": [{"type_name": n, "fields": TYPES[n]} for n in sorted(refs)]}
+            queue += [f["type"]["nested_type_name"] for f in fields(name) if f["type"]["nested_type_name"]]
+    description = {"type_description": {"type_name": ros_type, "fields": fields(ros_type)},
+                   "referenced_type_descriptions": [{"type_name": n, "fields": fields(n)} for n in sorted(refs)]}
     return "RIHS01_" + hashlib.sha256(json.dumps(description, separators=(", ", ": ")).encode()).hexdigest()
 
 
-# ---- CDR message types (field order = the .msg files) ----
+# ---- .msg text (MCAP's ros2msg schema encoding) ----
 
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces/msg/Time"):
-    sec: int32 = 0
-    nanosec: uint32 = 0
+MSG_PRIMITIVES = {v: k for k, v in PRIMITIVES.items() if isinstance(k, str)} | {15: "bool", 17: "string"}
 
 
-@dataclass
-class Header(IdlStruct, typename="std_msgs/msg/Header"):
-    stamp: Time = field(default_factory=Time)
-    frame_id: str = ""
+def _msg_field(f: dict) -> str:
+    t = f["type"]
+    base, capacity = t["type_id"] % ARRAY, t["capacity"]
+    kind = t["type_id"] // ARRAY  # 0 scalar, 1 array, 2 bounded sequence, 3 sequence
+    nested = t["nested_type_name"].replace("/msg/", "/")
+    name = nested if base == T_NESTED else MSG_PRIMITIVES[base]
+    suffix = ["", f"[{capacity}]", f"[<={capacity}]", "[]"][kind]
+    return f"{name}{suffix} {f['name']}"
 
 
-@dataclass
-class String(IdlStruct, typename="std_msgs/msg/String"):
-    data: str = ""
-
-
-@dataclass
-class Quaternion(IdlStruct, typename="geometry_msgs/msg/Quaternion"):
-    x: float64 = 0.0
-    y: float64 = 0.0
-    z: float64 = 0.0
-    w: float64 = 1.0
-
-
-@dataclass
-class Vector3(IdlStruct, typename="geometry_msgs/msg/Vector3"):
-    x: float64 = 0.0
-    y: float64 = 0.0
-    z: float64 = 0.0
-
-
-@dataclass
-class Imu(IdlStruct, typename="sensor_msgs/msg/Imu"):
-    header: Header = field(default_factory=Header)
-    orientation: Quaternion = field(default_factory=Quaternion)
-    orientation_covariance: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
-    angular_velocity: Vector3 = field(default_factory=Vector3)
-    angular_velocity_covariance: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
-    linear_acceleration: Vector3 = field(default_factory=Vector3)
-    linear_acceleration_covariance: array[float64, 9] = field(default_factory=lambda: [0.0] * 9)
-
-
-@dataclass
-class Temperature(IdlStruct, typename="sensor_msgs/msg/Temperature"):
-    header: Header = field(default_factory=Header)
-    temperature: float64 = 0.0
-    variance: float64 = 0.0
-
-
-@dataclass
-class FluidPressure(IdlStruct, typename="sensor_msgs/msg/FluidPressure"):
-    header: Header = field(default_factory=Header)
-    fluid_pressure: float64 = 0.0
-    variance: float64 = 0.0
-
-
-@dataclass
-class RelativeHumidity(IdlStruct, typename="sensor_msgs/msg/RelativeHumidity"):
-    header: Header = field(default_factory=Header)
-    relative_humidity: float64 = 0.0
-    variance: float64 = 0.0
-
-
-@dataclass
-class Illuminance(IdlStruct, typename="sensor_msgs/msg/Illuminance"):
-    header: Header = field(default_factory=Header)
-    illuminance: float64 = 0.0
-    variance: float64 = 0.0
-
-
-@dataclass
-class CanFrame(IdlStruct, typename="can_msgs/msg/Frame"):
-    header: Header = field(default_factory=Header)
-    id: uint32 = 0
-    is_rtr: bool = False
-    is_extended: bool = False
-    is_error: bool = False
-    dlc: uint8 = 0
-    data: array[uint8, 8] = field(default_factory=lambda: bytes(8))  # CDR gives uint8 arrays back as bytes
-
-
-MESSAGE_TYPES: dict[str, type[IdlStruct]] = {
-    cls.__idl_typename__: cls  # type: ignore[attr-defined]
-    for cls in (String, Imu, Temperature, FluidPressure, RelativeHumidity, Illuminance, CanFrame)
-}
-
+def msg_definition(ros_type: str) -> str:
+    """The type's .msg text with its nested types appended, as ROS 2 bags (and so MCAP's
+    ros2msg schemas) carry it: '=' * 80, then 'MSG: pkg/Type' and its fields, per type."""
+    order, queue = [], [ros_type]
+    while queue:
+        name = queue.pop(0)
+        if name not in order:
+            order.append(name)
+            queue += [f["type"]["nested_type_name"] for f in fields(name) if f["type"]["nested_type_name"]]
+    parts = ["\n".join(_msg_field(f) for f in fields(order[0]))]
+    for name in order[1:]:
+        body = "\n".join(_msg_field(f) for f in fields(name))
+        parts.append(f"{'=' * 80}\nMSG: {name.replace('/msg/', '/')}\n{body}")
+    return "\n".join(parts) + "\n"

@@ -3,14 +3,13 @@
 Discovers, live, by liveliness tokens: the bridges (vehicle/can/bridges/<name>/
 <bus>/<mode>) and ROS 2 entities (rmw_zenoh's @ros2_lv/**, a hermetic prefix
 that wildcards never match, so it is asked for explicitly). Subscribes to the
-bridges' CAN keys and to the selected ROS 2 topics, one subscriber each; the
-callbacks hand samples to one logger thread through a queue. Loggers: bridge
-CAN frames (16-byte format, batches) -> can/<bus>/<id>/raw (text) and, with a
-DBC, can/<bus>/<id>/<signal> (scalars); ROS 2 types by the registry LOGGERS
-(adding a type: one function and one registration line); unknown types are
-listed under discovery/, never fatal.
+bridges' CAN keys and to the selected ROS 2 topics (-t, or every supported one
+with --auto-subscribe), one subscriber per data key, dropped again when the
+last publisher's token goes away. Callbacks only enqueue; one thread decodes
+(canbench.ros2_msgs) and logs (canbench.viewer_types.LOGGERS). A malformed
+payload is counted per topic and skipped; an unsupported type is listed once.
 
-  canbench view --zenoh-connect tcp/127.0.0.1:7447 --auto-subscribe [--dbc f.dbc] [--save out.rrd]
+  canbench view --zenoh-connect tcp/127.0.0.1:7447 --auto-subscribe [--dbc f.dbc] [--urdf car.urdf] [--save out.rrd]
   canbench view reports/latest/recording.mcap
 
 Network safety: multicast scouting is off; endpoints are explicit."""
@@ -21,6 +20,7 @@ import queue
 import signal
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,9 +28,15 @@ from pathlib import Path
 import rerun as rr
 import zenoh
 
-from . import ros2, wire
-from .report import decode_signals, load_dbc
+from . import ros2, ros2_msgs, wire
+from .report import load_dbc
 from .viewer_args import DEFAULT_ENDPOINT
+from .viewer_types import LOGGERS, Context
+from .viewer_types.can import CanColumns
+
+QUEUE_SAMPLES = 100_000  # samples between the network callbacks and the logger thread
+BATCH_SAMPLES = 2_000    # the logger drains up to this many samples before sending CAN columns
+ERRORS_SHOWN = 10        # malformed samples described per topic; the rest are only counted
 
 
 @dataclass
@@ -41,69 +47,32 @@ class Sample:
     type_name: str = ""  # ROS 2 type for data keys; "" for the bridge's CAN keys
 
 
-# ---- loggers ----
-
-def _scalar(path: str, value: float) -> None:
-    rr.log(path, rr.Scalars(float(value)))
-
-
-def log_can_frames(base: str, frames: list[wire.Frame], dbc) -> None:
-    for f in frames:
-        ident = f"{f.can_id:08X}" if f.extended else f"{f.can_id:03X}"
-        rr.log(f"{base}/{ident}/raw", rr.TextLog(f.candump(base.rsplit("/", 1)[-1]).split(" ", 1)[1]))
-        if dbc is not None and not f.remote:
-            decoded = decode_signals(dbc, f)
-            if decoded:
-                for name, value in decoded[1].items():
-                    _scalar(f"{base}/{ident}/{name}", value)
-
-
-def _log_string(path: str, msg, dbc) -> None:
-    rr.log(path, rr.TextLog(msg.data))
-
-
-def _log_field(field_name: str) -> Callable:
-    def log(path: str, msg, dbc) -> None:
-        _scalar(f"{path}/{field_name}", getattr(msg, field_name))
-    return log
-
-
-def _log_imu(path: str, msg, dbc) -> None:
-    for group in ("orientation", "angular_velocity", "linear_acceleration"):
-        vec = getattr(msg, group)
-        for axis in ("x", "y", "z", "w"):
-            if hasattr(vec, axis):
-                _scalar(f"{path}/{group}/{axis}", getattr(vec, axis))
-
-
-def _log_can_frame(path: str, msg, dbc) -> None:
-    frame = wire.Frame(msg.id, msg.dlc, bytes(msg.data)[:msg.dlc] if not msg.is_rtr else b"", msg.is_extended,
-                       msg.is_rtr)
-    log_can_frames(path, [frame], dbc)
-
-
-LOGGERS: dict[str, Callable] = {
-    "std_msgs/msg/String": _log_string,
-    "sensor_msgs/msg/Temperature": _log_field("temperature"),
-    "sensor_msgs/msg/FluidPressure": _log_field("fluid_pressure"),
-    "sensor_msgs/msg/RelativeHumidity": _log_field("relative_humidity"),
-    "sensor_msgs/msg/Illuminance": _log_field("illuminance"),
-    "sensor_msgs/msg/Imu": _log_imu,
-    "can_msgs/msg/Frame": _log_can_frame,
-}
+def read_rrd_columns(path: Path) -> dict[str, dict[str, list]]:
+    """entity path -> 'Archetype:component' -> the values logged there, in order, read back
+    with Rerun's own reader (one value per row; a row of a batch archetype is a list)."""
+    from rerun.chunk import RrdReader
+    out: dict[str, dict[str, list]] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        columns = out.setdefault(str(chunk.entity_path), {})
+        for name in batch.schema.names:
+            if ":" in name:
+                columns.setdefault(name, []).extend(batch.column(name).to_pylist())
+    return out
 
 
 def read_rrd(path: Path) -> dict[str, list]:
-    """entity path -> the values logged there (scalars or text), read back with Rerun's own
-    reader: what tests and nightly scripts check a recording with."""
-    from rerun.chunk import RrdReader
+    """entity path -> the scalars or texts logged there: what tests and nightly scripts check."""
     out: dict[str, list] = {}
-    for chunk in RrdReader(path).stream().to_chunks():
-        batch = chunk.to_record_batch()
+    for entity, columns in read_rrd_columns(path).items():
         for column in ("Scalars:scalars", "TextLog:text"):
-            if column in batch.schema.names:
-                out.setdefault(str(chunk.entity_path), []).extend(v[0] for v in batch.column(column).to_pylist())
+            if column in columns:
+                out.setdefault(entity, []).extend(v[0] for v in columns[column])
     return out
+
+
+def normalise_topic(topic: str) -> str:
+    return "/" + topic.strip("/")
 
 
 # ---- live viewer ----
@@ -111,11 +80,16 @@ def read_rrd(path: Path) -> dict[str, list]:
 class Viewer:
     def __init__(self, session: zenoh.Session, topics: list[str], auto_subscribe: bool, dbc=None,
                  prefix: str = "vehicle/can"):
-        self.session, self.topics, self.auto, self.dbc, self.prefix = session, topics, auto_subscribe, dbc, prefix
-        self.samples: queue.Queue[Sample | None] = queue.Queue(maxsize=100_000)
+        self.session, self.auto, self.prefix = session, auto_subscribe, prefix
+        self.topics = {normalise_topic(t) for t in topics}
+        self.ctx = Context(dbc)
+        self.samples: queue.Queue[Sample | None] = queue.Queue(maxsize=QUEUE_SAMPLES)
         self.entities: dict[str, ros2.Entity] = {}
         self.bridges: set[str] = set()
         self.subscribers: dict[str, object] = {}
+        self.publishers: dict[str, set[str]] = {}  # ROS 2 data key -> tokens of its live publishers
+        self.unsupported: set[str] = set()
+        self.malformed: Counter[str] = Counter()
         self.dropped = 0
         self.logged = 0
         self.buses: set[str] = set()
@@ -143,11 +117,14 @@ class Viewer:
         self.stats_queryable = self.session.declare_queryable(f"{me}/stats", self._on_stats_query)
         self.token = self.session.liveliness().declare_token(me)
 
-    def _on_stats_query(self, query: zenoh.Query) -> None:
+    def stats(self) -> dict:
         with self.lock:
-            stats = {"logged": self.logged, "dropped": self.dropped, "bridges": sorted(self.bridges),
-                     "ros2_entities": len(self.entities), "subscriptions": sorted(self.subscribers)}
-        query.reply(query.key_expr, json.dumps(stats))
+            return {"logged": self.logged, "dropped": self.dropped, "bridges": sorted(self.bridges),
+                    "ros2_entities": len(self.entities), "subscriptions": sorted(self.subscribers),
+                    "malformed": dict(self.malformed), "unsupported": sorted(self.unsupported)}
+
+    def _on_stats_query(self, query: zenoh.Query) -> None:
+        query.reply(query.key_expr, json.dumps(self.stats()))
 
     def _on_bridge_token(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -157,6 +134,9 @@ class Viewer:
             # vehicle/can/bridges/<name>/<bus>/<mode>: the bus a single-bus bridge's keys stand for
             self.buses = {k.split("/")[-2] for k in self.bridges}
         rr.log("discovery/bridges", rr.TextLog(f"{'+' if alive else '-'} {key}"))
+
+    def wanted(self, entity: ros2.Entity) -> bool:
+        return entity.kind == "MP" and entity.type_name in LOGGERS and (self.auto or entity.topic in self.topics)
 
     def _on_ros_token(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -175,41 +155,83 @@ class Viewer:
                 self.entities[key] = entity
             else:
                 self.entities.pop(key, None)
-            wanted = entity.kind == "MP" and supported and (self.auto or entity.topic in self.topics)
-            if alive and wanted and entity.data_key not in self.subscribers:
+            if entity.topic and not supported and entity.type_name not in self.unsupported:
+                self.unsupported.add(entity.type_name)  # listed once, however many topics carry it
+                rr.log("discovery/unsupported", rr.TextLog(f"{entity.type_name} (first seen on {entity.topic})"))
+            if not self.wanted(entity):
+                return
+            publishers = self.publishers.setdefault(entity.data_key, set())
+            (publishers.add if alive else publishers.discard)(key)
+            if publishers and entity.data_key not in self.subscribers:
                 self.subscribers[entity.data_key] = self.session.declare_subscriber(
                     entity.data_key, self._ros_callback(entity.type_name))
+                rr.log("discovery/subscriptions", rr.TextLog(f"+ {entity.topic} [{entity.type_name}]"))
+            elif not publishers and entity.data_key in self.subscribers:
+                self.subscribers.pop(entity.data_key).undeclare()  # type: ignore[attr-defined]
+                del self.publishers[entity.data_key]
+                rr.log("discovery/subscriptions", rr.TextLog(f"- {entity.topic} [{entity.type_name}]"))
 
     def _ros_callback(self, type_name: str) -> Callable[[zenoh.Sample], None]:
         def on_sample(s: zenoh.Sample) -> None:
             self._enqueue(Sample(time.time_ns(), str(s.key_expr), s.payload.to_bytes(), type_name))
         return on_sample
 
-    def _log_loop(self) -> None:
-        while (sample := self.samples.get()) is not None:
-            rr.set_time("time", timestamp=sample.t_ns / 1e9)
+    def _batch(self) -> list[Sample]:
+        """The next samples: blocks for one, then takes what is already queued; None ends the loop."""
+        batch = [self.samples.get()]
+        while batch[-1] is not None and len(batch) < BATCH_SAMPLES:
             try:
+                batch.append(self.samples.get_nowait())
+            except queue.Empty:
+                break
+        if batch[-1] is None:
+            self.stopping = True
+            batch.pop()
+        return batch  # type: ignore[return-value]
+
+    def _malformed(self, topic: str, error: Exception) -> None:
+        with self.lock:
+            self.malformed[topic] += 1
+            count = self.malformed[topic]
+        if count <= ERRORS_SHOWN:
+            rr.log("discovery/errors", rr.TextLog(f"{topic}: {error}" + (" (further ones only counted)"
+                                                                         if count == ERRORS_SHOWN else "")))
+
+    def _log_ros(self, sample: Sample) -> None:
+        topic = "/" + "/".join(sample.key.split("/")[1:-2])
+        try:
+            msg = ros2_msgs.decode(sample.type_name, sample.payload)
+            rr.set_time("time", timestamp=sample.t_ns / 1e9)
+            self.ctx.static, self.ctx.t_ns = topic == "/tf_static", sample.t_ns
+            LOGGERS[sample.type_name](self.ctx, "ros2" + topic, msg)
+        except Exception as e:  # noqa: BLE001 - a payload, whatever it holds, never stops the viewer
+            self._malformed(topic, e)
+
+    def _log_loop(self) -> None:
+        self.stopping = False
+        while not self.stopping:
+            batch = self._batch()
+            can = CanColumns(self.ctx.dbc)
+            for sample in batch:
                 if sample.type_name:
-                    msg = ros2.MESSAGE_TYPES[sample.type_name].deserialize(sample.payload)
-                    topic = sample.key.split("/")[1:-2]
-                    LOGGERS[sample.type_name]("ros2/" + "/".join(topic), msg, self.dbc)
+                    self._log_ros(sample)
                 elif sample.key.endswith("/rx") or sample.key.endswith("/tx"):
                     parts = sample.key[len(self.prefix) + 1:].split("/")
                     with self.lock:
                         only = next(iter(self.buses)) if len(self.buses) == 1 else "bus"
                     bus = parts[0] if len(parts) == 2 else only
-                    log_can_frames(f"can/{parts[-1]}/{bus}", wire.decode_batch(sample.payload), self.dbc)
-                else:
-                    continue
-            except Exception as e:  # noqa: BLE001 - a bad sample is shown, never fatal
-                rr.log("discovery/errors", rr.TextLog(f"{sample.key}: {e}"))
+                    try:
+                        can.add(f"can/{parts[-1]}/{bus}", sample.t_ns, wire.decode_batch(sample.payload))
+                    except ValueError as e:  # WireError
+                        self._malformed(sample.key, e)
+            can.flush()
             with self.lock:
-                self.logged += 1
+                self.logged += len(batch)
 
     def stop(self) -> None:
         self.token.undeclare()
         self.samples.put(None)
-        self.logger.join(timeout=10)
+        self.logger.join(timeout=30)
 
 
 def open_session(mode: str, endpoints: list[str]) -> zenoh.Session:
@@ -218,26 +240,6 @@ def open_session(mode: str, endpoints: list[str]) -> zenoh.Session:
     conf.insert_json5("connect/endpoints", json.dumps(endpoints or [DEFAULT_ENDPOINT]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     return zenoh.open(conf)
-
-
-def view_mcap(path: Path, dbc) -> int:
-    """A bench recording (recording.mcap) into Rerun: bus frames and decoded signals."""
-    from mcap.reader import make_reader
-    count = 0
-    with open(path, "rb") as f:
-        for _, channel, message in make_reader(f).iter_messages():
-            rr.set_time("time", timestamp=message.log_time / 1e9)
-            data = json.loads(message.data)
-            if channel.topic.startswith("/can/") or channel.topic.startswith("/zenoh/"):
-                frame = wire.Frame(data["id"], data["dlc"], bytes.fromhex(data["data"]), data["extended"],
-                                   data["remote"])
-                side = "zenoh" if channel.topic.startswith("/zenoh/") else "rx"
-                log_can_frames(f"can/{side}/{data['bus']}", [frame], dbc)
-            elif channel.topic.startswith("/signals/"):
-                for name, value in data.items():
-                    _scalar(f"signals{channel.topic[len('/signals'):]}/{name}", value)
-            count += 1
-    return count
 
 
 def _interrupt(signum, frame) -> None:
@@ -250,9 +252,15 @@ def run(args) -> int:
         rr.save(str(args.save))
     else:
         rr.spawn()
+    if args.urdf:
+        # Rerun's URDF importer: links become coordinate frames named as in the URDF, joints
+        # transforms between them, so TF frames of the same names attach live data to the model
+        rr.log_file_from_path(args.urdf, static=True)
     dbc = load_dbc(args.dbc) if args.dbc else None
     if args.source:
-        print(f"canbench view: {view_mcap(args.source, dbc)} messages from {args.source}")
+        from .recording import view_mcap
+        count, malformed = view_mcap(args.source, Context(dbc))
+        print(f"canbench view: {count} messages from {args.source}, {malformed} malformed")
         rr.disconnect()
         return 0
     # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete; SIGINT explicitly too,
@@ -272,7 +280,9 @@ def run(args) -> int:
         viewer.stop()
         session.close()
         rr.disconnect()
-    with viewer.lock:
-        print(f"canbench view: {len(viewer.bridges)} bridge tokens, {len(viewer.entities)} ROS 2 entities, "
-              f"{len(viewer.subscribers)} subscriptions, {viewer.dropped} samples dropped (viewer too slow)")
+    s = viewer.stats()
+    print(f"canbench view: {len(s['bridges'])} bridge tokens, {s['ros2_entities']} ROS 2 entities, "
+          f"{len(s['subscriptions'])} subscriptions, {s['logged']} samples logged, {s['dropped']} dropped "
+          f"(viewer too slow), {sum(s['malformed'].values())} malformed, unsupported types: "
+          f"{', '.join(s['unsupported']) or 'none'}")
     return 0

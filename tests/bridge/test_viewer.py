@@ -16,7 +16,7 @@ import pytest
 import zenoh
 from conftest import REPO, wait_for
 
-from canbench import ros2
+from canbench import ros2, ros2_msgs
 
 rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip install -e '.[viewer]')")
 
@@ -38,7 +38,7 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
               session.liveliness().declare_token(ros2.publisher_token(
                   0, zid, 0, 1, "/cabin", "climate", "/cabin/temperature", "sensor_msgs/msg/Temperature", temp_hash)),
               session.liveliness().declare_token(ros2.publisher_token(
-                  0, zid, 0, 2, "/", "nav", "/odom", "nav_msgs/msg/Odometry", "RIHS01_" + "0" * 64))]
+                  0, zid, 0, 2, "/", "arm", "/joint_states", "sensor_msgs/msg/JointState", "RIHS01_" + "0" * 64))]
     rrd = tmp_path / "view.rrd"
     viewer = subprocess.Popen([sys.executable, "-m", "canbench.cli", "view", "--zenoh-connect", router.endpoint,
                                "--auto-subscribe", "--dbc", str(REPO / "scenarios" / "dbc" / "powertrain.dbc"),
@@ -51,7 +51,7 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
                  "the viewer subscribed to the discovered topics and seeing the bridge")
         publisher = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         for value in TEMPERATURES:
-            publisher.put(ros2.Temperature(temperature=value).serialize())
+            publisher.put(ros2_msgs.Temperature(temperature=value).serialize())
         for frame in (ENGINE_SPEED_FRAME, "18DAF110#R", "7FF#"):
             bus.run(["cansend", "vcan0", frame])
         wait_for(lambda: viewer_stats(session)["logged"] >= len(TEMPERATURES) + 2 * 3, "the viewer logging it all")
@@ -76,5 +76,6 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
     assert "/vehicle/can [can_msgs/msg/Frame]" in " ".join(logged["/discovery/ros2"])
     discovery = " ".join(logged["/discovery/ros2"])
     assert "/cabin/temperature [sensor_msgs/msg/Temperature]" in discovery
-    assert "/odom [nav_msgs/msg/Odometry] (no logger)" in discovery
+    assert "/joint_states [sensor_msgs/msg/JointState] (no logger)" in discovery
+    assert logged["/discovery/unsupported"] == ["sensor_msgs/msg/JointState (first seen on /joint_states)"]
     assert any("vehicle/can/bridges/" in line for line in logged["/discovery/bridges"])

@@ -1,17 +1,27 @@
 """rmw_zenoh conventions against published examples: liveliness tokens from
 rmw_zenoh's design document (incl. namespaces and mangling), DDS type names,
 data keys, REP-2011 type hashes against the hashes ROS 2 publishes for
-std_msgs/String and sensor_msgs/Imu, and CDR against known bytes."""
+std_msgs/String, sensor_msgs/Imu, Image, CameraInfo and std_msgs/Header, CDR
+against known bytes (incl. an Image vector made with rosbags, another CDR
+implementation), and the .msg texts MCAP's ros2msg schemas carry, parsed by
+mcap-ros2-support."""
 from __future__ import annotations
 
 import pytest
 
-from canbench import ros2
+from canbench import ros2, ros2_msgs
 
 pytestmark = pytest.mark.unit
 
 STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
 IMU_HASH = "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
+PUBLISHED_HASHES = {  # as `ros2 topic info -v` shows them (Jazzy)
+    "std_msgs/msg/Header": "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01",
+    "builtin_interfaces/msg/Time": "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197",
+    "sensor_msgs/msg/Image": "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+    "sensor_msgs/msg/CameraInfo": "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
+    "sensor_msgs/msg/RegionOfInterest": "RIHS01_ad16bcba5f9131dcdba6fbded19f726f5440e3c513b4fb586dd3027eeed8abb1",
+}
 # verbatim from rmw_zenoh docs/design.md
 PUB = ("@ros2_lv/0/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/"
        f"{STRING_HASH}/::,7:,:,:,,")
@@ -53,14 +63,39 @@ def test_type_hashes_match_ros2():
     assert ros2.type_hash("std_msgs/msg/String") == STRING_HASH
     assert ros2.type_hash("sensor_msgs/msg/Imu") == IMU_HASH  # nested types, fixed arrays
     assert ros2.type_hash("can_msgs/msg/Frame").startswith("RIHS01_")
+    for ros_type, published in PUBLISHED_HASHES.items():  # sequences, nested fixed arrays, a nested struct
+        assert ros2.type_hash(ros_type) == published, ros_type
 
 
 def test_cdr_known_bytes_and_round_trips():
-    assert ros2.String("hello").serialize().hex() == "000100000600000068656c6c6f00"
-    frame = ros2.CanFrame(id=0x123, dlc=2, data=bytes([1, 2, 0, 0, 0, 0, 0, 0]))
+    assert ros2_msgs.String("hello").serialize().hex() == "000100000600000068656c6c6f00"
+    image = ros2_msgs.Image(header=ros2_msgs.Header(stamp=ros2_msgs.Time(1, 2), frame_id="cam"), height=1, width=2,
+                            encoding="rgb8", step=6, data=[1, 2, 3, 4, 5, 6])
+    assert image.serialize().hex() == ("0001000001000000020000000400000063616d0001000000020000000500000072676238"
+                                       "000000000600000006000000010203040506")
+    frame = ros2_msgs.CanFrame(id=0x123, dlc=2, data=bytes([1, 2, 0, 0, 0, 0, 0, 0]))
     # encapsulation | stamp 0,0 | frame_id "" (len 1 + NUL, pad 3) | id | rtr ext err | dlc | data
     assert frame.serialize().hex() == ("00010000" "00000000" "00000000" "01000000" "00" "000000" "23010000"
                                        "000000" "02" "0102000000000000")
     for cls in ros2.MESSAGE_TYPES.values():
         msg = cls()
         assert cls.deserialize(msg.serialize()) == msg
+
+
+def test_decode_refuses_what_is_not_ros2_cdr():
+    good = ros2_msgs.String("x").serialize()
+    assert ros2_msgs.decode("std_msgs/msg/String", good).data == "x"
+    for bad, why in [(b"", "empty payload"), (b"\x00\x03\x00\x00" + good[4:], "encapsulation"),
+                     (good[:6], "malformed CDR"), (good[:4] + b"\xff\xff\xff\x7f" + good[8:], "malformed CDR")]:
+        with pytest.raises(ros2_msgs.CdrError, match=why):
+            ros2_msgs.decode("std_msgs/msg/String", bad)
+
+
+@pytest.mark.parametrize("ros_type", sorted(ros2.MESSAGE_TYPES))
+def test_msg_definitions_decode_our_cdr(ros_type):
+    """The ros2msg schema text of every type, parsed by the MCAP ROS 2 decoder, reads our CDR."""
+    mcap_ros2 = pytest.importorskip("mcap_ros2.decoder", reason="mcap-ros2-support (pip install -e '.[viewer]')")
+    from mcap.records import Schema
+    schema = Schema(id=1, name=ros_type, encoding="ros2msg", data=ros2.msg_definition(ros_type).encode())
+    decoded = mcap_ros2.DecoderFactory().decoder_for("cdr", schema)(ros2.MESSAGE_TYPES[ros_type]().serialize())
+    assert [f for f in ros2.fields(ros_type)][0]["name"] in dir(decoded)

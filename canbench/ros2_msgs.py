@@ -1,0 +1,364 @@
+# mypy: disable-error-code="valid-type,assignment,type-arg"
+# (pycdr2 declares CDR types with annotations such as array[float64, 9] that are not Python types)
+"""ROS 2 message types as CDR structs (pycdr2), field for field the .msg files of
+ros2/common_interfaces (std_msgs, geometry_msgs, sensor_msgs, nav_msgs,
+visualization_msgs), ros2/geometry2 (tf2_msgs), ros2/rcl_interfaces
+(builtin_interfaces) and ros-drivers/ros_canopen (can_msgs). Order and types
+are the wire format and, through ros2.type_hash, the RIHS01 hash: change
+neither without the .msg file. decode() is the one entry for untrusted
+payloads: it checks the encapsulation header before pycdr2 reads anything."""
+
+from dataclasses import dataclass, field
+
+from pycdr2 import IdlStruct
+from pycdr2.types import array, float32, float64, int8, int32, sequence, uint8, uint32
+
+from .errors import BenchError
+
+
+class CdrError(BenchError):
+    """A payload that is not a CDR message of the type its key announces."""
+
+
+def _zeros(n: int):  # (no "from __future__ import annotations": pycdr2 reads the annotations as types)
+    return field(default_factory=lambda: [0.0] * n)
+
+
+def _list():
+    return field(default_factory=list)
+
+
+# ---- builtin_interfaces, std_msgs ----
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces/msg/Time"):
+    sec: int32 = 0
+    nanosec: uint32 = 0
+
+
+@dataclass
+class Duration(IdlStruct, typename="builtin_interfaces/msg/Duration"):
+    sec: int32 = 0
+    nanosec: uint32 = 0
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs/msg/Header"):
+    stamp: Time = field(default_factory=Time)
+    frame_id: str = ""
+
+
+@dataclass
+class String(IdlStruct, typename="std_msgs/msg/String"):
+    data: str = ""
+
+
+@dataclass
+class Float64(IdlStruct, typename="std_msgs/msg/Float64"):
+    data: float64 = 0.0
+
+
+@dataclass
+class ColorRGBA(IdlStruct, typename="std_msgs/msg/ColorRGBA"):
+    r: float32 = 0.0
+    g: float32 = 0.0
+    b: float32 = 0.0
+    a: float32 = 0.0
+
+
+# ---- geometry_msgs ----
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs/msg/Vector3"):
+    x: float64 = 0.0
+    y: float64 = 0.0
+    z: float64 = 0.0
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs/msg/Point"):
+    x: float64 = 0.0
+    y: float64 = 0.0
+    z: float64 = 0.0
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs/msg/Quaternion"):
+    x: float64 = 0.0
+    y: float64 = 0.0
+    z: float64 = 0.0
+    w: float64 = 1.0
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs/msg/Pose"):
+    position: Point = field(default_factory=Point)
+    orientation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass
+class PoseStamped(IdlStruct, typename="geometry_msgs/msg/PoseStamped"):
+    header: Header = field(default_factory=Header)
+    pose: Pose = field(default_factory=Pose)
+
+
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs/msg/PoseWithCovariance"):
+    pose: Pose = field(default_factory=Pose)
+    covariance: array[float64, 36] = _zeros(36)
+
+
+@dataclass
+class Twist(IdlStruct, typename="geometry_msgs/msg/Twist"):
+    linear: Vector3 = field(default_factory=Vector3)
+    angular: Vector3 = field(default_factory=Vector3)
+
+
+@dataclass
+class TwistWithCovariance(IdlStruct, typename="geometry_msgs/msg/TwistWithCovariance"):
+    twist: Twist = field(default_factory=Twist)
+    covariance: array[float64, 36] = _zeros(36)
+
+
+@dataclass
+class Transform(IdlStruct, typename="geometry_msgs/msg/Transform"):
+    translation: Vector3 = field(default_factory=Vector3)
+    rotation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs/msg/TransformStamped"):
+    header: Header = field(default_factory=Header)
+    child_frame_id: str = ""
+    transform: Transform = field(default_factory=Transform)
+
+
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs/msg/TFMessage"):
+    transforms: sequence[TransformStamped] = _list()
+
+
+# ---- sensor_msgs ----
+
+@dataclass
+class Imu(IdlStruct, typename="sensor_msgs/msg/Imu"):
+    header: Header = field(default_factory=Header)
+    orientation: Quaternion = field(default_factory=Quaternion)
+    orientation_covariance: array[float64, 9] = _zeros(9)
+    angular_velocity: Vector3 = field(default_factory=Vector3)
+    angular_velocity_covariance: array[float64, 9] = _zeros(9)
+    linear_acceleration: Vector3 = field(default_factory=Vector3)
+    linear_acceleration_covariance: array[float64, 9] = _zeros(9)
+
+
+@dataclass
+class Temperature(IdlStruct, typename="sensor_msgs/msg/Temperature"):
+    header: Header = field(default_factory=Header)
+    temperature: float64 = 0.0
+    variance: float64 = 0.0
+
+
+@dataclass
+class FluidPressure(IdlStruct, typename="sensor_msgs/msg/FluidPressure"):
+    header: Header = field(default_factory=Header)
+    fluid_pressure: float64 = 0.0
+    variance: float64 = 0.0
+
+
+@dataclass
+class RelativeHumidity(IdlStruct, typename="sensor_msgs/msg/RelativeHumidity"):
+    header: Header = field(default_factory=Header)
+    relative_humidity: float64 = 0.0
+    variance: float64 = 0.0
+
+
+@dataclass
+class Illuminance(IdlStruct, typename="sensor_msgs/msg/Illuminance"):
+    header: Header = field(default_factory=Header)
+    illuminance: float64 = 0.0
+    variance: float64 = 0.0
+
+
+@dataclass
+class Image(IdlStruct, typename="sensor_msgs/msg/Image"):
+    header: Header = field(default_factory=Header)
+    height: uint32 = 0
+    width: uint32 = 0
+    encoding: str = ""
+    is_bigendian: uint8 = 0
+    step: uint32 = 0
+    data: sequence[uint8] = _list()
+
+
+@dataclass
+class CompressedImage(IdlStruct, typename="sensor_msgs/msg/CompressedImage"):
+    header: Header = field(default_factory=Header)
+    format: str = ""
+    data: sequence[uint8] = _list()
+
+
+@dataclass
+class PointField(IdlStruct, typename="sensor_msgs/msg/PointField"):
+    name: str = ""
+    offset: uint32 = 0
+    datatype: uint8 = 0  # INT8=1 UINT8=2 INT16=3 UINT16=4 INT32=5 UINT32=6 FLOAT32=7 FLOAT64=8
+    count: uint32 = 1
+
+
+@dataclass
+class PointCloud2(IdlStruct, typename="sensor_msgs/msg/PointCloud2"):
+    header: Header = field(default_factory=Header)
+    height: uint32 = 0
+    width: uint32 = 0
+    fields: sequence[PointField] = _list()
+    is_bigendian: bool = False
+    point_step: uint32 = 0
+    row_step: uint32 = 0
+    data: sequence[uint8] = _list()
+    is_dense: bool = False
+
+
+@dataclass
+class LaserScan(IdlStruct, typename="sensor_msgs/msg/LaserScan"):
+    header: Header = field(default_factory=Header)
+    angle_min: float32 = 0.0
+    angle_max: float32 = 0.0
+    angle_increment: float32 = 0.0
+    time_increment: float32 = 0.0
+    scan_time: float32 = 0.0
+    range_min: float32 = 0.0
+    range_max: float32 = 0.0
+    ranges: sequence[float32] = _list()
+    intensities: sequence[float32] = _list()
+
+
+@dataclass
+class RegionOfInterest(IdlStruct, typename="sensor_msgs/msg/RegionOfInterest"):
+    x_offset: uint32 = 0
+    y_offset: uint32 = 0
+    height: uint32 = 0
+    width: uint32 = 0
+    do_rectify: bool = False
+
+
+@dataclass
+class CameraInfo(IdlStruct, typename="sensor_msgs/msg/CameraInfo"):
+    header: Header = field(default_factory=Header)
+    height: uint32 = 0
+    width: uint32 = 0
+    distortion_model: str = ""
+    d: sequence[float64] = _list()
+    k: array[float64, 9] = _zeros(9)
+    r: array[float64, 9] = _zeros(9)
+    p: array[float64, 12] = _zeros(12)
+    binning_x: uint32 = 0
+    binning_y: uint32 = 0
+    roi: RegionOfInterest = field(default_factory=RegionOfInterest)
+
+
+# ---- nav_msgs ----
+
+@dataclass
+class Odometry(IdlStruct, typename="nav_msgs/msg/Odometry"):
+    header: Header = field(default_factory=Header)
+    child_frame_id: str = ""
+    pose: PoseWithCovariance = field(default_factory=PoseWithCovariance)
+    twist: TwistWithCovariance = field(default_factory=TwistWithCovariance)
+
+
+@dataclass
+class Path(IdlStruct, typename="nav_msgs/msg/Path"):
+    header: Header = field(default_factory=Header)
+    poses: sequence[PoseStamped] = _list()
+
+
+@dataclass
+class MapMetaData(IdlStruct, typename="nav_msgs/msg/MapMetaData"):
+    map_load_time: Time = field(default_factory=Time)
+    resolution: float32 = 0.0
+    width: uint32 = 0
+    height: uint32 = 0
+    origin: Pose = field(default_factory=Pose)
+
+
+@dataclass
+class OccupancyGrid(IdlStruct, typename="nav_msgs/msg/OccupancyGrid"):
+    header: Header = field(default_factory=Header)
+    info: MapMetaData = field(default_factory=MapMetaData)
+    data: sequence[int8] = _list()  # row-major from (0, 0); -1 unknown, 0..100 occupancy
+
+
+# ---- visualization_msgs ----
+
+@dataclass
+class UVCoordinate(IdlStruct, typename="visualization_msgs/msg/UVCoordinate"):
+    u: float32 = 0.0
+    v: float32 = 0.0
+
+
+@dataclass
+class MeshFile(IdlStruct, typename="visualization_msgs/msg/MeshFile"):
+    filename: str = ""
+    data: sequence[uint8] = _list()
+
+
+@dataclass
+class Marker(IdlStruct, typename="visualization_msgs/msg/Marker"):
+    header: Header = field(default_factory=Header)
+    ns: str = ""
+    id: int32 = 0
+    type: int32 = 0
+    action: int32 = 0
+    pose: Pose = field(default_factory=Pose)
+    scale: Vector3 = field(default_factory=Vector3)
+    color: ColorRGBA = field(default_factory=ColorRGBA)
+    lifetime: Duration = field(default_factory=Duration)
+    frame_locked: bool = False
+    points: sequence[Point] = _list()
+    colors: sequence[ColorRGBA] = _list()
+    texture_resource: str = ""
+    texture: CompressedImage = field(default_factory=CompressedImage)
+    uv_coordinates: sequence[UVCoordinate] = _list()
+    text: str = ""
+    mesh_resource: str = ""
+    mesh_file: MeshFile = field(default_factory=MeshFile)
+    mesh_use_embedded_materials: bool = False
+
+
+@dataclass
+class MarkerArray(IdlStruct, typename="visualization_msgs/msg/MarkerArray"):
+    markers: sequence[Marker] = _list()
+
+
+# ---- can_msgs ----
+
+@dataclass
+class CanFrame(IdlStruct, typename="can_msgs/msg/Frame"):
+    header: Header = field(default_factory=Header)
+    id: uint32 = 0
+    is_rtr: bool = False
+    is_extended: bool = False
+    is_error: bool = False
+    dlc: uint8 = 0
+    data: array[uint8, 8] = field(default_factory=lambda: bytes(8))  # CDR gives uint8 arrays back as bytes
+
+
+ALL = (Time, Duration, Header, String, Float64, ColorRGBA, Vector3, Point, Quaternion, Pose, PoseStamped,
+       PoseWithCovariance, Twist, TwistWithCovariance, Transform, TransformStamped, TFMessage, Imu, Temperature,
+       FluidPressure, RelativeHumidity, Illuminance, Image, CompressedImage, PointField, PointCloud2, LaserScan,
+       RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate, MeshFile, Marker,
+       MarkerArray, CanFrame)
+MESSAGE_TYPES: dict[str, type[IdlStruct]] = {cls.__idl_typename__: cls for cls in ALL}  # type: ignore[attr-defined]
+
+# encapsulation kinds ROS 2 sends (plain CDR, big/little endian); XCDR2 and PL_CDR are not ROS 2 messages
+ENCAPSULATIONS = {b"\x00\x00", b"\x00\x01"}
+
+
+def decode(type_name: str, payload: bytes):
+    """The message a payload holds, or CdrError saying why not (never another exception)."""
+    if len(payload) < 4 or payload[:2] not in ENCAPSULATIONS:
+        raise CdrError(f"{type_name}: not a CDR encapsulation header: {payload[:4].hex() or 'empty payload'}")
+    try:
+        return MESSAGE_TYPES[type_name].deserialize(payload)
+    except Exception as e:  # noqa: BLE001 - pycdr2 raises struct.error, IndexError, UnicodeDecodeError...
+        raise CdrError(f"{type_name}: malformed CDR ({len(payload)} bytes): {e}") from None

@@ -1,0 +1,62 @@
+"""CAN frames: the bridge's own frames and can_msgs/msg/Frame (the bridge's ROS 2
+output, recording.mcap) alike -> <base>/<id>/raw (candump text) and, with a DBC,
+<base>/<id>/<signal> (scalars). Frames are collected and sent to Rerun one column
+per entity (send_columns): per-frame rr.log calls cost more than a busy bus allows."""
+from __future__ import annotations
+
+from collections import defaultdict
+
+import rerun as rr
+
+from .. import wire
+from ..report import decode_signals
+from . import Context, logger
+
+
+class CanColumns:
+    """Frames of one batch grouped by entity, sent with their receive times."""
+
+    def __init__(self, dbc):
+        self.dbc = dbc
+        self.raw: dict[str, tuple[list[int], list[str]]] = defaultdict(lambda: ([], []))
+        self.signals: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
+
+    def add(self, base: str, t_ns: int, frames: list[wire.Frame]) -> None:
+        bus = base.rsplit("/", 1)[-1]
+        for f in frames:
+            ident = wire.id_hex(f.can_id, f.extended)
+            times, texts = self.raw[f"{base}/{ident}/raw"]
+            times.append(t_ns)
+            texts.append(f.candump(bus).split(" ", 1)[1])
+            if self.dbc is not None and not f.remote and (decoded := decode_signals(self.dbc, f)):
+                for name, value in decoded[1].items():
+                    times, values = self.signals[f"{base}/{ident}/{name}"]
+                    times.append(t_ns)
+                    values.append(value)
+
+    def flush(self) -> int:
+        frames = 0
+        for path, (times, texts) in self.raw.items():
+            rr.send_columns(path, indexes=[rr.TimeColumn("time", timestamp=[t / 1e9 for t in times])],
+                            columns=rr.TextLog.columns(text=texts))
+            frames += len(texts)
+        for path, (times, values) in self.signals.items():
+            rr.send_columns(path, indexes=[rr.TimeColumn("time", timestamp=[t / 1e9 for t in times])],
+                            columns=rr.Scalars.columns(scalars=values))
+        self.raw.clear()
+        self.signals.clear()
+        return frames
+
+
+def frame_of(msg) -> wire.Frame:
+    if msg.dlc > 8:
+        raise ValueError(f"can_msgs/msg/Frame dlc {msg.dlc} > 8")
+    return wire.Frame(msg.id, msg.dlc, bytes(msg.data)[:msg.dlc] if not msg.is_rtr else b"", msg.is_extended,
+                      msg.is_rtr)
+
+
+@logger("can_msgs/msg/Frame")
+def log_frame(ctx: Context, path: str, msg) -> None:
+    columns = CanColumns(ctx.dbc)
+    columns.add(path, ctx.t_ns, [frame_of(msg)])
+    columns.flush()

@@ -1,0 +1,83 @@
+"""visualization_msgs/Marker and MarkerArray: each marker at <topic>/<ns>/<id>, its pose
+a Transform3D there, its shape in the pose's coordinates by marker type; DELETE clears
+that marker, DELETEALL every marker of the topic. Lifetimes are not expired (Rerun keeps
+history; a marker lives until deleted or replaced)."""
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+
+from . import Context, logger
+
+ARROW, CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST, CUBE_LIST, SPHERE_LIST, POINTS, TEXT_VIEW_FACING, \
+    MESH_RESOURCE, TRIANGLE_LIST, ARROW_STRIP = range(13)
+ADD, DELETE, DELETEALL = 0, 2, 3  # MODIFY == ADD
+
+
+def rgba(c) -> list[int]:
+    return [round(min(max(v, 0.0), 1.0) * 255) for v in (c.r, c.g, c.b, c.a)]
+
+
+def shape(m):
+    """The Rerun archetype drawing one marker in its own coordinates."""
+    half = [m.scale.x / 2, m.scale.y / 2, m.scale.z / 2]
+    pts = np.array([[p.x, p.y, p.z] for p in m.points], dtype=np.float64).reshape(-1, 3)
+    colors = [rgba(c) for c in m.colors] if len(m.colors) == len(m.points) and m.colors else [rgba(m.color)]
+    if m.type == ARROW:
+        if len(pts) >= 2:  # start and end; scale.x shaft diameter
+            return rr.Arrows3D(origins=[pts[0]], vectors=[pts[1] - pts[0]], radii=m.scale.x / 2, colors=colors[:1])
+        return rr.Arrows3D(vectors=[[m.scale.x, 0, 0]], radii=m.scale.y / 2, colors=colors[:1])  # along x
+    if m.type == CUBE:
+        return rr.Boxes3D(half_sizes=[half], colors=colors[:1], fill_mode="solid")
+    if m.type == SPHERE:
+        return rr.Ellipsoids3D(half_sizes=[half], colors=colors[:1], fill_mode="solid")
+    if m.type == CYLINDER:  # scale.x, scale.y diameters, scale.z height; Rerun's cylinders are round
+        return rr.Cylinders3D(lengths=[m.scale.z], radii=[m.scale.x / 2], colors=colors[:1], fill_mode="solid")
+    if m.type == LINE_STRIP:
+        return rr.LineStrips3D([pts], radii=m.scale.x / 2, colors=colors[:1])
+    if m.type == LINE_LIST:
+        return rr.LineStrips3D(pts[: len(pts) // 2 * 2].reshape(-1, 2, 3), radii=m.scale.x / 2,
+                               colors=colors[::2] if len(colors) > 1 else colors)
+    if m.type == CUBE_LIST:
+        return rr.Boxes3D(centers=pts, half_sizes=[half] * len(pts), colors=colors, fill_mode="solid")
+    if m.type == SPHERE_LIST:
+        return rr.Ellipsoids3D(centers=pts, half_sizes=[half] * len(pts), colors=colors, fill_mode="solid")
+    if m.type == POINTS:
+        return rr.Points3D(pts, radii=m.scale.x / 2, colors=colors)
+    if m.type == TEXT_VIEW_FACING:  # scale.z the text height
+        return rr.Points3D([[0, 0, 0]], labels=[m.text], radii=m.scale.z / 10, colors=colors[:1], show_labels=True)
+    if m.type == TRIANGLE_LIST:
+        n = len(pts) // 3 * 3
+        return rr.Mesh3D(vertex_positions=pts[:n], triangle_indices=np.arange(n).reshape(-1, 3),
+                         vertex_colors=colors * (n if len(colors) == 1 else 1) if n else None)
+    if m.type == ARROW_STRIP:
+        return rr.Arrows3D(origins=pts[:-1], vectors=np.diff(pts, axis=0), radii=m.scale.x / 2, colors=colors[:1])
+    if m.type == MESH_RESOURCE:
+        raise ValueError(f"marker {m.ns}/{m.id}: MESH_RESOURCE ({m.mesh_resource!r}) is not shown")
+    raise ValueError(f"marker {m.ns}/{m.id}: unknown marker type {m.type}")
+
+
+def log_one(ctx: Context, path: str, m) -> None:
+    if m.action == DELETEALL:
+        rr.log(path, rr.Clear(recursive=True))
+        return
+    entity = f"{path}/{m.ns or '_'}/{m.id}"
+    if m.action == DELETE:
+        rr.log(entity, rr.Clear(recursive=True))
+        return
+    if m.action != ADD:
+        raise ValueError(f"marker {m.ns}/{m.id}: unknown action {m.action}")
+    archetype = shape(m)
+    ctx.pose(entity, m.pose.position, m.pose.orientation, m.header.frame_id)
+    rr.log(f"{entity}/shape", archetype, *([rr.CoordinateFrame(entity)] if m.header.frame_id else []))
+
+
+@logger("visualization_msgs/msg/Marker")
+def log_marker(ctx: Context, path: str, msg) -> None:
+    log_one(ctx, path, msg)
+
+
+@logger("visualization_msgs/msg/MarkerArray")
+def log_marker_array(ctx: Context, path: str, msg) -> None:
+    for m in msg.markers:
+        log_one(ctx, path, m)

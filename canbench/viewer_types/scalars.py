@@ -1,0 +1,44 @@
+"""Text and scalar series: std_msgs/String, the single-value sensor_msgs, Imu."""
+from __future__ import annotations
+
+import rerun as rr
+
+from ..ros2_msgs import Point
+from . import Context, logger
+
+ZERO = Point()
+
+
+@logger("std_msgs/msg/String")
+def log_string(ctx: Context, path: str, msg) -> None:
+    rr.log(path, rr.TextLog(msg.data))
+
+
+def _field_logger(type_name: str, field_name: str) -> None:
+    @logger(type_name)
+    def log(ctx: Context, path: str, msg) -> None:
+        ctx.scalar(f"{path}/{field_name}", getattr(msg, field_name))
+
+
+for _type, _field in (("sensor_msgs/msg/Temperature", "temperature"),
+                      ("sensor_msgs/msg/FluidPressure", "fluid_pressure"),
+                      ("sensor_msgs/msg/RelativeHumidity", "relative_humidity"),
+                      ("sensor_msgs/msg/Illuminance", "illuminance")):
+    _field_logger(_type, _field)
+
+
+def vector_scalars(ctx: Context, path: str, vector) -> None:
+    for axis in ("x", "y", "z"):
+        ctx.scalar(f"{path}/{axis}", getattr(vector, axis))
+
+
+@logger("sensor_msgs/msg/Imu")
+def log_imu(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/angular_velocity", msg.angular_velocity)
+    vector_scalars(ctx, f"{path}/linear_acceleration", msg.linear_acceleration)
+    ctx.pose(f"{path}/orientation", ZERO, msg.orientation, msg.header.frame_id)
+
+
+@logger("std_msgs/msg/Float64")
+def log_float64(ctx: Context, path: str, msg) -> None:
+    ctx.scalar(path, msg.data)  # recording.mcap's decoded signals
