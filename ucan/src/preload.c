@@ -262,34 +262,44 @@ static int64_t now_ns(void)
 	return (int64_t)ts.tv_sec * 1000000000ll + ts.tv_nsec;
 }
 
-/* Looks up by name (if name) or index; refreshes the cache on a miss. */
+static int cached_iface(const char *name, uint32_t ifindex, struct ucan_ifinfo *out, int64_t *fetched_ns)
+{
+	int found = -1;
+	pthread_mutex_lock(&iflist_lock);
+	for (uint32_t i = 0; i < iflist.count && i < UCAN_MAX_IFACES && found < 0; i++) {
+		const struct ucan_ifinfo *ifi = &iflist.ifs[i];
+		if (name ? strncmp(ifi->name, name, sizeof(ifi->name)) == 0 : ifi->ifindex == ifindex) {
+			*out = *ifi;
+			found = 0;
+		}
+	}
+	*fetched_ns = iflist_fetched_ns;
+	pthread_mutex_unlock(&iflist_lock);
+	return found;
+}
+
+/* Looks up by name (if name) or index; refreshes the cache on a miss. The
+ * hub is asked without holding the lock: a query can take seconds (a stopped
+ * hub), and neither other threads nor a child forked meanwhile may wait on it. */
 static int find_iface(const char *name, uint32_t ifindex, struct ucan_ifinfo *out)
 {
+	int64_t fetched;
+	if (cached_iface(name, ifindex, out, &fetched) == 0)
+		return 0;
+	int64_t now = now_ns();
+	if (fetched && now - fetched < IFLIST_REFRESH_NS)
+		return -1;
+	uint32_t type = UCAN_MSG_IFLIST;
+	struct ucan_iflist fresh;
+	int saved = errno;
+	ssize_t n = hub_query(&type, sizeof(type), &fresh, sizeof(fresh));
+	errno = saved;
 	pthread_mutex_lock(&iflist_lock);
-	for (int attempt = 0; attempt < 2; attempt++) {
-		for (uint32_t i = 0; i < iflist.count && i < UCAN_MAX_IFACES; i++) {
-			const struct ucan_ifinfo *ifi = &iflist.ifs[i];
-			if (name ? strncmp(ifi->name, name, sizeof(ifi->name)) == 0 : ifi->ifindex == ifindex) {
-				*out = *ifi;
-				pthread_mutex_unlock(&iflist_lock);
-				return 0;
-			}
-		}
-		int64_t now = now_ns();
-		if (attempt == 1 || (iflist_fetched_ns && now - iflist_fetched_ns < IFLIST_REFRESH_NS))
-			break;
-		uint32_t type = UCAN_MSG_IFLIST;
-		struct ucan_iflist fresh;
-		int saved = errno;
-		ssize_t n = hub_query(&type, sizeof(type), &fresh, sizeof(fresh));
-		errno = saved;
-		iflist_fetched_ns = now;
-		if (n != (ssize_t)sizeof(fresh) || fresh.type != UCAN_MSG_IFLIST)
-			break;
+	iflist_fetched_ns = now;
+	if (n == (ssize_t)sizeof(fresh) && fresh.type == UCAN_MSG_IFLIST)
 		iflist = fresh;
-	}
 	pthread_mutex_unlock(&iflist_lock);
-	return -1;
+	return cached_iface(name, ifindex, out, &fetched);
 }
 
 /* ---- socket settings ---- */
@@ -1128,8 +1138,40 @@ static void adopt_inherited(int fd)
 	}
 }
 
+/* fork() copies only the calling thread: a lock another thread held would
+ * stay locked in the child forever. The library's global locks are taken
+ * across fork (held only for table and cache updates, never across a hub
+ * query); each socket's lock, which a thread may hold while it waits for the
+ * hub, starts afresh in the child. */
+static void atfork_prepare(void)
+{
+	pthread_mutex_lock(&table_lock);
+	pthread_mutex_lock(&iflist_lock);
+}
+
+static void atfork_parent(void)
+{
+	pthread_mutex_unlock(&iflist_lock);
+	pthread_mutex_unlock(&table_lock);
+}
+
+static void atfork_child(void)
+{
+	pthread_mutex_unlock(&iflist_lock);
+	pthread_mutex_unlock(&table_lock);
+	for (unsigned c = 0; c < FD_CHUNKS; c++) {
+		_Atomic(struct csock *) *chunk = (void *)fd_chunks[c];
+		for (unsigned i = 0; chunk && i < (1u << FD_CHUNK_BITS); i++) {
+			struct csock *cs = atomic_load(&chunk[i]);
+			if (cs)
+				pthread_mutex_init(&cs->lock, NULL);
+		}
+	}
+}
+
 __attribute__((constructor)) static void ucan_init(void)
 {
+	pthread_atfork(atfork_prepare, atfork_parent, atfork_child);
 	DIR *dir = opendir("/proc/self/fd");
 	if (!dir)
 		return;

@@ -1,0 +1,47 @@
+"""The preload library under a multithreaded C program (ucan/tests/preload_probe.c)
+that forks while another thread waits for the hub, polls and reads before bind,
+and closes descriptors behind the library's back (issue 19, defects 6-8). The
+before-bind and closed-descriptor probes hold on kernel vcan as well."""
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+from conftest import require_userspace
+from hubclient import Stopped
+
+pytestmark = pytest.mark.bus
+WAIT_S = 30
+
+
+def start_probe(bus, *args: str) -> subprocess.Popen:
+    return bus.popen([bus.tool("preload_probe"), *args], stdin=subprocess.PIPE, bufsize=1)
+
+
+def expect(proc: subprocess.Popen, wanted: str) -> list[str]:
+    """Lines up to the one equal to wanted (ok:/FAIL: results included)."""
+    lines = []
+    while (line := proc.stdout.readline()) != "":
+        lines.append(line.strip())
+        if line.strip() == wanted:
+            return lines
+    raise AssertionError(f"probe ended before '{wanted}': {lines} {proc.stderr.read()}")
+
+
+def finish(proc: subprocess.Popen, before: list[str]) -> list[str]:
+    out, err = proc.communicate(timeout=WAIT_S)
+    lines = before + out.splitlines()
+    assert proc.returncode == 0 and not [line for line in lines if line.startswith("FAIL")], (lines, err)
+    return lines
+
+
+def test_fork_while_a_thread_waits_for_the_hub(bus):
+    """Defect 6: no pthread_atfork, and the interface cache's lock held across a hub query:
+    a child forked meanwhile blocked forever in if_nametoindex."""
+    require_userspace(bus, "the hub is stopped to make its answer slow")
+    probe = start_probe(bus, "fork", "vcan0")
+    lines = expect(probe, "ready")
+    with Stopped(bus.hub.pid):
+        probe.stdin.write("stopped\n")
+        lines += expect(probe, "resume")
+    finish(probe, lines)

@@ -1,0 +1,241 @@
+/* preload_probe - a multithreaded SocketCAN program that does what the
+ * preload library must survive (tests/bus/test_preload_probe.py drives it):
+ *
+ *   preload_probe fork <iface>     a thread queries an interface the hub does not have
+ *                                  while the hub is stopped; fork; the child must not hang
+ *   preload_probe unbound <iface>  poll, epoll and recv (SO_RCVTIMEO) before bind time out
+ *                                  as on the kernel; then bind and receive one frame
+ *   preload_probe stale <iface>    descriptors closed behind the library's back
+ *                                  (fclose(fdopen()), the raw syscall) are not CAN any more
+ *
+ * Prints one line per result; exit 0 when everything held, 1 otherwise. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <net/if.h>
+#include <poll.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/socket.h>
+#include <sys/syscall.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+#include <linux/can.h>
+#include <netinet/in.h>
+
+#define UNBOUND_WAIT_MS 200
+#define CHILD_DEADLINE_S 3
+
+static int failures;
+
+static void result(int ok, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void result(int ok, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	printf("%s: ", ok ? "ok" : "FAIL");
+	vprintf(fmt, ap);
+	putchar('\n');
+	fflush(stdout);
+	va_end(ap);
+	failures += !ok;
+}
+
+static double ms_since(const struct timespec *t0)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return (t.tv_sec - t0->tv_sec) * 1e3 + (t.tv_nsec - t0->tv_nsec) / 1e6;
+}
+
+static int can_socket(void)
+{
+	int s = socket(PF_CAN, SOCK_RAW, CAN_RAW);
+	if (s < 0) {
+		perror("preload_probe: socket");
+		exit(1);
+	}
+	return s;
+}
+
+static void can_bind(int s, const char *iface)
+{
+	struct sockaddr_can addr = { .can_family = AF_CAN, .can_ifindex = (int)if_nametoindex(iface) };
+	if (addr.can_ifindex == 0 || bind(s, (struct sockaddr *)&addr, sizeof(addr)) < 0) {
+		fprintf(stderr, "preload_probe: bind %s: %s\n", iface, strerror(errno));
+		exit(1);
+	}
+}
+
+static void wait_line(const char *expected)
+{
+	char line[64];
+	if (!fgets(line, sizeof(line), stdin) || strncmp(line, expected, strlen(expected)) != 0) {
+		fprintf(stderr, "preload_probe: expected '%s' on stdin\n", expected);
+		exit(1);
+	}
+}
+
+/* ---- fork while another thread waits for the hub ---- */
+
+static atomic_int querier_tid, stop_querying;
+
+static void *query_missing(void *arg)
+{
+	(void)arg;
+	querier_tid = (int)gettid();
+	while (!stop_querying)
+		if_nametoindex("nosuch0"); /* a miss asks the hub, at most once a second */
+	return NULL;
+}
+
+/* The querier is blocked in poll(), waiting for the stopped hub's answer. */
+static int querier_waiting(void)
+{
+	char path[64], buf[64];
+	snprintf(path, sizeof(path), "/proc/self/task/%d/syscall", (int)querier_tid);
+	FILE *f = fopen(path, "r");
+	if (!f)
+		return 0;
+	int nr = -1;
+	if (fgets(buf, sizeof(buf), f))
+		nr = atoi(buf);
+	fclose(f);
+	return nr == SYS_poll || nr == SYS_ppoll;
+}
+
+static void probe_fork(const char *iface)
+{
+	unsigned index = if_nametoindex(iface);
+	result(index != 0, "%s has index %u before the hub stops", iface, index);
+	printf("ready\n");
+	fflush(stdout);
+	wait_line("stopped"); /* the driver stopped the hub */
+	pthread_t t;
+	pthread_create(&t, NULL, query_missing, NULL);
+	struct timespec t0, tick = { 0, 1000000 };
+	clock_gettime(CLOCK_MONOTONIC, &t0);
+	while (!(querier_tid && querier_waiting()) && ms_since(&t0) < 5000)
+		nanosleep(&tick, NULL); /* polling a readiness condition: the querier's syscall */
+	result(querier_waiting(), "a thread waits for the stopped hub in poll()");
+	pid_t child = fork();
+	if (child == 0) {
+		alarm(CHILD_DEADLINE_S);
+		unsigned again = if_nametoindex(iface);
+		int s = socket(PF_CAN, SOCK_RAW, CAN_RAW);
+		close(s);
+		_exit(again == index && s >= 0 ? 0 : 2);
+	}
+	int status;
+	waitpid(child, &status, 0);
+	result(WIFEXITED(status) && WEXITSTATUS(status) == 0, "the child looked up %s and opened a socket (%s)",
+	       iface, WIFSIGNALED(status) ? "killed by its deadline: deadlocked" : "exited");
+	printf("resume\n");
+	fflush(stdout);
+	stop_querying = 1;
+	pthread_join(t, NULL);
+}
+
+/* ---- before bind ---- */
+
+static void probe_unbound(const char *iface)
+{
+	int s = can_socket();
+	struct pollfd pfd = { .fd = s, .events = POLLIN };
+	struct timespec t0;
+	clock_gettime(CLOCK_MONOTONIC, &t0);
+	int rc = poll(&pfd, 1, UNBOUND_WAIT_MS);
+	result(rc == 0, "poll before bind: %d (revents 0x%x) after %.0f ms", rc, rc > 0 ? pfd.revents : 0,
+	       ms_since(&t0));
+
+	int ep = epoll_create1(EPOLL_CLOEXEC);
+	struct epoll_event ev = { .events = EPOLLIN }, out;
+	epoll_ctl(ep, EPOLL_CTL_ADD, s, &ev);
+	clock_gettime(CLOCK_MONOTONIC, &t0);
+	rc = epoll_wait(ep, &out, 1, UNBOUND_WAIT_MS);
+	result(rc == 0, "epoll before bind: %d (events 0x%x) after %.0f ms", rc, rc > 0 ? out.events : 0,
+	       ms_since(&t0));
+	close(ep);
+
+	struct timeval tv = { 0, UNBOUND_WAIT_MS * 1000 };
+	setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+	struct can_frame f;
+	alarm(5); /* blocking forever is the failure */
+	clock_gettime(CLOCK_MONOTONIC, &t0);
+	ssize_t n = recv(s, &f, sizeof(f), 0);
+	int err = errno;
+	double waited = ms_since(&t0);
+	alarm(0);
+	result(n < 0 && (err == EAGAIN || err == EWOULDBLOCK) && waited >= UNBOUND_WAIT_MS * 0.9,
+	       "recv before bind with SO_RCVTIMEO: %zd (%s) after %.0f ms", n, n < 0 ? strerror(err) : "data",
+	       waited);
+
+	can_bind(s, iface);
+	printf("ready\n");
+	fflush(stdout);
+	tv.tv_sec = 10;
+	setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+	n = read(s, &f, sizeof(f));
+	result(n == (ssize_t)sizeof(f), "after bind: frame %03X", n == (ssize_t)sizeof(f) ? f.can_id : 0);
+	close(s);
+}
+
+/* ---- descriptors closed behind the library's back ---- */
+
+static void probe_stale(const char *iface)
+{
+	int s = can_socket();
+	can_bind(s, iface);
+	fclose(fdopen(s, "r+")); /* glibc closes without calling close() */
+	int p[2];
+	if (pipe(p) < 0 || (p[0] != s && p[1] != s)) {
+		result(0, "the pipe did not reuse the closed socket's descriptor %d", s);
+		return;
+	}
+	ssize_t w = write(p[1], "hello", 5);
+	char buf[8] = "";
+	ssize_t r = read(p[0], buf, sizeof(buf));
+	result(w == 5 && r == 5 && memcmp(buf, "hello", 5) == 0,
+	       "a pipe on descriptor %d after fclose(fdopen()): write %zd, read %zd", s, w, r);
+	close(p[0]);
+	close(p[1]);
+
+	int s2 = can_socket();
+	can_bind(s2, iface);
+	syscall(SYS_close, s2);
+	int u = socket(AF_INET, SOCK_DGRAM, 0);
+	struct sockaddr_in sin = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+	socklen_t len = sizeof(sin);
+	int bound = bind(u, (struct sockaddr *)&sin, sizeof(sin));
+	int named = getsockname(u, (struct sockaddr *)&sin, &len);
+	result(u == s2 && bound == 0 && named == 0 && sin.sin_family == AF_INET,
+	       "a UDP socket on descriptor %d after the raw close: bind %d, getsockname family %d", u, bound,
+	       sin.sin_family);
+	close(u);
+}
+
+int main(int argc, char **argv)
+{
+	if (argc != 3) {
+		fprintf(stderr, "Usage: preload_probe fork|unbound|stale <iface>\n");
+		return 2;
+	}
+	signal(SIGPIPE, SIG_IGN);
+	if (strcmp(argv[1], "fork") == 0)
+		probe_fork(argv[2]);
+	else if (strcmp(argv[1], "unbound") == 0)
+		probe_unbound(argv[2]);
+	else if (strcmp(argv[1], "stale") == 0)
+		probe_stale(argv[2]);
+	else {
+		fprintf(stderr, "preload_probe: unknown probe '%s'\n", argv[1]);
+		return 2;
+	}
+	return failures ? 1 : 0;
+}
