@@ -9,9 +9,9 @@ from collections.abc import Callable
 from functools import wraps
 
 from . import validity
+from .analysis import RunResult
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import describe
-from .run import RunResult
 
 SHOW = 10  # frames listed per problem
 

@@ -10,14 +10,11 @@ from pathlib import Path
 
 import zenoh
 
-from . import tracegen, wire
-from .ecu import SENT_LOG_HEADER, frame_of, timed_plan
+from . import periodic, wire
+from .plans import SENT_LOG_HEADER, frame_of, sent_line, timed_plan
+from .runkeys import tx_key
 from .scenario import Commands, Scenario
 from .trace import read_trace
-
-
-def tx_key(prefix: str, bus: str, bus_count: int) -> str:
-    return f"{prefix}/tx" if bus_count == 1 else f"{prefix}/{bus}/tx"
 
 
 def plan(scenario: Scenario) -> list[tuple[float, str, int, wire.Frame]]:
@@ -32,7 +29,7 @@ def plan(scenario: Scenario) -> list[tuple[float, str, int, wire.Frame]]:
 def _messages(c: Commands):
     if c.trace is not None:
         return timed_plan(read_trace(c.trace, None), c.speed, 1, c.start_offset_s, c.bus, {}).frames()
-    return ((0, m) for m in tracegen.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
+    return ((0, m) for m in periodic.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
 
 
 class Commander(threading.Thread):
@@ -59,7 +56,7 @@ class Commander(threading.Thread):
                     now_ns = time.time_ns()
                     self.publishers[bus].put(wire.encode(frame))
                     self.sent += 1
-                    log.write(f"{line}\t{now_ns}\t{frame.candump(bus)}\n")
+                    log.write(sent_line(line, now_ns, frame, bus))
         except BaseException as e:  # reported by the orchestrator, never lost in a thread
             self.error = e
         finally:

@@ -20,13 +20,13 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import cantools
 from mcap.writer import Writer
 
 from . import oracle, wire
+from .dbc import decode_signals
 
 if TYPE_CHECKING:
-    from .run import RunResult
+    from .analysis import RunResult
 
 FRAME_FIELDS = {
     "bus": {"type": "string"}, "id": {"type": "integer"}, "id_hex": {"type": "string"},
@@ -47,10 +47,6 @@ def _frame_json(bus: str, o: oracle.Observed) -> dict:
     return {"bus": bus, "id": f.can_id, "id_hex": wire.id_hex(f.can_id, f.extended),
             "extended": f.extended, "remote": f.remote, "dlc": f.dlc, "data": f.data.hex().upper(),
             "source": f"{o.origin}:{o.line}" if o.line else ""}
-
-
-def load_dbc(path: Path | None):
-    return cantools.database.load_file(str(path)) if path else None
 
 
 def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
@@ -86,21 +82,6 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
         writer.add_metadata("canbench.run", {"run_id": result.run_id, "scenario": result.scenario.name,
                                              "passed": str(result.metrics.get("passed"))})
         writer.finish()
-
-
-def decode_signals(dbc, frame) -> tuple[str, dict] | None:
-    """(message name, numeric signals) of a frame the DBC describes, else None."""
-    try:
-        message = dbc.get_message_by_frame_id(frame.can_id)
-    except KeyError:
-        return None
-    if message.is_extended_frame != frame.extended:
-        return None
-    try:
-        decoded = message.decode(frame.data, decode_choices=False)
-    except Exception:  # a frame the DBC does not describe correctly is still recorded raw
-        return None
-    return message.name, {k: float(v) for k, v in decoded.items() if isinstance(v, int | float)}
 
 
 # ---- HTML ----

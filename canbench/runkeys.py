@@ -9,6 +9,47 @@ import time
 
 import zenoh
 
+from . import ros2
+
+
+def rx_key(prefix: str, bus: str, bus_count: int) -> str:
+    """Where a bridge publishes a bus's frames: <prefix>/rx for one bus, <prefix>/<bus>/rx for several."""
+    return f"{prefix}/rx" if bus_count == 1 else f"{prefix}/{bus}/rx"
+
+
+def tx_key(prefix: str, bus: str, bus_count: int) -> str:
+    """Where a bridge takes a bus's commands (the same shape as rx_key)."""
+    return f"{prefix}/tx" if bus_count == 1 else f"{prefix}/{bus}/tx"
+
+
+def bridges(prefix: str) -> str:
+    """The bridges' liveliness tokens: <prefix>/bridges/<name>/<bus>/<mode>."""
+    return f"{prefix}/bridges/**"
+
+
+def bridge_stats(prefix: str, name: str = "*") -> str:
+    """A bridge's stats queryable."""
+    return f"{prefix}/bridges/{name}/stats"
+
+
+def ecus_done(run_id: str) -> str:
+    """Every ECU's done message (ecu_done: one of them)."""
+    return f"bench/runs/{run_id}/ecus/*/done"
+
+
+def ros2_data_keys(scenario) -> list[str]:
+    """The data keys of the bridge's ROS 2 output (bridge.ros2_topic), one per bus."""
+    topic = scenario.bridge.get("ros2_topic")
+    if not topic:
+        return []
+    topics = [topic] if len(scenario.bus_names) == 1 else [f"{topic}/{b}" for b in scenario.bus_names]
+    frame = "can_msgs/msg/Frame"
+    return [ros2.data_key(scenario.bridge.get("ros2_domain", 0), t, frame, ros2.type_hash(frame)) for t in topics]
+
+
+VIEWERS = "canbench/viewers/*"  # a canbench view's liveliness token
+VIEWER_STATS = "canbench/viewers/*/stats"  # its stats queryable: what it subscribes to
+
 
 def capture_ready(run_id: str) -> str:
     return f"bench/runs/{run_id}/capture-ready"

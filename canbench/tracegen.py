@@ -10,20 +10,17 @@
 
   canbench gen-trace --kind powertrain --seconds 2 --out scenarios/traces/powertrain-2s.log
 
-Each message: (id, extended, cycle_ms, dlc). Byte 0 low nibble is a rolling
-counter, the last byte an 8-bit checksum (sum of the other bytes, like many
-OEM CRC-less schemes), the rest slowly varying signals."""
+Each message: (id, extended, cycle_ms, dlc), with the payloads of the periodic
+engine (canbench.periodic): a rolling counter, a checksum, slowly varying signals."""
 from __future__ import annotations
 
 import argparse
-import heapq
-import math
-from collections.abc import Iterator
 from decimal import Decimal
 from pathlib import Path
 
 import can
 
+from .periodic import payload
 from .trace import format_line
 from .wire import Frame
 
@@ -38,18 +35,6 @@ MESSAGES = [
 ]
 
 
-def _payload(can_id: int, dlc: int, n: int, t: float) -> bytes:
-    if dlc == 0:
-        return b""
-    data = bytearray(dlc)
-    data[0] = n & 0x0F | (can_id & 0xF0)
-    for i in range(1, dlc - 1):
-        data[i] = int(127 + 100 * math.sin(t * (i + 1) + can_id % 7)) & 0xFF
-    if dlc > 1:
-        data[-1] = sum(data[:-1]) & 0xFF
-    return bytes(data)
-
-
 def generate(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0") -> list[can.Message]:
     frames: list[can.Message] = []
     for can_id, extended, cycle_ms, dlc in MESSAGES:
@@ -59,7 +44,7 @@ def generate(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0
         for n in range(count):
             t = start + phase + n * cycle_ms / 1000
             frames.append(can.Message(timestamp=t, arbitration_id=can_id, is_extended_id=extended,
-                                      dlc=dlc, data=_payload(can_id, dlc, n, t - start), channel=iface))
+                                      dlc=dlc, data=payload(can_id, dlc, n, t - start), channel=iface))
     # a diagnostic remote request once a second
     frames += [can.Message(timestamp=start + 0.5 + s, arbitration_id=0x7E0, is_extended_id=False,
                            is_remote_frame=True, dlc=8, channel=iface) for s in range(int(seconds))]
@@ -79,48 +64,14 @@ def mixed(seconds: float, start: float = 1_700_000_000.0, iface: str = "vcan0") 
         t = start + n * 0.005
         frames.append(can.Message(timestamp=t, arbitration_id=can_id, is_extended_id=extended,
                                   is_remote_frame=remote, dlc=dlc,
-                                  data=b"" if remote else _payload(can_id, dlc, n, n * 0.005), channel=iface))
+                                  data=b"" if remote else payload(can_id, dlc, n, n * 0.005), channel=iface))
     return frames
 
 
 def burst(count: int, start: float = 1_700_000_000.0, iface: str = "vcan0") -> list[can.Message]:
     """count frames offered at once: ids cycle through 16 priorities, 8 bytes each."""
     return [can.Message(timestamp=start, arbitration_id=0x100 + (n * 7) % 16, is_extended_id=False, dlc=8,
-                        data=_payload(0x100 + n % 16, 8, n, n * 1e-4), channel=iface) for n in range(count)]
-
-
-def periodic_count(message, seconds: float) -> int:
-    """How many frames a scenario message (canbench.scenario.Message) gives in `seconds`."""
-    return max(1, int(seconds * 1000 / message.cycle_ms))
-
-
-def periodic_frame(message, n: int, start: float, iface: str) -> can.Message:
-    """The n-th frame of a scenario message, with the same counter/checksum payloads as the
-    synthetic trace."""
-    m = message
-    phase = (m.can_id % 97) / 97 * min(m.cycle_ms, 10) / 1000
-    t = start + phase + n * m.cycle_ms / 1000
-    return can.Message(timestamp=t, arbitration_id=m.can_id, is_extended_id=m.extended, is_remote_frame=m.remote,
-                       dlc=m.dlc, data=b"" if m.remote else _payload(m.can_id, m.dlc, n, t - start), channel=iface)
-
-
-def periodic_frames(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> Iterator[can.Message]:
-    """Frames of scenario messages for `seconds` in time order (then id; ties in the messages'
-    order), made as they are consumed: an hour of a busy bus is millions of frames."""
-    def one(m):
-        return (periodic_frame(m, n, start, iface) for n in range(periodic_count(m, seconds)))
-    return heapq.merge(*(one(m) for m in messages), key=lambda f: (f.timestamp, f.arbitration_id))
-
-
-def periodic_last(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> can.Message | None:
-    """The frame periodic_frames ends with, without making the others."""
-    last = [(periodic_frame(m, periodic_count(m, seconds) - 1, start, iface), i) for i, m in enumerate(messages)]
-    return max(last, key=lambda fi: (fi[0].timestamp, fi[0].arbitration_id, fi[1]))[0] if last else None
-
-
-def periodic(messages, seconds: float, start: float = 0.0, iface: str = "vcan0") -> list[can.Message]:
-    """periodic_frames as a list (short runs and trace files)."""
-    return list(periodic_frames(messages, seconds, start, iface))
+                        data=payload(0x100 + n % 16, 8, n, n * 1e-4), channel=iface) for n in range(count)]
 
 
 def write(path: Path, frames: list[can.Message]) -> None:
@@ -132,13 +83,6 @@ def write(path: Path, frames: list[can.Message]) -> None:
             frame = Frame(m.arbitration_id, m.dlc, b"" if m.is_remote_frame else bytes(m.data), m.is_extended_id,
                           m.is_remote_frame)
             out.write(format_line(round(Decimal(m.timestamp) * 1_000_000) * 1000, str(m.channel), frame) + "\n")
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    add_arguments(ap)
-    args = ap.parse_args()
-    print(generate_file(args.kind, args.seconds, args.frames, args.out))
 
 
 KINDS = ("powertrain", "mixed", "burst")
@@ -156,7 +100,3 @@ def generate_file(kind: str, seconds: float, count: int, out: Path) -> str:
               "burst": lambda: burst(count)}[kind]()
     write(out, frames)
     return f"{out}: {len(frames)} {kind} frames"
-
-
-if __name__ == "__main__":
-    main()

@@ -22,7 +22,7 @@ from .capture import read_capture_stats
 from .trace import DROPCOUNT
 
 if TYPE_CHECKING:
-    from .run import RunResult
+    from .analysis import RunResult
 
 OUTCOMES = ("bench error", "invalid: capture", "invalid: emulator")  # the first that applies wins
 DEFAULT_EMULATOR_MAX_SEND_ERROR_MS = 5.0

@@ -29,7 +29,7 @@ import rerun as rr
 import zenoh
 
 from . import ros2, ros2_msgs, wire
-from .report import load_dbc
+from .dbc import load_dbc
 from .viewer_args import DEFAULT_ENDPOINT
 from .viewer_types import LOGGERS, Context
 from .viewer_types.can import CanColumns

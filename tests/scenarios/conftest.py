@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from canbench import checks, report, run, scenario
+from canbench import analysis, checks, dbc, report, run, scenario
 
 
 def pytest_addoption(parser):
@@ -66,10 +66,10 @@ def pytest_sessionfinish(session, exitstatus):
     result.metrics["verdicts"] = getattr(pytest, "_bench_verdicts", {})
     result.metrics["problems"] = checks.failing(result)
     result.metrics["passed"] = all(v in ("passed", "skipped") for v in result.metrics["verdicts"].values())
-    run.write_metrics(result)
+    analysis.write_metrics(result)
     # recordings and the HTML page come after the verdicts they show; a failure here is
     # reported, never allowed to change a verdict
-    writers = {"recording.mcap": lambda p: report.write_mcap(result, p, report.load_dbc(result.scenario.dbc)),
+    writers = {"recording.mcap": lambda p: report.write_mcap(result, p, dbc.load_dbc(result.scenario.dbc)),
                "report.html": lambda p: report.write_html(result, p)}
     for name, write in writers.items():
         try:

@@ -9,7 +9,7 @@ import tracemalloc
 import can
 import pytest
 
-from canbench import commands, ecu, tracegen
+from canbench import commands, periodic, plans
 from canbench.scenario import Commands, Ecu, Message
 from canbench.trace import TraceFrame
 
@@ -25,24 +25,24 @@ def key(m: can.Message) -> tuple:
 
 def eager_periodic(messages, seconds: float, start: float) -> list[can.Message]:
     """The plan as it was made before (every frame, then one stable sort): the reference."""
-    frames = [tracegen.periodic_frame(m, n, start, "vcan0") for m in messages
-              for n in range(tracegen.periodic_count(m, seconds))]
+    frames = [periodic.periodic_frame(m, n, start, "vcan0") for m in messages
+              for n in range(periodic.periodic_count(m, seconds))]
     return sorted(frames, key=lambda f: (f.timestamp, f.arbitration_id))
 
 
 def test_periodic_plan_is_the_sorted_frames_with_their_count_and_last():
-    plan = ecu.timed_plan([], 1.0, 1, 0.0, "vcan0", {})
+    plan = plans.timed_plan([], 1.0, 1, 0.0, "vcan0", {})
     assert (plan.count, plan.last, list(plan.frames())) == (0, None, [])
     reference = eager_periodic(MESSAGES, 3.0, 0.5)
-    lazy = list(tracegen.periodic_frames(MESSAGES, 3.0, 0.5))
+    lazy = list(periodic.periodic_frames(MESSAGES, 3.0, 0.5))
     assert [key(m) for m in lazy] == [key(m) for m in reference]
-    last = tracegen.periodic_last(MESSAGES, 3.0, 0.5)
+    last = periodic.periodic_last(MESSAGES, 3.0, 0.5)
     assert key(last) == key(reference[-1])
 
 
 def test_ecu_schedule_counts_the_own_copies_of_the_last_id():
     e = Ecu(name="body", bus="vcan0", role="periodic", run_s=2.0, messages=tuple(MESSAGES), start_offset_s=0.1)
-    plan = ecu.schedule(e, None)
+    plan = plans.schedule(e, None)
     frames = [m for _, m in plan.frames()]
     assert plan.count == len(frames) == len(eager_periodic(MESSAGES, 2.0, 0.1))
     assert key(plan.last) == key(frames[-1])
@@ -55,7 +55,7 @@ def test_timed_plan_loops_remaps_and_knows_its_last_frame():
     trace = [TraceFrame(line=i + 1, message=can.Message(timestamp=100 + i * 0.01, arbitration_id=id_, dlc=1,
                                                         data=bytes([i])))
              for i, id_ in enumerate([0x10, 0x20, 0x10, 0x30])]
-    plan = ecu.timed_plan(trace, 2.0, 3, 1.0, "vcan1", {0x30: 0x10})
+    plan = plans.timed_plan(trace, 2.0, 3, 1.0, "vcan1", {0x30: 0x10})
     frames = list(plan.frames())
     assert plan.count == len(frames) == 12
     assert [line for line, _ in frames] == [1, 2, 3, 4] * 3
@@ -68,7 +68,7 @@ def test_timed_plan_loops_remaps_and_knows_its_last_frame():
 
 def test_an_hour_of_a_busy_bus_is_not_held_in_memory():
     hour = [Message(0x100 + i, 10) for i in range(5)]  # the soak's 500 frames/s
-    plan = ecu.schedule(Ecu(name="body", bus="vcan0", role="periodic", run_s=3600.0, messages=tuple(hour)), None)
+    plan = plans.schedule(Ecu(name="body", bus="vcan0", role="periodic", run_s=3600.0, messages=tuple(hour)), None)
     assert plan.count == 1_800_000
     tracemalloc.start()
     frames = plan.frames()

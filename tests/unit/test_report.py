@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from canbench import checks, oracle, report, run, scenario, wire
+from canbench import analysis, checks, dbc, oracle, report, scenario, wire
 
 pytestmark = pytest.mark.unit
 REPO = Path(__file__).resolve().parents[2]
@@ -25,7 +25,7 @@ def result(tmp_path):
             if i != 50:
                 f.write(f"{o.t_ns + 400_000}\tvehicle/can/rx\t{wire.encode(o.frame).hex()}\t"
                         f"{wire.encode_attachment(i, [o.t_ns]).hex()}\n")
-    r = run.analyse(sc, "synthetic", tmp_path, "vehicle/can", {}, None, 2.0)
+    r = analysis.analyse(sc, "synthetic", tmp_path, "vehicle/can", {}, None, 2.0)
     problems = checks.failing(r)
     r.metrics["verdicts"] = {f"test_check[{c}]": "failed" if c in problems else "passed" for c in checks.CHECKS}
     r.metrics["problems"], r.metrics["passed"] = problems, not problems
@@ -33,7 +33,7 @@ def result(tmp_path):
 
 
 def test_mcap_has_documented_channels_and_signals(result, tmp_path):
-    report.write_mcap(result, tmp_path / "recording.mcap", report.load_dbc(result.scenario.dbc))
+    report.write_mcap(result, tmp_path / "recording.mcap", dbc.load_dbc(result.scenario.dbc))
     with open(tmp_path / "recording.mcap", "rb") as f:
         reader = make_reader(f)
         counts: dict[str, int] = {}

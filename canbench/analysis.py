@@ -1,0 +1,156 @@
+"""The analysis of a run: the captures, send logs and ECU summaries a run left in its directory,
+compared by the oracle per bus (CAN -> Zenoh, Zenoh -> CAN, round trips through echo ECUs), into
+a RunResult and metrics.json. Needs no network: checks, reports and tests use it on a directory."""
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from . import oracle, wire
+from .capture import read_zenoh_capture
+from .faults import disruptive
+from .runkeys import rx_key, tx_key
+from .scenario import Scenario
+
+METRICS_SCHEMA_VERSION = 1
+
+
+@dataclass
+class BusResult:
+    bus: str
+    rx_key: str
+    can_frames: list[oracle.Observed]
+    zenoh_frames: list[oracle.Observed]
+    comparison: oracle.Comparison       # CAN -> Zenoh
+    problems: list[str]
+    commands: list[oracle.Observed] = field(default_factory=list)
+    zenoh_to_can: oracle.Comparison | None = None
+    round_trip: oracle.Comparison | None = None
+    cycle_times: dict = field(default_factory=dict)  # id -> {"can": stats, "zenoh": stats}
+    bus_frames: list[oracle.Observed] = field(default_factory=list)  # the whole bus capture
+    ecu_frames_not_captured: int = 0  # frames an ECU logged as sent that the bus capture lacks
+
+
+@dataclass
+class RunResult:
+    scenario: Scenario
+    run_id: str
+    run_dir: Path
+    buses: list[BusResult]
+    ecus: dict[str, dict]
+    bridge_stats: dict | None
+    unexpected_keys: list[str]
+    metrics: dict = field(default_factory=dict)
+    baseline: dict | None = None  # metrics.json of the run to compare with (relative regression gate)
+
+
+Located = list[tuple[str, oracle.Observed]]  # (bus, frame)
+
+
+def expected_answers(scenario: Scenario, commands: Located) -> Located:
+    """(bus, the echo's answer) for every command an echo ECU answers; the answer carries the
+    command's put time and place, so latency is the round trip and failures name the command."""
+    out = []
+    for bus, cmd in commands:
+        f = cmd.frame
+        echo = next((e for e in scenario.echoes if e.bus == bus and f.can_id in e.echo_ids), None)
+        if echo is None or f.remote:
+            continue
+        can_id, data = echo.answer(f.can_id, f.data)
+        out.append((bus, oracle.Observed(wire.Frame(can_id, f.dlc, data, f.extended), cmd.t_ns, cmd.index,
+                                         line=cmd.line, origin=cmd.origin)))
+    return out
+
+
+def answer_ids(scenario: Scenario) -> dict[str, set[int]]:
+    """Per bus: the ids of echo answers."""
+    out: dict[str, set[int]] = {}
+    for e in scenario.echoes:
+        out.setdefault(e.bus, set()).update(i + e.answer_id_offset for i in e.echo_ids)
+    return out
+
+
+def _sent_by_ecus(run_dir: Path, bus: str) -> Counter:
+    """What the ECUs on this bus say they sent (their send logs), by frame content."""
+    out: Counter = Counter()
+    for log in sorted(run_dir.glob("ecu-*.sent.tsv")):
+        out.update(oracle.frame_key(r.frame) for r in oracle.read_sent_log(log) if r.bus == bus)
+    return out
+
+
+def _flood_frames(scenario: Scenario, bus: str, can_frames: list[oracle.Observed]) -> Counter:
+    """The frames of the bus's can_flood steps, by content (told by their id, the flood's alone)."""
+    ids = {f.can_id for f in scenario.faults if f.action == "can_flood" and f.bus == bus}
+    return Counter(oracle.frame_key(o.frame) for o in can_frames if o.frame.can_id in ids and not o.frame.extended)
+
+
+def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.Observed, oracle.Observed]]) -> dict:
+    can_side = oracle.cycle_times(can_frames)
+    zenoh_side = oracle.cycle_times(sorted((r for _, r in matched), key=lambda o: o.index))
+    return {ident: {"can": stats, "zenoh": zenoh_side.get(ident)} for ident, stats in can_side.items()}
+
+
+def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: dict[str, dict],
+            bridge_stats: dict | None, traffic_s: float, baseline: dict | None = None,
+            faults: dict | None = None) -> RunResult:
+    samples = read_zenoh_capture(run_dir / "zenoh.tsv")
+    n = len(scenario.bus_names)
+    expected_keys = {rx_key(prefix, b, n) for b in scenario.bus_names}
+    expected_keys |= {tx_key(prefix, b, n) for b in scenario.bus_names}
+    unexpected_keys = sorted({key for _, key, _, _ in samples if key not in expected_keys})
+    commands_log = run_dir / "commands.tsv"
+    commands = [(r.bus, oracle.Observed(r.frame, r.t_ns, i, line=r.log_line, origin="commands.tsv"))
+                for i, r in enumerate(oracle.read_sent_log(commands_log) if commands_log.exists() else [])]
+    answers = expected_answers(scenario, commands)
+    buses = []
+    for bus in scenario.bus_names:
+        key = rx_key(prefix, bus, n)
+        can_frames = oracle.read_candump(run_dir / "can.log", bus)
+        zenoh_frames, problems = oracle.zenoh_frames(samples, key)
+        bus_commands = [c for b, c in commands if b == bus]
+        tx = None
+        from_ecus = can_frames
+        sent_by_ecus = _sent_by_ecus(run_dir, bus)
+        if scenario.commands:
+            # every bus frame not from an ECU or a flood is the bridge's
+            tx, from_ecus = oracle.compare_commands(bus_commands, can_frames,
+                                                    sent_by_ecus + _flood_frames(scenario, bus, can_frames))
+        comparison = oracle.compare(from_ecus, zenoh_frames)
+        bus_answers = [a for b, a in answers if b == bus]
+        round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
+        if faults:
+            windows = [(w["start_ns"], w["end_ns"]) for w in disruptive(faults["windows"])]
+            for c in (comparison, tx, round_trip):
+                if c is not None:
+                    oracle.apply_fault_windows(c, windows)
+        not_captured = sum((sent_by_ecus - Counter(oracle.frame_key(o.frame) for o in can_frames)).values())
+        buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
+                               _cycle_times(from_ecus, comparison.matched), can_frames, not_captured))
+    result = RunResult(scenario, run_id, run_dir, buses, ecus, bridge_stats, unexpected_keys, baseline=baseline)
+    result.metrics = {
+        "schema_version": METRICS_SCHEMA_VERSION,
+        "run_id": run_id,
+        "scenario": scenario.name,
+        "traffic_s": round(traffic_s, 3),
+        "can_to_zenoh": {b.bus: b.comparison.summary() for b in buses},
+        "zenoh_to_can": {b.bus: b.zenoh_to_can.summary() for b in buses if b.zenoh_to_can},
+        "round_trip": {b.bus: b.round_trip.summary() for b in buses if b.round_trip},
+        "cycle_times": {b.bus: b.cycle_times for b in buses},
+        "ecus": ecus,
+        "bridge_stats": bridge_stats,
+        "unexpected_keys": unexpected_keys,
+        "baseline_run_id": baseline.get("run_id") if baseline else None,
+        "faults": faults,
+        "verdicts": {},
+    }
+    write_metrics(result)
+    return result
+
+
+def write_metrics(result: RunResult) -> None:
+    path = result.run_dir / "metrics.json"
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result.metrics, indent=2, default=str))
+    tmp.replace(path)  # never a half-written file

@@ -1,0 +1,75 @@
+"""What an ECU or the commander sends, as a plan made lazily (an hour of a busy bus held as
+can.Message objects is gigabytes): a trace's frames with speed, loops, offset and id remap, or
+the periodic engine's frames; and the send log both write (ecu-<name>.sent.tsv, commands.tsv:
+trace line, send time, the frame in candump form), which the oracle reads back."""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import can
+
+from . import periodic
+from .scenario import Ecu, Scenario
+from .trace import read_trace
+from .wire import Frame
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What an ECU sends, in send order. The frames are made as they are sent (frames() gives a
+    fresh iterator each call): an hour at 500 frames/s held as can.Message objects is ~0.6 GiB."""
+    frames: Callable[[], Iterator[tuple[int, can.Message]]]  # (trace line, message); generated: line 0
+    count: int
+    last: can.Message | None
+    last_id_count: int  # frames with the last frame's id and id format: the own copies to wait for
+
+
+def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
+    """The ECU's plan with speed, loops, offset and id remap applied."""
+    if ecu.role == "periodic":
+        msgs, run_s, start, bus = ecu.messages, ecu.run_s, ecu.start_offset_s, ecu.bus
+        last = periodic.periodic_last(msgs, run_s, start, bus)
+        return Plan(frames=lambda: ((0, m) for m in periodic.periodic_frames(msgs, run_s, start, bus)),
+                    count=sum(periodic.periodic_count(m, run_s) for m in msgs), last=last,
+                    last_id_count=sum(periodic.periodic_count(m, run_s) for m in msgs
+                                      if last and (m.can_id, m.extended) == (last.arbitration_id,
+                                                                             last.is_extended_id)))
+    frames = read_trace(ecu.trace, None) if ecu.trace else []
+    return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap)
+
+
+def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
+               id_remap: dict[int, int]) -> Plan:
+    """A trace's frames (canbench.trace.TraceFrame) looped `loops` times at `speed`."""
+    if not frames:
+        return Plan(frames=lambda: iter(()), count=0, last=None, last_id_count=0)
+    t0 = frames[0].message.timestamp
+    span = frames[-1].message.timestamp - t0
+    period = span + (frames[1].message.timestamp - t0 if len(frames) > 1 else 0.001)
+
+    def timed(tf, loop: int) -> can.Message:
+        m = tf.message
+        return can.Message(timestamp=start_offset_s + (m.timestamp - t0 + loop * period) / speed,
+                           arbitration_id=id_remap.get(m.arbitration_id, m.arbitration_id),
+                           is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame, dlc=m.dlc,
+                           data=b"" if m.is_remote_frame else m.data, channel=bus)
+
+    last = timed(frames[-1], loops - 1)
+    per_loop = sum(1 for tf in frames if (id_remap.get(tf.message.arbitration_id, tf.message.arbitration_id),
+                                          tf.message.is_extended_id) == (last.arbitration_id, last.is_extended_id))
+    return Plan(frames=lambda: ((tf.line, timed(tf, loop)) for loop in range(loops) for tf in frames),
+                count=loops * len(frames), last=last, last_id_count=loops * per_loop)
+
+
+def frame_of(msg: can.Message) -> Frame:
+    return Frame(msg.arbitration_id, msg.dlc, b"" if msg.is_remote_frame else bytes(msg.data),
+                 msg.is_extended_id, msg.is_remote_frame)
+
+
+SENT_LOG_HEADER = "# trace_line\tsend_time_ns\tframe (candump form)\n"
+
+
+def sent_line(line: int, t_ns: int, frame: Frame, bus: str) -> str:
+    """One send-log line: source line (0: generated), send time (ns), the frame in candump form."""
+    return f"{line}\t{t_ns}\t{frame.candump(bus)}\n"
