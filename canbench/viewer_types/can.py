@@ -9,7 +9,7 @@ from collections import defaultdict
 import rerun as rr
 
 from .. import wire
-from ..report import decode_signals
+from ..dbc import decode_signals
 from . import Context, logger
 
 
