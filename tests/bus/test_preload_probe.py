@@ -45,3 +45,13 @@ def test_fork_while_a_thread_waits_for_the_hub(bus):
         probe.stdin.write("stopped\n")
         lines += expect(probe, "resume")
     finish(probe, lines)
+
+
+def test_unbound_socket_polls_and_reads_like_the_kernels(bus):
+    """Defect 7: poll/epoll on an unbound emulated socket reported POLLHUP at once (kernel:
+    times out), recv ignored SO_RCVTIMEO and blocked forever."""
+    probe = start_probe(bus, "unbound", "vcan0")
+    lines = expect(probe, "ready")
+    bus.run(["cansend", "vcan0", "1AB#01"])
+    lines = finish(probe, lines)
+    assert lines[-1] == "ok: after bind: frame 1AB"

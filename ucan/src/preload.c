@@ -194,7 +194,7 @@ static void complain_hub_down(const char *path, int err)
 }
 
 /* Connects fd (blocking for the duration) to the hub. */
-static int hub_connect(int fd)
+static int hub_connect_as(int fd, int complain)
 {
 	struct sockaddr_un addr;
 	if (hub_addr(&addr) < 0)
@@ -207,12 +207,18 @@ static int hub_connect(int fd)
 	if (flags >= 0 && (flags & O_NONBLOCK))
 		get_fcntl()(fd, F_SETFL, (void *)(intptr_t)flags);
 	if (rc < 0) {
-		complain_hub_down(addr.sun_path, err);
+		if (complain)
+			complain_hub_down(addr.sun_path, err);
 		errno = err;
 		return -1;
 	}
 	atomic_store(&hub_complained, 0);
 	return 0;
+}
+
+static int hub_connect(int fd)
+{
+	return hub_connect_as(fd, 1);
 }
 
 static int wait_readable(int fd)
@@ -399,6 +405,10 @@ PUBLIC int socket(int domain, int type, int protocol)
 		errno = err;
 		return -1;
 	}
+	/* connected from the start, an unbound socket polls and reads like the
+	 * kernel's: nothing to read, writable (an unconnected one would report
+	 * POLLHUP). The hub sends nothing before BIND. Hub down: bind() retries. */
+	cs->connected = hub_connect_as(fd, 0) == 0;
 	return fd;
 }
 
@@ -791,23 +801,30 @@ static void iov_gather(const struct iovec *iov, size_t n, void *out, size_t len)
 	}
 }
 
-static int block_forever_unless_nonblocking(int fd, int flags)
+/* An unbound socket that could not reach the hub: nothing ever arrives, but
+ * O_NONBLOCK, MSG_DONTWAIT and SO_RCVTIMEO (set natively) apply as usual. */
+static int recv_nothing(int fd, int flags)
 {
 	int fl = get_fcntl()(fd, F_GETFL, NULL);
 	if ((flags & MSG_DONTWAIT) || (fl >= 0 && (fl & O_NONBLOCK))) {
 		errno = EAGAIN;
 		return -1;
 	}
-	/* an unbound CAN_RAW socket never receives anything */
-	for (;;)
-		if (ppoll(NULL, 0, NULL, NULL) < 0 && errno == EINTR)
-			return -1;
+	struct timeval tv = { 0, 0 };
+	socklen_t len = sizeof(tv);
+	get_getsockopt()(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, &len);
+	struct timespec ts = { tv.tv_sec, tv.tv_usec * 1000 };
+	int forever = tv.tv_sec == 0 && tv.tv_usec == 0;
+	if (ppoll(NULL, 0, forever ? NULL : &ts, NULL) < 0)
+		return -1; /* EINTR */
+	errno = EAGAIN;
+	return -1;
 }
 
 static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int flags)
 {
-	if (!cs->bound)
-		return block_forever_unless_nonblocking(fd, flags);
+	if (!cs->bound && !cs->connected)
+		return recv_nothing(fd, flags);
 	struct iovec iov[UIO_MAXIOV];
 	if (user->msg_iovlen + 1 > UIO_MAXIOV) {
 		errno = EMSGSIZE;
