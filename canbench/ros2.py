@@ -107,6 +107,63 @@ def node_token(domain_id: int, zid: str, nid: int, namespace: str, node: str) ->
                      mangle(namespace or "/"), node])
 
 
+# ---- a node as rmw_zenoh runs one (the bench's own ROS 2 publishers: tests, benchmarks) ----
+
+def attachment(sequence: int, source_ns: int, gid: bytes) -> bytes:
+    """rmw_zenoh's per-sample attachment: int64 sequence number, int64 source timestamp,
+    the publisher's 16-byte GID, in Zenoh's serialization (z_serialize)."""
+    from zenoh.ext import Int64, z_serialize
+    return z_serialize((Int64(sequence), Int64(source_ns), gid)).to_bytes()
+
+
+class Publisher:
+    def __init__(self, node: "Node", eid: int, topic: str, ros_type: str):
+        self.session, self.topic, self.ros_type = node.session, topic, ros_type
+        self.type_hash = type_hash(ros_type)
+        self.key = data_key(node.domain_id, topic, ros_type, self.type_hash)
+        token = publisher_token(node.domain_id, node.zid, node.nid, eid, node.namespace, node.name, topic, ros_type,
+                                self.type_hash)
+        self.gid = hashlib.sha256(token.encode()).digest()[:16]
+        self.publisher = self.session.declare_publisher(self.key, congestion_control=node.congestion_control)
+        self.token = self.session.liveliness().declare_token(token)  # after the publisher: ready when seen
+        self.sequence = 0
+
+    def put(self, payload) -> None:
+        """A message (a ros2_msgs struct) or raw CDR bytes (tests send malformed ones)."""
+        import time
+        self.sequence += 1
+        data = payload if isinstance(payload, bytes) else payload.serialize()
+        self.publisher.put(data, attachment=attachment(self.sequence, time.time_ns(), self.gid))
+
+    def undeclare(self) -> None:
+        if self.token is not None:
+            self.token.undeclare()
+            self.publisher.undeclare()
+            self.token = None
+
+
+class Node:
+    """Liveliness tokens, data keys and attachments as rmw_zenoh declares them, on a Zenoh session."""
+
+    def __init__(self, session, name: str, namespace: str = "/", domain_id: int = 0, nid: int = 0):
+        import zenoh
+        self.session, self.name, self.namespace, self.domain_id, self.nid = session, name, namespace, domain_id, nid
+        self.zid = str(session.info.zid())
+        self.congestion_control = zenoh.CongestionControl.BLOCK  # a test publisher loses nothing
+        self.token = session.liveliness().declare_token(node_token(domain_id, self.zid, nid, namespace, name))
+        self.publishers: list[Publisher] = []
+
+    def publisher(self, topic: str, ros_type: str) -> Publisher:
+        pub = Publisher(self, self.nid + 1 + len(self.publishers), topic, ros_type)
+        self.publishers.append(pub)
+        return pub
+
+    def close(self) -> None:
+        for pub in self.publishers:
+            pub.undeclare()
+        self.token.undeclare()
+
+
 # ---- type descriptions and RIHS01 hashes (REP-2011) ----
 
 # rosidl's FieldType ids (type_description_interfaces/msg/FieldType.msg)

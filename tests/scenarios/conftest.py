@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from canbench import analysis, checks, dbc, report, run, scenario
+from canbench import analysis, checks, dbc, recording, report, run, scenario
 
 
 def pytest_addoption(parser):
@@ -69,7 +69,7 @@ def pytest_sessionfinish(session, exitstatus):
     analysis.write_metrics(result)
     # recordings and the HTML page come after the verdicts they show; a failure here is
     # reported, never allowed to change a verdict
-    writers = {"recording.mcap": lambda p: report.write_mcap(result, p, dbc.load_dbc(result.scenario.dbc)),
+    writers = {"recording.mcap": lambda p: recording.write_mcap(result, p, dbc.load_dbc(result.scenario.dbc)),
                "report.html": lambda p: report.write_html(result, p)}
     for name, write in writers.items():
         try:

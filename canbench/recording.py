@@ -1,0 +1,106 @@
+"""recording.mcap of a bench run, in ROS 2's own encoding so that Foxglove, Rerun
+(`rerun recording.mcap`, `rerun mcap convert`) and ROS 2 bag tooling open it
+natively: every message is CDR, every schema a ROS 2 .msg definition
+(schema encoding ros2msg, message encoding cdr; profile ros2).
+
+Channels (header.stamp = log time; header.frame_id = the bus):
+  /can/<bus>                     can_msgs/msg/Frame  every frame on the bus (log time: bus timestamp)
+  /zenoh/<bus>                   can_msgs/msg/Frame  every frame the consumer received (log time: receive)
+  /commands/<bus>                can_msgs/msg/Frame  every command put on the tx key (log time: put)
+  /latency/<bus>                 std_msgs/msg/Float64  CAN -> Zenoh latency of each matched frame, ms
+  /signals/<bus>/<msg>/<signal>  std_msgs/msg/Float64  DBC-decoded signals of bus frames (Foxglove plots
+                                                      `/signals/vcan0/EngineData/EngineSpeed.data`)
+
+`canbench view recording.mcap` reads it back through the live viewer's decoders
+and loggers (view_mcap): the same entities as a live run."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from . import ros2, ros2_msgs, wire
+from .dbc import decode_signals
+
+if TYPE_CHECKING:  # the viewer's side needs rerun-sdk, writing a recording does not
+    from .oracle import Observed
+    from .run import RunResult
+    from .viewer_types import Context
+
+FRAME, FLOAT64 = "can_msgs/msg/Frame", "std_msgs/msg/Float64"
+
+
+def can_frame_msg(bus: str, t_ns: int, f: wire.Frame) -> ros2_msgs.CanFrame:
+    stamp = ros2_msgs.Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+    return ros2_msgs.CanFrame(header=ros2_msgs.Header(stamp=stamp, frame_id=bus), id=f.can_id, is_rtr=f.remote,
+                              is_extended=f.extended, dlc=f.dlc,
+                              data=(b"" if f.remote else f.data).ljust(8, b"\0"))  # type: ignore[arg-type]
+
+
+class Ros2McapWriter:
+    """Channels created as topics first appear, one schema per ROS 2 type."""
+
+    def __init__(self, out):
+        self.writer = Writer(out)
+        self.writer.start(profile="ros2", library="canbench")
+        self.schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+        self.seqs: dict[str, int] = {}
+
+    def write(self, topic: str, ros_type: str, t_ns: int, msg) -> None:
+        if topic not in self.channels:
+            if ros_type not in self.schemas:
+                self.schemas[ros_type] = self.writer.register_schema(
+                    ros_type, "ros2msg", ros2.msg_definition(ros_type).encode())
+            self.channels[topic] = self.writer.register_channel(topic, "cdr", self.schemas[ros_type])
+        self.seqs[topic] = self.seqs.get(topic, 0) + 1
+        self.writer.add_message(self.channels[topic], log_time=t_ns, publish_time=t_ns, sequence=self.seqs[topic],
+                                data=msg.serialize())
+
+    def frame(self, topic: str, bus: str, o: Observed) -> None:
+        self.write(topic, FRAME, o.t_ns, can_frame_msg(bus, o.t_ns, o.frame))
+
+
+def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
+    with open(path, "wb") as out:
+        w = Ros2McapWriter(out)
+        for b in result.buses:
+            for o in b.bus_frames:
+                w.frame(f"/can/{b.bus}", b.bus, o)
+                if dbc is not None and not o.frame.remote and (signals := decode_signals(dbc, o.frame)):
+                    for name, value in signals[1].items():
+                        w.write(f"/signals/{b.bus}/{signals[0]}/{name}", FLOAT64, o.t_ns, ros2_msgs.Float64(value))
+            latency_of = {r.index: (r.t_ns - s.t_ns) / 1e6 for s, r in b.comparison.matched}
+            for o in b.zenoh_frames:
+                w.frame(f"/zenoh/{b.bus}", b.bus, o)
+                if o.index in latency_of:
+                    w.write(f"/latency/{b.bus}", FLOAT64, o.t_ns, ros2_msgs.Float64(latency_of[o.index]))
+            for o in b.commands:
+                w.frame(f"/commands/{b.bus}", b.bus, o)
+        w.writer.add_metadata("canbench.run", {"run_id": result.run_id, "scenario": result.scenario.name,
+                                               "passed": str(result.metrics.get("passed"))})
+        w.writer.finish()
+
+
+def view_mcap(path: Path, ctx: Context) -> tuple[int, int]:
+    """Every ROS 2 (CDR) channel of an MCAP file through the viewer's loggers, at the
+    topic's path (/can/vcan0 -> can/vcan0/<id>/raw); (messages logged, malformed)."""
+    import rerun as rr
+
+    from .viewer_types import LOGGERS
+    count = malformed = 0
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if schema is None or schema.encoding != "ros2msg" or schema.name not in LOGGERS:
+                continue
+            rr.set_time("time", timestamp=message.log_time / 1e9)
+            ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
+            try:
+                LOGGERS[schema.name](ctx, channel.topic.strip("/"), ros2_msgs.decode(schema.name, message.data))
+                count += 1
+            except Exception as e:  # noqa: BLE001 - as live: a bad message is shown and counted, never fatal
+                rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
+                malformed += 1
+    return count, malformed
