@@ -10,7 +10,7 @@
 
 enum opt_id {
 	OPT_ENABLED = 256, OPT_ROUTER, OPT_LISTEN, OPT_MODE, OPT_PERIOD, OPT_BATCH, OPT_PREFIX, OPT_NAME, OPT_CAN,
-	OPT_ALLOW, OPT_DENY, OPT_RX_PRIORITY, OPT_RX_CONGESTION, OPT_RX_EXPRESS, OPT_RX_QUEUE, OPT_ZENOH_CONFIG,
+	OPT_ALLOW, OPT_DENY, OPT_RX_PRIORITY, OPT_RX_CONGESTION, OPT_RX_EXPRESS, OPT_RX_QUEUE, OPT_TX_QUEUE, OPT_ZENOH_CONFIG,
 	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_HELP,
 };
 
@@ -35,6 +35,7 @@ static const struct option_spec specs[] = {
 	{ OPT_RX_CONGESTION, "rx-congestion", "ZENOH_RX_CONGESTION", "block|drop", "Zenoh congestion control of CAN -> Zenoh (default block)" },
 	{ OPT_RX_EXPRESS, "rx-express", "ZENOH_RX_EXPRESS", "0|1", "send CAN -> Zenoh samples without Zenoh batching (default 0)" },
 	{ OPT_RX_QUEUE, "rx-queue-frames", "ZENOH_RX_QUEUE_FRAMES", "N", "frames queued between CAN reader and publisher (default 65536)" },
+	{ OPT_TX_QUEUE, "tx-queue-frames", "ZENOH_TX_QUEUE_FRAMES", "N", "command frames queued for CAN; a command that does not fit is refused (default 2048)" },
 	{ OPT_ZENOH_CONFIG, "zenoh-config", "ZENOH_CONFIG", "FILE", "Zenoh JSON5 config applied first (TLS, auth)" },
 	{ OPT_COMPRESSION, "compression", "ZENOH_COMPRESSION", "0|1", "compress the Zenoh transport (default 0)" },
 	{ OPT_ROS2_TOPIC, "ros2-topic", "ZENOH_ROS2_TOPIC", "TOPIC", "also publish can_msgs/msg/Frame on this ROS 2 topic (default off)" },
@@ -98,13 +99,13 @@ int zn_parse_id_ranges(const char *text, zn_id_range_t *out, size_t max, size_t 
 			p += 2;
 		}
 		errno = 0;
-		unsigned long first = strtoul(p, &end, 16), last = first;
-		if (end == p || errno)
+		unsigned long long first = strtoull(p, &end, 16), last = first;
+		if (end == p || errno || *p == '-')
 			goto bad;
 		if (*end == '-') {
 			char *q = end + 1;
-			last = strtoul(q, &end, 16);
-			if (end == q || errno)
+			last = strtoull(q, &end, 16);
+			if (end == q || errno || *q == '-')
 				goto bad;
 		}
 		while (*end == ' ')
@@ -113,6 +114,10 @@ int zn_parse_id_ranges(const char *text, zn_id_range_t *out, size_t max, size_t 
 			goto bad;
 		if (*count == max) {
 			snprintf(err, err_len, "more than %zu id ranges", max);
+			return -1;
+		}
+		if (first > CAN_EXTD_ID_MASK || last > CAN_EXTD_ID_MASK) { /* never cut to 32 bits */
+			snprintf(err, err_len, "id range '%s' is beyond 0x%X (29 bits)", tok, (unsigned)CAN_EXTD_ID_MASK);
 			return -1;
 		}
 		r.first = (uint32_t)first;
@@ -188,6 +193,7 @@ static int apply(zn_node_config_t *cfg, enum opt_id id, const char *value, const
 	case OPT_PERIOD:
 	case OPT_BATCH:
 	case OPT_RX_QUEUE:
+	case OPT_TX_QUEUE:
 	case OPT_RX_PRIORITY:
 		if (parse_u32(value, &u) < 0) {
 			snprintf(err, err_len, "%s='%s' is not a whole number%s", source, value,
@@ -200,6 +206,8 @@ static int apply(zn_node_config_t *cfg, enum opt_id id, const char *value, const
 			cfg->batch_max_frames = u;
 		else if (id == OPT_RX_QUEUE)
 			cfg->rx_queue_frames = u;
+		else if (id == OPT_TX_QUEUE)
+			cfg->tx_queue_frames = u;
 		else
 			cfg->rx_qos.priority = u > 255 ? 0 : (uint8_t)u;
 		return 0;

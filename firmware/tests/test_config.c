@@ -56,6 +56,10 @@ static void test_precedence(void)
 	CHECK(cfg.rx_qos.congestion == ZN_CONGESTION_DROP);
 	CHECK(cfg.allow_count == 2 && cfg.allow[1].extended && cfg.allow[1].first == 0x18DA0000);
 	clear_env();
+	const char *endpoints[] = { "--router", "tls/[::1]:7447, tcp/router.local:7447#iface=lo,", "--deny-ids",
+				    "e:1FFFFFFF", "--tx-queue-frames", "4096", NULL };
+	CHECK(parse(&cfg, err, endpoints) == ZN_CONFIG_OK);
+	CHECK(cfg.deny_count == 1 && cfg.deny[0].first == 0x1FFFFFFF && cfg.tx_queue_frames == 4096);
 }
 
 static void expect_error(const char *const *args, const char *fragment)
@@ -83,6 +87,17 @@ static void test_errors(void)
 	expect_error((const char *[]){ "stray", NULL }, "unexpected argument 'stray'");
 	expect_error((const char *[]){ "--batch-max-frames", "5000", NULL }, "batch max 5000");
 	expect_error((const char *[]){ "--rx-priority", "9", NULL }, "priority 9");
+	/* issue 19, defect 13: no silent 32-bit truncation (this was taken as 0x7FF) */
+	expect_error((const char *[]){ "--deny-ids", "1000007FF", NULL }, "id range '1000007FF' is beyond 0x1FFFFFFF");
+	expect_error((const char *[]){ "--allow-ids", "e:0-FFFFFFFFFFFFFFFFF", NULL }, "id range 'e:0-FFFFFFFFFFFFFFFFF'");
+	expect_error((const char *[]){ "--allow-ids", "-5", NULL }, "id range '-5'");
+	/* a malformed endpoint is a configuration error (one line, exit 2), not an open failure */
+	expect_error((const char *[]){ "--router", "tcp/127.0.0.1", NULL }, "router endpoint 'tcp/127.0.0.1' is not");
+	expect_error((const char *[]){ "--router", "tcp127.0.0.1:7447", NULL }, "router endpoint 'tcp127.0.0.1:7447'");
+	expect_error((const char *[]){ "--router", "tcp/127.0.0.1:7447,tcp/:99999", NULL }, "'tcp/:99999'");
+	expect_error((const char *[]){ "--router", "bogus/127.0.0.1:7447", NULL }, "'bogus/127.0.0.1:7447'");
+	expect_error((const char *[]){ "--mode", "peer", "--listen", "tcp/0.0.0.0:x", NULL }, "listen endpoint");
+	expect_error((const char *[]){ "--tx-queue-frames", "10", NULL }, "tx queue 10 frames");
 	setenv("ZENOH_NODE_ENABLED", "perhaps", 1);
 	expect_error((const char *[]){ NULL }, "ZENOH_NODE_ENABLED='perhaps'");
 	clear_env();

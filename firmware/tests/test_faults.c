@@ -53,7 +53,7 @@ static void test_drop_every_second_sample(void)
 	can_message_t c = { .identifier = 0x321, .data_length_code = 1, .data = { 0x42 } };
 	zn_wire_encode(&c, wire, sizeof(wire));
 	CHECK(mock_zenoh_deliver("vehicle/can/tx", wire, 16, NULL, 0) == 0);
-	CHECK(mock_can_tx_count("vcan0") == 1 && mock_can_tx("vcan0", 0).data[0] == 0x42);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1 && mock_can_tx("vcan0", 0).data[0] == 0x42);
 	zn_node_stop();
 }
 

@@ -18,6 +18,7 @@ struct mock_bus {
 	size_t rx_head, rx_len;
 	can_message_t tx[MOCK_FRAMES];
 	size_t tx_len;
+	int stalled;
 };
 
 struct zn_can {
@@ -26,6 +27,7 @@ struct zn_can {
 
 static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t arrived = PTHREAD_COND_INITIALIZER;
+static pthread_cond_t sent = PTHREAD_COND_INITIALIZER; /* a frame transmitted, or a stall lifted */
 static struct mock_bus *buses[MOCK_BUSES];
 
 static struct mock_bus *find_bus(const char *name, int create)
@@ -75,6 +77,26 @@ size_t mock_can_tx_count(const char *bus)
 	return n;
 }
 
+size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms)
+{
+	struct timespec ts = mock_deadline(timeout_ms);
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 1);
+	while (b->tx_len < n && pthread_cond_timedwait(&sent, &lock, &ts) == 0)
+		;
+	size_t got = b->tx_len;
+	pthread_mutex_unlock(&lock);
+	return got;
+}
+
+void mock_can_stall(const char *bus, int stalled)
+{
+	pthread_mutex_lock(&lock);
+	find_bus(bus, 1)->stalled = stalled;
+	pthread_cond_broadcast(&sent);
+	pthread_mutex_unlock(&lock);
+}
+
 can_message_t mock_can_tx(const char *bus, size_t i)
 {
 	can_message_t m;
@@ -117,10 +139,18 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 
 esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
 {
-	(void)timeout_ms;
+	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
+	while (can->bus->stalled)
+		if (can->bus->stalled == MOCK_HOLD)
+			pthread_cond_wait(&sent, &lock);
+		else if (pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
+			pthread_mutex_unlock(&lock);
+			return ESP_ERR_TIMEOUT;
+		}
 	if (can->bus->tx_len < MOCK_FRAMES)
 		can->bus->tx[can->bus->tx_len++] = *msg;
+	pthread_cond_broadcast(&sent);
 	pthread_mutex_unlock(&lock);
 	return ESP_OK;
 }

@@ -40,6 +40,13 @@ static inline struct timespec mock_deadline(int timeout_ms)
 /* CAN */
 void mock_can_inject(const char *bus, const can_message_t *msg, int64_t rx_time_ns);
 size_t mock_can_tx_count(const char *bus);
+/* Waits until at least n frames were transmitted on bus; returns the count. */
+size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms);
+/* A stalled bus takes no frame: zn_can_transmit waits its timeout and fails (as a
+ * controller whose bus is busy or has no acknowledging node). MOCK_HOLD: it
+ * waits, whatever its timeout, until the stall is lifted (0). */
+enum { MOCK_HOLD = 2 };
+void mock_can_stall(const char *bus, int stalled);
 can_message_t mock_can_tx(const char *bus, size_t i);
 
 /* Zenoh */

@@ -23,6 +23,11 @@
 #define ZN_KEY_MAX 256
 #define ZN_ENDPOINTS_MAX 512
 #define ZN_BATCH_MAX_FRAMES 1024 /* 16 KiB payload */
+/* The largest Zenoh message the node needs to receive: a command of
+ * ZN_BATCH_MAX_FRAMES frames with its attachment, plus room for Zenoh's own
+ * framing and the key. The Zenoh port caps reassembly at this, so no
+ * publisher can make the node buffer more (Zenoh's default is 1 GiB). */
+#define ZN_RX_MESSAGE_MAX (ZN_BATCH_MAX_FRAMES * 16 + 12 + ZN_BATCH_MAX_FRAMES * 8 + 8192)
 
 typedef struct {
 	uint32_t first, last; /* inclusive; flags not included: compare raw identifiers */
@@ -46,6 +51,7 @@ typedef struct {
 	size_t deny_count;
 	zn_qos_t rx_qos;		       /* CAN -> Zenoh (telemetry) */
 	uint32_t rx_queue_frames;	       /* frames buffered between CAN reader and publisher */
+	uint32_t tx_queue_frames;	       /* CONFIG_ZENOH_TX_QUEUE_FRAMES: command frames waiting for CAN */
 	char zenoh_config_file[ZN_ENDPOINTS_MAX]; /* optional JSON5 (TLS, auth) */
 	bool compression;			  /* CONFIG_ZENOH_COMPRESSION: compress the Zenoh transport */
 	char ros2_topic[ZN_NAME_MAX]; /* CONFIG_ZENOH_ROS2_TOPIC: also publish can_msgs/msg/Frame here ("" = off) */

@@ -35,6 +35,7 @@ void zn_node_default_config(zn_node_config_t *cfg)
 	 * (docs/benchmark.md): 4x the sustained rate at a third of the CPU per frame, same latency. */
 	cfg->rx_qos = (zn_qos_t){ .priority = 5, .congestion = ZN_CONGESTION_BLOCK, .express = 0 };
 	cfg->rx_queue_frames = CONFIG_ZENOH_RX_QUEUE_FRAMES;
+	cfg->tx_queue_frames = CONFIG_ZENOH_TX_QUEUE_FRAMES;
 #ifdef CONFIG_ZENOH_COMPRESSION
 	cfg->compression = CONFIG_ZENOH_COMPRESSION;
 #endif
@@ -54,6 +55,63 @@ static int valid_key_chunk(const char *s)
 	return 1;
 }
 
+/* One Zenoh endpoint: <protocol>/<address>[?metadata][#config], e.g. tcp/127.0.0.1:7447,
+ * tls/router.local:7447, [::1] in brackets; an IP protocol needs host:port (port 1..65535). */
+static int valid_endpoint(const char *e, size_t n)
+{
+	static const char *const ip_protocols[] = { "tcp", "udp", "tls", "quic", "ws" };
+	static const char *const other_protocols[] = { "unixsock-stream", "unixpipe", "serial", "vsock" };
+	const char *slash = memchr(e, '/', n);
+	if (!slash || slash == e)
+		return 0;
+	size_t proto_len = (size_t)(slash - e), addr_len = n - proto_len - 1;
+	const char *addr = slash + 1;
+	for (size_t i = 0; i < addr_len; i++)
+		if (addr[i] == '?' || addr[i] == '#')
+			addr_len = i; /* metadata and link configuration follow the address */
+	if (addr_len == 0)
+		return 0;
+	for (size_t i = 0; i < sizeof(other_protocols) / sizeof(other_protocols[0]); i++)
+		if (proto_len == strlen(other_protocols[i]) && !memcmp(e, other_protocols[i], proto_len))
+			return 1;
+	int ip = 0;
+	for (size_t i = 0; i < sizeof(ip_protocols) / sizeof(ip_protocols[0]); i++)
+		ip |= proto_len == strlen(ip_protocols[i]) && !memcmp(e, ip_protocols[i], proto_len);
+	const char *colon = NULL;
+	for (size_t i = 0; i < addr_len; i++)
+		if (addr[i] == ':')
+			colon = addr + i;
+	if (!ip || !colon || colon == addr || (addr[0] == '[' && colon[-1] != ']'))
+		return 0;
+	size_t digits = addr_len - (size_t)(colon + 1 - addr);
+	unsigned long port = 0;
+	for (size_t i = 0; i < digits; i++) {
+		if (!isdigit((unsigned char)colon[1 + i]) || digits > 5)
+			return 0;
+		port = port * 10 + (unsigned long)(colon[1 + i] - '0');
+	}
+	return digits > 0 && port >= 1 && port <= 65535;
+}
+
+/* Checks a comma-separated endpoint list (empty items are ignored, as the Zenoh port does). */
+static int check_endpoints(const char *list, char *err, size_t err_len, const char *what)
+{
+	for (const char *p = list; *p;) {
+		while (*p == ' ' || *p == ',')
+			p++;
+		size_t n = strcspn(p, ",");
+		while (n && p[n - 1] == ' ')
+			n--;
+		if (n && !valid_endpoint(p, n)) {
+			snprintf(err, err_len, "%s endpoint '%.*s' is not <protocol>/<host>:<port> (e.g. tcp/127.0.0.1:7447)",
+				 what, (int)n, p);
+			return -1;
+		}
+		p += strcspn(p, ",");
+	}
+	return 0;
+}
+
 esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t err_len)
 {
 #define BAD(...)                                                                                                       \
@@ -65,12 +123,18 @@ esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t er
 		BAD("mode %d is not 0 (client), 1 (peer) or 2 (router)", (int)cfg->mode);
 	if (cfg->mode == ZN_MODE_CLIENT && !cfg->router_address[0])
 		BAD("client mode needs a router address (ZENOH_ROUTER_ADDRESS / --router)");
+	if (check_endpoints(cfg->router_address, err, err_len, "router") != 0 ||
+	    check_endpoints(cfg->listen, err, err_len, "listen") != 0)
+		return ESP_ERR_INVALID_ARG;
 	if (cfg->publish_period_ms > 60000)
 		BAD("publish period %" PRIu32 " ms is over 60000 ms", cfg->publish_period_ms);
 	if (cfg->batch_max_frames < 1 || cfg->batch_max_frames > ZN_BATCH_MAX_FRAMES)
 		BAD("batch max %" PRIu32 " frames is not 1..%d", cfg->batch_max_frames, ZN_BATCH_MAX_FRAMES);
 	if (cfg->rx_queue_frames < 16 || cfg->rx_queue_frames > 1048576)
 		BAD("rx queue %" PRIu32 " frames is not 16..1048576", cfg->rx_queue_frames);
+	if (cfg->tx_queue_frames < ZN_BATCH_MAX_FRAMES || cfg->tx_queue_frames > 65536)
+		BAD("tx queue %" PRIu32 " frames is not %d..65536 (it holds at least one largest command)",
+		    cfg->tx_queue_frames, ZN_BATCH_MAX_FRAMES);
 	if (cfg->bus_count < 1 || cfg->bus_count > ZN_MAX_BUSES)
 		BAD("%zu CAN buses: 1..%d supported", cfg->bus_count, ZN_MAX_BUSES);
 	if (!valid_key_chunk(cfg->node_name))

@@ -28,10 +28,16 @@ struct rx_entry {
 	uint64_t seq;
 };
 
+/* A frame waiting for the transmitter, with the number of the command it came in. */
+struct tx_entry {
+	can_message_t msg;
+	uint32_t cmd;
+};
+
 struct bus_counters {
-	uint64_t can_rx_frames, filtered, rx_queue_drops;
+	uint64_t can_rx_frames, filtered, invalid_frames, rx_queue_drops;
 	uint64_t published_samples, published_frames, publish_errors;
-	uint64_t tx_samples, tx_frames, can_tx_errors;
+	uint64_t tx_samples, tx_frames, can_tx_errors, tx_queue_full, tx_abandoned;
 	uint64_t tx_rejected[ZN_WIRE_REASONS];
 	uint64_t can_reopens;
 };
@@ -41,7 +47,7 @@ struct bus {
 	const char *name;
 	char rx_key[ZN_KEY_MAX], tx_key[ZN_KEY_MAX], token_key[ZN_KEY_MAX];
 	zn_can_t *can;
-	zn_mutex_t *can_lock; /* the reader reopens the port; the subscriber transmits on it */
+	zn_mutex_t *can_lock; /* the reader reopens the port; the transmitter transmits on it */
 	zn_publisher_t *pub;
 	zn_subscriber_t *sub;
 	zn_token_t *token;
@@ -57,6 +63,16 @@ struct bus {
 	struct rx_entry *queue;
 	uint32_t cap, head, len;
 	uint64_t next_seq;
+	uint8_t *payload, *attachment; /* the publisher's sample being built (batch_max_frames) */
+	/* tx queue: ring of tx_entry filled by the subscriber callback, drained by the
+	 * transmitter thread; guarded by tx_lock */
+	zn_mutex_t *tx_lock;
+	zn_cond_t *tx_ready, *tx_idle;
+	struct tx_entry *txq;
+	uint32_t tx_cap, tx_head, tx_len, tx_cmd;
+	int tx_stop;
+	zn_thread_t *transmitter;
+	int cb_inflight, cb_closed; /* atomics: callbacks inside the gate; gate closed (zn_tx_close) */
 	struct bus_counters n;
 };
 
@@ -89,9 +105,13 @@ int zn_stop_wait(int timeout_ms);
 void zn_rx_reader_thread(void *bus);
 void zn_rx_publisher_thread(void *bus);
 
-/* zn_tx.c: the subscriber callback of one bus's tx key */
+/* zn_tx.c: the subscriber callback of one bus's tx key, queueing commands
+ * whole for the transmitter thread. zn_tx_close undeclares the subscriber and
+ * returns once no callback is inside the queue any more. */
 void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
 		      void *bus);
+void zn_tx_transmitter_thread(void *bus);
+void zn_tx_close(struct bus *b);
 
 /* zn_stats.c */
 void zn_stats_monitor_thread(void *arg);

@@ -41,9 +41,20 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 	b->queue = calloc(b->cap, sizeof(*b->queue));
 	if (!b->queue)
 		return ESP_ERR_NO_MEM;
+	/* the sample the publisher builds: one frame in immediate mode, else a batch */
+	size_t batch_max = cfg->publish_period_ms ? cfg->batch_max_frames : 1;
+	b->payload = malloc(batch_max * ZN_WIRE_FRAME_SIZE);
+	b->attachment = malloc(ZN_ATTACHMENT_SIZE(batch_max));
+	b->tx_cap = cfg->tx_queue_frames;
+	b->txq = calloc(b->tx_cap, sizeof(*b->txq));
+	if (!b->payload || !b->attachment || !b->txq)
+		return ESP_ERR_NO_MEM;
 	ZN_TRY(zn_mutex_new(&b->lock));
 	ZN_TRY(zn_mutex_new(&b->can_lock));
 	ZN_TRY(zn_cond_new(&b->nonempty));
+	ZN_TRY(zn_mutex_new(&b->tx_lock));
+	ZN_TRY(zn_cond_new(&b->tx_ready));
+	ZN_TRY(zn_cond_new(&b->tx_idle));
 	if (zn_can_open(b->name, &b->can) != ESP_OK) {
 		zn_log("E", "cannot open CAN bus %s", b->name);
 		return ESP_FAIL;
@@ -102,6 +113,7 @@ esp_err_t zn_node_init(const zn_node_config_t *cfg)
 		struct bus *b = &zn_node.buses[i];
 		ZN_TRY(zn_thread_start(&b->publisher, "zn-pub", zn_rx_publisher_thread, b));
 		ZN_TRY(zn_thread_start(&b->reader, "zn-can", zn_rx_reader_thread, b));
+		ZN_TRY(zn_thread_start(&b->transmitter, "zn-tx", zn_tx_transmitter_thread, b));
 	}
 	ZN_TRY(zn_thread_start(&zn_node.monitor, "zn-mon", zn_stats_monitor_thread, NULL));
 	/* last: the token tells others the bridge forwards both ways from now on */
@@ -141,6 +153,9 @@ void zn_node_stop(void)
 		zn_undeclare_token(zn_node.ros_node_token);
 		zn_node.ros_node_token = NULL;
 	}
+	/* no command callback inside the tx queue from here on */
+	for (size_t i = 0; i < zn_node.cfg.bus_count; i++)
+		zn_tx_close(&zn_node.buses[i]);
 	zn_mutex_lock(zn_node.stop_lock);
 	zn_node.stopping = 1;
 	zn_cond_signal(zn_node.stop_cond);
@@ -152,11 +167,15 @@ void zn_node_stop(void)
 		zn_cond_signal(b->nonempty);
 		zn_mutex_unlock(b->lock);
 		zn_thread_join(b->publisher); /* flushes the pending batch */
+		zn_mutex_lock(b->tx_lock);
+		b->tx_stop = 1;
+		zn_cond_signal(b->tx_ready);
+		zn_mutex_unlock(b->tx_lock);
+		zn_thread_join(b->transmitter); /* writes what is queued while the bus takes it */
 	}
 	zn_thread_join(zn_node.monitor);
 	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
-		zn_undeclare_subscriber(b->sub);
 		zn_undeclare_publisher(b->pub);
 		if (b->ros_pub)
 			zn_undeclare_publisher(b->ros_pub);
@@ -171,7 +190,13 @@ void zn_node_stop(void)
 		struct bus *b = &zn_node.buses[i];
 		zn_can_close(b->can);
 		free(b->queue);
+		free(b->txq);
+		free(b->payload);
+		free(b->attachment);
 		zn_cond_free(b->nonempty);
+		zn_cond_free(b->tx_ready);
+		zn_cond_free(b->tx_idle);
+		zn_mutex_free(b->tx_lock);
 		zn_mutex_free(b->lock);
 		zn_mutex_free(b->can_lock);
 	}

@@ -7,6 +7,7 @@
  * Sequence numbers are assigned on reception, before the queue, so any loss
  * after that point shows as a gap to subscribers. */
 #include <assert.h>
+#include <inttypes.h>
 #include <stdlib.h>
 
 #include "zn_internal.h"
@@ -22,6 +23,14 @@ esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_
 		return ESP_ERR_INVALID_STATE;
 	struct bus *b = &zn_node.buses[bus_index];
 	COUNT(b->n.can_rx_frames);
+	uint8_t wire[ZN_WIRE_FRAME_SIZE];
+	if (zn_wire_encode(msg, wire, sizeof(wire)) < 0) {
+		/* not a CAN 2.0 frame (dlc > 8, id out of range): refused here, so no batch ever holds one */
+		if (COUNT(b->n.invalid_frames) == 0)
+			zn_log("W", "%s: skipped a frame the wire format cannot carry (id 0x%" PRIX32 ", dlc %u); further ones only counted",
+			       b->name, msg->identifier, msg->data_length_code);
+		return ESP_ERR_INVALID_ARG;
+	}
 	if (!zn_node_id_allowed(&zn_node.cfg, msg)) {
 		COUNT(b->n.filtered);
 		return ESP_OK;
@@ -49,16 +58,11 @@ esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_
 
 static void publish(struct bus *b, const struct rx_entry *frames, size_t n)
 {
-	static_assert(ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE <= 16384, "batch payload bound");
-	uint8_t payload[ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE];
-	uint8_t attachment[ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES)];
+	uint8_t *payload = b->payload, *attachment = b->attachment; /* sized for the largest sample (init_bus) */
 	size_t len = 0;
 	zn_attachment_header(attachment, (uint16_t)n, frames[0].seq);
 	for (size_t i = 0; i < n; i++) {
-		if (zn_wire_encode(&frames[i].msg, payload + len, sizeof(payload) - len) < 0) {
-			COUNT(b->n.publish_errors); /* the CAN port never hands over such a frame */
-			return;
-		}
+		zn_wire_encode(&frames[i].msg, payload + len, ZN_WIRE_FRAME_SIZE); /* valid: zn_node_submit */
 		len += ZN_WIRE_FRAME_SIZE;
 		zn_attachment_set_time(attachment, i, frames[i].rx_time_ns);
 	}
@@ -96,14 +100,14 @@ static size_t take(struct bus *b, struct rx_entry *out, size_t max)
 void zn_rx_publisher_thread(void *arg)
 {
 	struct bus *b = arg;
-	static_assert(ZN_BATCH_MAX_FRAMES >= PUBLISH_CHUNK, "chunk fits the batch buffer");
-	struct rx_entry *taken = malloc(ZN_BATCH_MAX_FRAMES * sizeof(*taken));
+	uint32_t period_ms = zn_node.cfg.publish_period_ms;
+	size_t batch_max = period_ms ? zn_node.cfg.batch_max_frames : 1;
+	size_t take_max = period_ms ? batch_max : PUBLISH_CHUNK;
+	struct rx_entry *taken = malloc(take_max * sizeof(*taken));
 	if (!taken) {
 		zn_log("E", "%s: out of memory for the publisher", b->name);
 		return;
 	}
-	uint32_t period_ms = zn_node.cfg.publish_period_ms;
-	size_t batch_max = period_ms ? zn_node.cfg.batch_max_frames : 1;
 	int64_t next_flush = zn_monotonic_ns() + (int64_t)period_ms * 1000000;
 	for (;;) {
 		zn_mutex_lock(b->lock);
@@ -123,7 +127,7 @@ void zn_rx_publisher_thread(void *arg)
 					      (1 + (zn_monotonic_ns() - next_flush) / ((int64_t)period_ms * 1000000));
 		}
 		int stopping = zn_node.stopping;
-		size_t n = take(b, taken, period_ms ? batch_max : PUBLISH_CHUNK);
+		size_t n = take(b, taken, take_max);
 		zn_mutex_unlock(b->lock);
 		if (n)
 			publish_runs(b, taken, n, batch_max);
