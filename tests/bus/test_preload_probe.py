@@ -55,3 +55,10 @@ def test_unbound_socket_polls_and_reads_like_the_kernels(bus):
     bus.run(["cansend", "vcan0", "1AB#01"])
     lines = finish(probe, lines)
     assert lines[-1] == "ok: after bind: frame 1AB"
+
+
+def test_descriptor_closed_behind_the_librarys_back_is_not_can_any_more(bus):
+    """Defect 8: a descriptor closed by fclose(fdopen(fd)) or the raw syscall stayed a CAN
+    socket in the library's table: the pipe or UDP socket reusing it was treated as CAN."""
+    probe = start_probe(bus, "stale", "vcan0")
+    finish(probe, [])

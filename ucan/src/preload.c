@@ -28,6 +28,7 @@
 #include <string.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/time.h>
 #include <sys/uio.h>
 #include <sys/un.h>
@@ -50,6 +51,8 @@ struct csock {
 	int connected, bound;
 	atomic_int header_mode;
 	char cookie[UCAN_COOKIE_MAX];
+	dev_t dev; /* the unix socket's identity: tells a descriptor closed */
+	ino_t ino; /* behind the library's back and reused from ours */
 	struct ucan_sockopts opts;
 	struct can_filter filters[UCAN_MAX_FILTERS];
 };
@@ -67,6 +70,9 @@ struct csock {
 
 REAL_DECL(int, socket, int, int, int)
 REAL_DECL(int, bind, int, const struct sockaddr *, socklen_t)
+REAL_DECL(int, socketpair, int, int, int, int *)
+REAL_DECL(int, accept, int, struct sockaddr *, socklen_t *)
+REAL_DECL(int, accept4, int, struct sockaddr *, socklen_t *, int)
 REAL_DECL(int, connect, int, const struct sockaddr *, socklen_t)
 REAL_DECL(int, close, int)
 REAL_DECL(int, close_range, unsigned, unsigned, int)
@@ -162,6 +168,59 @@ static int track(int fd, struct csock *cs)
 	if (old)
 		release(old);
 	return 0;
+}
+
+/* A descriptor closed without close() (fclose(fdopen(fd)), the raw syscall)
+ * and reused stays in the table: before the library acts on a descriptor in
+ * a call that is not per frame, or when a per-frame call fails, it checks the
+ * descriptor is still its socket, and forgets it if not. */
+static int remember_identity(int fd, struct csock *cs)
+{
+	struct stat st;
+	if (fstat(fd, &st) < 0)
+		return -1;
+	cs->dev = st.st_dev;
+	cs->ino = st.st_ino;
+	return 0;
+}
+
+static int still_ours(int fd, const struct csock *cs)
+{
+	struct stat st;
+	int saved = errno;
+	int ours = fstat(fd, &st) == 0 && S_ISSOCK(st.st_mode) && st.st_dev == cs->dev && st.st_ino == cs->ino;
+	errno = saved;
+	return ours;
+}
+
+static struct csock *lookup_live(int fd)
+{
+	struct csock *cs = lookup(fd);
+	if (cs && !still_ours(fd, cs)) {
+		track(fd, NULL);
+		return NULL;
+	}
+	return cs;
+}
+
+/* After a failed per-frame call: 1 if fd was not ours any more (now forgotten). */
+static int forget_if_stale(int fd, struct csock *cs)
+{
+	if (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR || still_ours(fd, cs))
+		return 0;
+	track(fd, NULL);
+	return 1;
+}
+
+/* A descriptor the kernel just handed out is not a socket of ours, whatever the table says. */
+static int fresh_fd(int fd)
+{
+	if (fd >= 0 && lookup(fd)) {
+		int saved = errno;
+		track(fd, NULL);
+		errno = saved;
+	}
+	return fd;
 }
 
 /* ---- talking to the hub ---- */
@@ -378,7 +437,7 @@ static int ensure_connected(struct csock *cs, int fd)
 PUBLIC int socket(int domain, int type, int protocol)
 {
 	if (domain != PF_CAN)
-		return get_socket()(domain, type, protocol);
+		return fresh_fd(get_socket()(domain, type, protocol));
 	int base = type & ~(SOCK_NONBLOCK | SOCK_CLOEXEC);
 	if (base != SOCK_RAW || protocol != CAN_RAW) {
 		static atomic_int told;
@@ -396,7 +455,7 @@ PUBLIC int socket(int domain, int type, int protocol)
 	pthread_mutex_init(&cs->lock, NULL);
 	default_opts(cs);
 	int fd = get_socket()(AF_UNIX, SOCK_SEQPACKET | (type & (SOCK_NONBLOCK | SOCK_CLOEXEC)), 0);
-	if (fd < 0 || bind_cookie(fd, cs) < 0 || track(fd, cs) < 0) {
+	if (fd < 0 || bind_cookie(fd, cs) < 0 || remember_identity(fd, cs) < 0 || track(fd, cs) < 0) {
 		int err = errno;
 		if (fd >= 0)
 			get_close()(fd);
@@ -412,9 +471,29 @@ PUBLIC int socket(int domain, int type, int protocol)
 	return fd;
 }
 
+PUBLIC int socketpair(int domain, int type, int protocol, int sv[2])
+{
+	int rc = get_socketpair()(domain, type, protocol, sv);
+	if (rc == 0) {
+		fresh_fd(sv[0]);
+		fresh_fd(sv[1]);
+	}
+	return rc;
+}
+
+PUBLIC int accept(int fd, struct sockaddr *addr, socklen_t *len)
+{
+	return fresh_fd(get_accept()(fd, addr, len));
+}
+
+PUBLIC int accept4(int fd, struct sockaddr *addr, socklen_t *len, int flags)
+{
+	return fresh_fd(get_accept4()(fd, addr, len, flags));
+}
+
 PUBLIC int bind(int fd, const struct sockaddr *addr, socklen_t len)
 {
-	struct csock *cs = lookup(fd);
+	struct csock *cs = lookup_live(fd);
 	if (!cs)
 		return get_bind()(fd, addr, len);
 	const struct sockaddr_can *can = (const struct sockaddr_can *)addr;
@@ -482,7 +561,7 @@ PUBLIC int close_range(unsigned first, unsigned last, int flags)
 
 static int track_dup(int oldfd, int newfd)
 {
-	struct csock *cs = lookup(oldfd);
+	struct csock *cs = lookup_live(oldfd);
 	if (newfd >= 0 && oldfd != newfd)
 		track(newfd, cs); /* also forgets whatever newfd was before */
 	return newfd;
@@ -545,7 +624,7 @@ static int int_opt(const void *val, socklen_t len, uint8_t *out)
 
 PUBLIC int setsockopt(int fd, int level, int name, const void *val, socklen_t len)
 {
-	struct csock *cs = lookup(fd);
+	struct csock *cs = lookup_live(fd);
 	if (!cs)
 		return get_setsockopt()(fd, level, name, val, len);
 	if (level == SOL_SOCKET) {
@@ -623,7 +702,7 @@ static int put_int_opt(void *val, socklen_t *len, int v)
 
 PUBLIC int getsockopt(int fd, int level, int name, void *val, socklen_t *len)
 {
-	struct csock *cs = lookup(fd);
+	struct csock *cs = lookup_live(fd);
 	if (!cs)
 		return get_getsockopt()(fd, level, name, val, len);
 	if (level == SOL_SOCKET) {
@@ -706,7 +785,7 @@ static void fill_can_addr(struct sockaddr *addr, socklen_t *len, uint32_t ifinde
 
 PUBLIC int getsockname(int fd, struct sockaddr *addr, socklen_t *len)
 {
-	struct csock *cs = lookup(fd);
+	struct csock *cs = lookup_live(fd);
 	if (!cs)
 		return get_getsockname()(fd, addr, len);
 	fill_can_addr(addr, len, cs->opts.ifindex);
@@ -715,7 +794,7 @@ PUBLIC int getsockname(int fd, struct sockaddr *addr, socklen_t *len)
 
 PUBLIC int getpeername(int fd, struct sockaddr *addr, socklen_t *len)
 {
-	if (!lookup(fd))
+	if (!lookup_live(fd))
 		return get_getpeername()(fd, addr, len);
 	errno = EOPNOTSUPP;
 	return -1;
@@ -732,7 +811,7 @@ PUBLIC int ioctl(int fd, unsigned long request, ...)
 
 	struct ifreq *ifr = arg;
 	struct ucan_ifinfo ifi;
-	int is_can = lookup(fd) != NULL;
+	int is_can = lookup_live(fd) != NULL;
 	switch (request) {
 	case SIOCGIFINDEX:
 	case SIOCGIFMTU:
@@ -897,7 +976,8 @@ PUBLIC ssize_t recvmsg(int fd, struct msghdr *msg, int flags)
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_recvmsg()(fd, msg, flags);
-	return can_recvmsg(cs, fd, msg, flags);
+	ssize_t n = can_recvmsg(cs, fd, msg, flags);
+	return n < 0 && forget_if_stale(fd, cs) ? get_recvmsg()(fd, msg, flags) : n;
 }
 
 static ssize_t can_recv_buf(struct csock *cs, int fd, void *buf, size_t len, int flags, struct sockaddr *addr,
@@ -919,7 +999,8 @@ PUBLIC ssize_t recvfrom(int fd, void *buf, size_t len, int flags, struct sockadd
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_recvfrom()(fd, buf, len, flags, addr, addrlen);
-	return can_recv_buf(cs, fd, buf, len, flags, addr, addrlen);
+	ssize_t n = can_recv_buf(cs, fd, buf, len, flags, addr, addrlen);
+	return n < 0 && forget_if_stale(fd, cs) ? get_recvfrom()(fd, buf, len, flags, addr, addrlen) : n;
 }
 
 PUBLIC ssize_t recv(int fd, void *buf, size_t len, int flags)
@@ -927,7 +1008,8 @@ PUBLIC ssize_t recv(int fd, void *buf, size_t len, int flags)
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_recv()(fd, buf, len, flags);
-	return can_recv_buf(cs, fd, buf, len, flags, NULL, NULL);
+	ssize_t n = can_recv_buf(cs, fd, buf, len, flags, NULL, NULL);
+	return n < 0 && forget_if_stale(fd, cs) ? get_recv()(fd, buf, len, flags) : n;
 }
 
 PUBLIC ssize_t read(int fd, void *buf, size_t len)
@@ -935,7 +1017,8 @@ PUBLIC ssize_t read(int fd, void *buf, size_t len)
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_read()(fd, buf, len);
-	return can_recv_buf(cs, fd, buf, len, 0, NULL, NULL);
+	ssize_t n = can_recv_buf(cs, fd, buf, len, 0, NULL, NULL);
+	return n < 0 && forget_if_stale(fd, cs) ? get_read()(fd, buf, len) : n;
 }
 
 PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
@@ -948,7 +1031,8 @@ PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
 		return -1;
 	}
 	struct msghdr msg = { .msg_iov = (struct iovec *)iov, .msg_iovlen = (size_t)iovcnt };
-	return can_recvmsg(cs, fd, &msg, 0);
+	ssize_t n = can_recvmsg(cs, fd, &msg, 0);
+	return n < 0 && forget_if_stale(fd, cs) ? get_readv()(fd, iov, iovcnt) : n;
 }
 
 PUBLIC int recvmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags, struct timespec *timeout)
@@ -959,6 +1043,8 @@ PUBLIC int recvmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags, struc
 	unsigned i;
 	for (i = 0; i < vlen; i++) {
 		ssize_t n = can_recvmsg(cs, fd, &vec[i].msg_hdr, i == 0 ? flags & ~MSG_WAITFORONE : flags | MSG_DONTWAIT);
+		if (n < 0 && i == 0 && forget_if_stale(fd, cs))
+			return get_recvmmsg()(fd, vec, vlen, flags, timeout);
 		if (n < 0)
 			return i ? (int)i : -1;
 		vec[i].msg_len = (unsigned)n;
@@ -1047,7 +1133,8 @@ PUBLIC ssize_t sendmsg(int fd, const struct msghdr *msg, int flags)
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_sendmsg()(fd, msg, flags);
-	return can_send(cs, fd, msg->msg_iov, msg->msg_iovlen, flags, msg->msg_name, msg->msg_namelen);
+	ssize_t n = can_send(cs, fd, msg->msg_iov, msg->msg_iovlen, flags, msg->msg_name, msg->msg_namelen);
+	return n < 0 && forget_if_stale(fd, cs) ? get_sendmsg()(fd, msg, flags) : n;
 }
 
 PUBLIC ssize_t sendto(int fd, const void *buf, size_t len, int flags, const struct sockaddr *addr, socklen_t addrlen)
@@ -1056,7 +1143,8 @@ PUBLIC ssize_t sendto(int fd, const void *buf, size_t len, int flags, const stru
 	if (!cs)
 		return get_sendto()(fd, buf, len, flags, addr, addrlen);
 	struct iovec iov = { .iov_base = (void *)buf, .iov_len = len };
-	return can_send(cs, fd, &iov, 1, flags, addr, addrlen);
+	ssize_t n = can_send(cs, fd, &iov, 1, flags, addr, addrlen);
+	return n < 0 && forget_if_stale(fd, cs) ? get_sendto()(fd, buf, len, flags, addr, addrlen) : n;
 }
 
 PUBLIC ssize_t send(int fd, const void *buf, size_t len, int flags)
@@ -1065,7 +1153,8 @@ PUBLIC ssize_t send(int fd, const void *buf, size_t len, int flags)
 	if (!cs)
 		return get_send()(fd, buf, len, flags);
 	struct iovec iov = { .iov_base = (void *)buf, .iov_len = len };
-	return can_send(cs, fd, &iov, 1, flags, NULL, 0);
+	ssize_t n = can_send(cs, fd, &iov, 1, flags, NULL, 0);
+	return n < 0 && forget_if_stale(fd, cs) ? get_send()(fd, buf, len, flags) : n;
 }
 
 PUBLIC ssize_t write(int fd, const void *buf, size_t len)
@@ -1074,7 +1163,8 @@ PUBLIC ssize_t write(int fd, const void *buf, size_t len)
 	if (!cs)
 		return get_write()(fd, buf, len);
 	struct iovec iov = { .iov_base = (void *)buf, .iov_len = len };
-	return can_send(cs, fd, &iov, 1, 0, NULL, 0);
+	ssize_t n = can_send(cs, fd, &iov, 1, 0, NULL, 0);
+	return n < 0 && forget_if_stale(fd, cs) ? get_write()(fd, buf, len) : n;
 }
 
 PUBLIC ssize_t writev(int fd, const struct iovec *iov, int iovcnt)
@@ -1086,7 +1176,8 @@ PUBLIC ssize_t writev(int fd, const struct iovec *iov, int iovcnt)
 		errno = EINVAL;
 		return -1;
 	}
-	return can_send(cs, fd, iov, (size_t)iovcnt, 0, NULL, 0);
+	ssize_t n = can_send(cs, fd, iov, (size_t)iovcnt, 0, NULL, 0);
+	return n < 0 && forget_if_stale(fd, cs) ? get_writev()(fd, iov, iovcnt) : n;
 }
 
 PUBLIC int sendmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags)
@@ -1098,6 +1189,8 @@ PUBLIC int sendmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags)
 	for (i = 0; i < vlen; i++) {
 		const struct msghdr *m = &vec[i].msg_hdr;
 		ssize_t n = can_send(cs, fd, m->msg_iov, m->msg_iovlen, flags, m->msg_name, m->msg_namelen);
+		if (n < 0 && i == 0 && forget_if_stale(fd, cs))
+			return get_sendmmsg()(fd, vec, vlen, flags);
 		if (n < 0)
 			return i ? (int)i : -1;
 		vec[i].msg_len = (unsigned)n;
@@ -1128,6 +1221,7 @@ static void adopt_inherited(int fd)
 	pthread_mutex_init(&cs->lock, NULL);
 	default_opts(cs);
 	memcpy(cs->cookie, addr.sun_path + 1, name_len);
+	remember_identity(fd, cs);
 	struct sockaddr_un peer;
 	socklen_t peer_len = sizeof(peer);
 	cs->connected = get_getpeername()(fd, (struct sockaddr *)&peer, &peer_len) == 0;
