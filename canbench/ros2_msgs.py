@@ -8,6 +8,7 @@ are the wire format and, through ros2.type_hash, the RIHS01 hash: change
 neither without the .msg file. decode() is the one entry for untrusted
 payloads: it checks the encapsulation header before pycdr2 reads anything."""
 
+import typing
 from dataclasses import dataclass, field
 
 from pycdr2 import IdlStruct
@@ -354,11 +355,27 @@ MESSAGE_TYPES: dict[str, type[IdlStruct]] = {cls.__idl_typename__: cls for cls i
 ENCAPSULATIONS = {b"\x00\x00", b"\x00\x01"}
 
 
+def _byte_arrays(cls) -> list[tuple[str, int]]:
+    hints = typing.get_type_hints(cls, include_extras=True)
+    return [(name, meta.length) for name, hint in hints.items()
+            if isinstance(meta := getattr(hint, "__metadata__", (None,))[0], array)
+            and getattr(meta.subtype, "__metadata__", (None,))[0] == "uint8"]
+
+
+# pycdr2 reads a fixed uint8 array as one slice and, at the end of a truncated buffer, returns it
+# short instead of failing: those fields (top-level ones: can_msgs/Frame's data) are checked here
+BYTE_ARRAYS = {name: fields for name, cls in MESSAGE_TYPES.items() if (fields := _byte_arrays(cls))}
+
+
 def decode(type_name: str, payload: bytes):
     """The message a payload holds, or CdrError saying why not (never another exception)."""
     if len(payload) < 4 or payload[:2] not in ENCAPSULATIONS:
         raise CdrError(f"{type_name}: not a CDR encapsulation header: {payload[:4].hex() or 'empty payload'}")
     try:
-        return MESSAGE_TYPES[type_name].deserialize(payload)
+        msg = MESSAGE_TYPES[type_name].deserialize(payload)
     except Exception as e:  # noqa: BLE001 - pycdr2 raises struct.error, IndexError, UnicodeDecodeError...
         raise CdrError(f"{type_name}: malformed CDR ({len(payload)} bytes): {e}") from None
+    for name, length in BYTE_ARRAYS.get(type_name, ()):
+        if len(getattr(msg, name)) != length:
+            raise CdrError(f"{type_name}: malformed CDR ({len(payload)} bytes): {name} ends past the payload")
+    return msg
