@@ -22,6 +22,7 @@ from ros2_catalogue import CASES, malformed_variants
 from canbench import ros2
 from canbench.rig import free_port
 
+URDF = Path(__file__).parents[1] / "data" / "viewer" / "car.urdf"
 rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip install -e '.[viewer]')")
 from canbench.viewer import read_rrd_columns  # noqa: E402
 
@@ -100,8 +101,9 @@ def test_every_type_logged_with_its_values_and_malformed_cdr_skipped(lone_router
         case.check(columns)
 
 
-def test_topic_selection_in_peer_mode(tmp_path):
-    """-t picks exactly its topics (with or without the leading slash); peer to peer, no router."""
+def test_topic_selection_in_peer_mode_with_a_urdf(tmp_path):
+    """-t picks exactly its topics (with or without the leading slash); peer to peer, no router;
+    --urdf: the model's links as Rerun's URDF importer logs them, its joint between named frames."""
     port = free_port()
     session = listening_peer(port)
     node = ros2.Node(session, "cabin")
@@ -109,7 +111,7 @@ def test_topic_selection_in_peer_mode(tmp_path):
     picked = {c.topic: c for c in CASES if c.topic in ("/chatter", "/cabin/temperature")}
     try:
         with viewer(session, rrd, "--zenoh-mode", "peer", "--zenoh-connect", f"tcp/127.0.0.1:{port}",
-                    "-t", "/chatter", "-t", "cabin/temperature"):
+                    "-t", "/chatter", "-t", "cabin/temperature", "--urdf", str(URDF)):
             pubs = {c.topic: node.publisher(c.topic, c.type_name) for c in CASES[:-1]}  # CAN: no frame keys here
             wanted = {pubs[t].key for t in picked}
             wait_for(lambda: subscribed(session, wanted), "the viewer subscribed to the two selected topics")
@@ -126,6 +128,11 @@ def test_topic_selection_in_peer_mode(tmp_path):
     for case in picked.values():
         case.check(columns)
     assert not [e for e in columns if e.startswith("/ros2/") and not e.startswith(("/ros2/chatter", "/ros2/cabin/t"))]
+    body = columns["/car/visual_geometries/base_link/visual_0"]
+    assert body["Boxes3D:half_sizes"] == [[[2.0, 1.0, 0.75]]] and body["CoordinateFrame:frame"] == [["base_link"]]
+    joint = columns["/tf_static"]
+    assert (joint["Transform3D:parent_frame"], joint["Transform3D:child_frame"]) == ([["base_link"]], [["lidar"]])
+    assert joint["Transform3D:translation"] == [[[0.5, 0.0, 1.0]]]
 
 
 def test_topic_whose_publisher_goes_is_unsubscribed(lone_router, tmp_path):
