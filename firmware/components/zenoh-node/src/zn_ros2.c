@@ -65,8 +65,8 @@ esp_err_t zn_ros2_declare_tokens(const char *zid)
 		sscanf(zid + 2 * g, "%2x", &v);
 		zn_node.gid_seed[g] = (uint8_t)v;
 	}
-	snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/0/NN/%%/%%/%s", cfg->ros2_domain, zid, ros_node);
-	if (zn_declare_token(zn_node.session, key, &zn_node.ros_node_token) != 0)
+	int n = snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/0/NN/%%/%%/%s", cfg->ros2_domain, zid, ros_node);
+	if (n < 0 || (size_t)n >= sizeof(key) || zn_declare_token(zn_node.session, key, &zn_node.ros_node_token) != 0)
 		return ESP_FAIL;
 	for (size_t i = 0; i < cfg->bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
@@ -74,8 +74,12 @@ esp_err_t zn_ros2_declare_tokens(const char *zid)
 		for (char *c = topic; *c; c++)
 			if (*c == '/')
 				*c = '%';
-		snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/%zu/MP/%%/%%/%s/%s/%s/%s/::,10:,:,:,,", cfg->ros2_domain,
-			 zid, i + 1, ros_node, topic, ZN_ROS2_FRAME_TYPE, ZN_ROS2_FRAME_HASH);
+		n = snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/%zu/MP/%%/%%/%s/%s/%s/%s/::,10:,:,:,,",
+			     cfg->ros2_domain, zid, i + 1, ros_node, topic, ZN_ROS2_FRAME_TYPE, ZN_ROS2_FRAME_HASH);
+		if (n < 0 || (size_t)n >= sizeof(key)) { /* never a truncated key */
+			zn_log("E", "ROS 2: the liveliness token of %s would exceed %zu bytes", b->ros_topic, sizeof(key));
+			return ESP_ERR_INVALID_SIZE;
+		}
 		if (zn_declare_token(zn_node.session, key, &b->ros_token) != 0)
 			return ESP_FAIL;
 		zn_log("I", "ROS 2: %s as can_msgs/msg/Frame on %s", b->ros_topic, b->ros_key);

@@ -15,6 +15,9 @@
 #define CAN_RECEIVE_TIMEOUT_MS 200 /* how soon a reader notices shutdown */
 #define CAN_REOPEN_MIN_MS 100
 #define CAN_REOPEN_MAX_MS 2000
+static_assert(ZN_BATCH_MAX_FRAMES <= UINT16_MAX, "the attachment counts frames in a u16");
+static_assert(sizeof(struct rx_entry) <= 40, "a queued CAN frame (rx_queue_frames of them per bus)");
+
 #define PUBLISH_CHUNK 64 /* frames taken from the queue per lock in immediate mode */
 
 esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_time_ns)

@@ -12,9 +12,17 @@
  * Zenoh still starts later sees the gate shut and touches nothing else. The
  * transmitter then writes what is queued while the bus takes it and abandons
  * the rest at the first failure. */
+#include <assert.h>
 #include <inttypes.h>
 
 #include "zn_internal.h"
+
+/* buffers sized for the target (docs/bridge.md, Limits): 24 bytes a queued frame on a
+ * 32-bit core, and the largest command within what the Zenoh port lets in */
+static_assert(sizeof(struct tx_entry) <= 24, "a queued command frame");
+static_assert(ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE + ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES) + 1024 <=
+		      ZN_RX_MESSAGE_MAX,
+	      "a largest command and its key fit the Zenoh message cap");
 
 #define CAN_TRANSMIT_TIMEOUT_MS 100 /* a frame that cannot be sent by then is counted as failed */
 #define CLOSE_RECHECK_MS 10	    /* zn_tx_close re-reads the gate's count at least this often */
