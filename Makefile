@@ -26,7 +26,7 @@ BENCH_BASE     := canbench/base:bookworm
 COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 BENCH_CAN_MODE ?= $(shell scripts/detect-can)
 BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
-IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/scenarios tests/data pyproject.toml .dockerignore
+IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/data pyproject.toml .dockerignore
 # content hash of everything the images are built from: unchanged sources, no rebuild.
 # Computed once per make run (:=), so the images built and the images tested are the same
 # even if a file changes meanwhile.
@@ -60,7 +60,7 @@ FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
 .PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host bench-tools zn-flood test clean preflight base images \
+        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -126,7 +126,14 @@ check-bus: ucan ucan-asan
 
 # The component's unit tests on mock ports (release and ASan/UBSan): no Zenoh port needed.
 FW_UNIT_BUILD  := $(BUILD)/firmware-unit
-check-firmware:
+# The component cross-compiled for the target's kind of core (firmware/cross: rv32imc,
+# picolibc; -Werror, per-function stack budget from Kconfig). Compiles only: a few seconds.
+check-firmware-cross:
+	cmake -S firmware/cross -B $(BUILD)/firmware-cross $(CMAKE_GEN) \
+	  -DCMAKE_TOOLCHAIN_FILE=$(CURDIR)/firmware/cross/rv32imc-picolibc.cmake >/dev/null
+	ninja -C $(BUILD)/firmware-cross
+
+check-firmware: check-firmware-cross
 	cmake -S firmware -B $(FW_UNIT_BUILD) $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=RelWithDebInfo -DZN_BUILD_BRIDGE=OFF >/dev/null
 	ninja -C $(FW_UNIT_BUILD)
 	ctest --test-dir $(FW_UNIT_BUILD) --output-on-failure
