@@ -1,7 +1,7 @@
 """The bench's checks on a run result. Each returns None when the scenario
 does not ask for it, else a list of problems (empty = pass) that name the
 frames and where they came from (can.log:line). Used by the scenario tests
-(tests/scenarios) and by the seeded-fault tests that prove each check fails
+(canbench.scenario_checks) and by the seeded-fault tests that prove each check fails
 for the fault it exists for."""
 from __future__ import annotations
 
