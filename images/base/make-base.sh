@@ -8,7 +8,8 @@
 #   3. either way, tag <output-tag> = that image plus the CA bundle (default:
 #      the host's, or BENCH_CA_BUNDLE) so pip, cargo and apt inside image
 #      builds trust the same TLS-intercepting proxy the host does.
-# Prints which path was taken. Needs root for debootstrap.
+# Prints which path was taken. debootstrap (installed by scripts/host-deps when missing)
+# runs as root: directly, or through passwordless sudo.
 set -euo pipefail
 
 base=$1
@@ -31,22 +32,32 @@ elif docker image inspect "$local_base" >/dev/null 2>&1; then
 	from=$local_base
 else
 	echo "base: $base cannot be pulled; building $local_base from Debian packages with debootstrap"
-	command -v debootstrap >/dev/null || { echo "base: debootstrap is missing (apt-get install debootstrap)" >&2; exit 1; }
-	rm -rf "$work/rootfs"
+	# debootstrap installs itself when it can (root or passwordless sudo), else names the command
+	"$here/../../scripts/host-deps" "make base (no $base to pull)" debootstrap
+	# the root file system is root's: debootstrap, tar and rm run as root
+	if [ "$(id -u)" = 0 ]; then
+		as_root=()
+	elif sudo -n true 2>/dev/null; then
+		as_root=(sudo -n)
+	else
+		echo "base: debootstrap needs root: run once: sudo make base (or make debian:bookworm-slim pullable)" >&2
+		exit 1
+	fi
+	"${as_root[@]}" rm -rf "$work/rootfs"
 	mkdir -p "$work"
-	debootstrap --variant=minbase --include=ca-certificates "$suite" "$work/rootfs" "$mirror" >"$work/debootstrap.log" 2>&1 ||
-		{ tail -n 20 "$work/debootstrap.log" >&2; exit 1; }
+	"${as_root[@]}" debootstrap --variant=minbase --include=ca-certificates "$suite" "$work/rootfs" "$mirror" \
+		>"$work/debootstrap.log" 2>&1 || { tail -n 20 "$work/debootstrap.log" >&2; exit 1; }
 	# the same sources as debian:bookworm-slim: main, updates, security (rustc-web lives there)
-	cat >"$work/rootfs/etc/apt/sources.list" <<SOURCES
+	"${as_root[@]}" tee "$work/rootfs/etc/apt/sources.list" >/dev/null <<SOURCES
 deb $mirror $suite main
 deb $mirror $suite-updates main
 deb http://deb.debian.org/debian-security $suite-security main
 SOURCES
-	rm -rf "$work/rootfs/var/cache/apt/archives/"*.deb "$work/rootfs/var/lib/apt/lists/"*
-	tar -C "$work/rootfs" -c . | docker import \
+	"${as_root[@]}" sh -c 'rm -rf "$1/var/cache/apt/archives/"*.deb "$1/var/lib/apt/lists/"*' sh "$work/rootfs"
+	"${as_root[@]}" tar -C "$work/rootfs" -c . | docker import \
 		--change 'ENV LANG=C.UTF-8 PATH=/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin' \
 		--change 'CMD ["bash"]' - "$local_base" >/dev/null
-	rm -rf "$work/rootfs"
+	"${as_root[@]}" rm -rf "$work/rootfs"
 	from=$local_base
 fi
 

@@ -1,0 +1,144 @@
+"""scripts/bench-suite (make test) with Docker and bench-run replaced by stand-ins: the
+validation gate (exit 2, no run started), JOBS=N at most N runs at once, SHARD=k/n runners
+together running every scenario once, one summary and one exit code."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.unit
+
+REPO = Path(__file__).resolve().parents[2]
+
+# `docker run [--rm] [-v h:c[:ro]] [-w d] [-u x] [-e K[=v]] image cmd...` run on the host:
+# container paths of the mounts mapped back, `canbench` the checkout's
+FAKE_DOCKER = f"""#!{sys.executable}
+import os, subprocess, sys
+args, i, mounts, cwd, env = sys.argv[1:], 1, {{}}, None, dict(os.environ)
+while args[i].startswith("-"):
+    flag = args[i]
+    if flag == "--rm":
+        i += 1
+        continue
+    value = args[i + 1]
+    if flag == "-v":
+        host, cont = value.split(":")[:2]
+        mounts[cont] = host
+    elif flag == "-w":
+        cwd = value
+    elif flag == "-e" and "=" in value:
+        env[value.split("=")[0]] = value.split("=", 1)[1]
+    i += 2
+def host(x):
+    for c, h in mounts.items():
+        if x == c or x.startswith(c + "/"):
+            return h + x[len(c):]
+    return x
+with open(os.environ["FAKE_LOG"], "a") as log:
+    log.write("docker " + " ".join(args[i + 1:]) + "\\n")
+sys.exit(subprocess.run([host(x) for x in args[i + 1:]], cwd=cwd, env=env).returncode)
+"""
+CANBENCH = f"#!/bin/sh\nPYTHONPATH={REPO} exec {sys.executable} -m canbench.cli \"$@\"\n"
+# bench-run's contract towards the suite: a line in runs.tsv, the checks' exit code
+FAKE_BENCH_RUN = """#!/usr/bin/env bash
+s=$1 name=$(basename "$1" .yaml)
+echo "start $name $(date +%s%N)" >>"$FAKE_LOG"
+code=$(sed -n 's/^# exit: //p' "$s")
+sleep 0.5 # the run's work
+echo "stop $name $(date +%s%N)" >>"$FAKE_LOG"
+printf '%s\\t%s\\t%s\\t%s\\n' "$s" "run-$name" "${code:-0}" 1 >>"$BENCH_SUITE_DIR/runs.tsv"
+exit "${code:-0}"
+"""
+SCENARIO = ("name: {name}\nduration_s: {duration}\nbuses: [{{name: vcan0}}]\n"
+            "ecus: [{{name: e, bus: vcan0, role: echo, echo_ids: ['600']}}]\nexpect: {{integrity: true}}\n")
+
+
+@pytest.fixture
+def bench(tmp_path):
+    root = tmp_path / "repo"
+    (root / "scripts").mkdir(parents=True)
+    shutil.copy(REPO / "scripts" / "bench-suite", root / "scripts")
+    bins = tmp_path / "bin"
+    bins.mkdir()
+    for path, text in [(root / "scripts" / "bench-run", FAKE_BENCH_RUN), (bins / "docker", FAKE_DOCKER),
+                       (bins / "canbench", CANBENCH)]:
+        path.write_text(text)
+        path.chmod(0o755)
+    (root / "sc").mkdir()
+    env = {**os.environ, "PATH": f"{bins}:{os.environ['PATH']}", "FAKE_LOG": str(tmp_path / "log")}
+
+    def run(names: list[str], **extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run([str(root / "scripts" / "bench-suite"), *[f"sc/{n}.yaml" for n in names]],
+                              cwd=root, env={**env, **extra}, capture_output=True, text=True, timeout=120)
+
+    def add(name: str, duration: int = 10, code: int = 0, text: str | None = None) -> None:
+        body = text if text is not None else SCENARIO.format(name=name, duration=duration)
+        (root / "sc" / f"{name}.yaml").write_text(body + (f"# exit: {code}\n" if code else ""))
+
+    def events() -> list[tuple[str, str, int]]:
+        log = tmp_path / "log"
+        lines = log.read_text().splitlines() if log.exists() else []
+        return [(w[0], w[1], int(w[2])) for w in (line.split() for line in lines) if w[0] in ("start", "stop")]
+
+    return run, add, events, root
+
+
+def overlap(events: list[tuple[str, str, int]]) -> int:
+    running = peak = 0
+    for kind, _, _ in sorted(events, key=lambda e: (e[2], e[0] == "start")):
+        running += 1 if kind == "start" else -1
+        peak = max(peak, running)
+    return peak
+
+
+def test_bad_scenario_stops_everything_with_exit_2(bench):
+    run, add, events, root = bench
+    add("good")
+    add("bad", text="name: bad\nduration_s: ten\nbuses: [{name: vcan0}]\nexpect: {}\n")
+    proc = run(["good", "bad"])
+    assert proc.returncode == 2, proc.stderr
+    assert "sc/bad.yaml:2: duration_s: 'ten' is not of type 'number'" in proc.stderr
+    assert "nothing started" in proc.stderr and events() == []  # not even the good one
+    assert not list((root / "reports").glob("suite-*"))
+
+
+def test_jobs_run_concurrently_and_the_summary_covers_all(bench):
+    run, add, events, root = bench
+    for i in range(4):
+        add(f"s{i}", code=1 if i == 2 else 0)
+    proc = run([f"s{i}" for i in range(4)], JOBS="2")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert overlap(events()) == 2
+    assert "s2: FAILED (exit 1)" in proc.stdout and "make test: FAILED, 3 of 4 passed" in proc.stdout
+    summary = json.loads(next((root / "reports").glob("suite-*/summary.json")).read_text())
+    assert sorted((r["scenario"], r["exit_code"]) for r in summary["runs"]) == [
+        ("sc/s0.yaml", 0), ("sc/s1.yaml", 0), ("sc/s2.yaml", 1), ("sc/s3.yaml", 0)]
+    assert summary["jobs"] == 2 and (root / "reports" / "latest-suite" / "index.html").exists()
+
+
+def test_serial_is_one_at_a_time(bench):
+    run, add, events, _ = bench
+    for i in range(3):
+        add(f"s{i}")
+    proc = run([f"s{i}" for i in range(3)])
+    assert proc.returncode == 0 and overlap(events()) == 1, proc.stdout + proc.stderr
+    assert "make test: all 3 scenario(s) passed" in proc.stdout
+
+
+def test_shards_together_run_every_scenario_once(bench):
+    run, add, events, _ = bench
+    durations = [70, 60, 60, 50, 40, 30, 30, 10]
+    for i, d in enumerate(durations):
+        add(f"s{i}", duration=d)
+    names = [f"s{i}" for i in range(len(durations))]
+    for k in (1, 2, 3):
+        proc = run(names, SHARD=f"{k}/3")
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+    started = [name for kind, name, _ in events() if kind == "start"]
+    assert sorted(started) == sorted(names)
