@@ -6,11 +6,17 @@ from __future__ import annotations
 
 from collections import defaultdict
 
+import numpy as np
 import rerun as rr
 
 from .. import wire
 from ..dbc import decode_signals
 from . import Context, logger
+
+
+def time_column(times_ns: list[int]) -> rr.TimeColumn:
+    # as datetime64[ns]: a list of float seconds costs Rerun's converter 20 times more per frame
+    return rr.TimeColumn("time", timestamp=np.asarray(times_ns, dtype="datetime64[ns]"))
 
 
 class CanColumns:
@@ -37,12 +43,10 @@ class CanColumns:
     def flush(self) -> int:
         frames = 0
         for path, (times, texts) in self.raw.items():
-            rr.send_columns(path, indexes=[rr.TimeColumn("time", timestamp=[t / 1e9 for t in times])],
-                            columns=rr.TextLog.columns(text=texts))
+            rr.send_columns(path, indexes=[time_column(times)], columns=rr.TextLog.columns(text=texts))
             frames += len(texts)
         for path, (times, values) in self.signals.items():
-            rr.send_columns(path, indexes=[rr.TimeColumn("time", timestamp=[t / 1e9 for t in times])],
-                            columns=rr.Scalars.columns(scalars=values))
+            rr.send_columns(path, indexes=[time_column(times)], columns=rr.Scalars.columns(scalars=values))
         self.raw.clear()
         self.signals.clear()
         return frames
