@@ -3,7 +3,10 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 
 BUILD          ?= build
-PYTHON         ?= python3
+# make check installs the project's Python packages into this virtual environment (never
+# the system's); every Python target uses it once it exists.
+VENV           ?= .venv
+PYTHON         ?= $(if $(wildcard $(VENV)/bin/python),$(CURDIR)/$(VENV)/bin/python,python3)
 PYTEST         := $(PYTHON) -m pytest
 # Rust and zenohd builds outlive `make clean` and fresh clones: they take minutes.
 CACHE          ?= $(HOME)/.cache/canbench
@@ -26,7 +29,7 @@ BENCH_BASE     := canbench/base:bookworm
 COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 BENCH_CAN_MODE ?= $(shell scripts/detect-can)
 BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
-IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/scenarios tests/data pyproject.toml .dockerignore
+IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/data pyproject.toml .dockerignore
 # content hash of everything the images are built from: unchanged sources, no rebuild.
 # Computed once per make run (:=), so the images built and the images tested are the same
 # even if a file changes meanwhile.
@@ -59,15 +62,17 @@ FW_RUST_ARGS   := -DZN_RUST_PREBUILT_DIR=$(RUST_PORT_DIR) -DZN_RUST_TARGET_DIR=$
 FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
-.PHONY: bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
+.PHONY: setup venv summarise scaffold validate open bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
         check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
-	@echo "make test       run the bench's scenarios against the bridge (the main job; SCENARIO=file)"
+	@echo "make test       run the bench's scenarios against the bridge (the main job; SCENARIO=file JOBS=N SHARD=k/n)"
 	@echo "make images     build the bench's images (only what changed); make base: the base image"
 	@echo "make shell      a shell in the orchestrator image; make logs: the latest run's container logs"
 	@echo "make check      the project's own tests (unit, bus conformance, bridge integration, fuzz)"
+	@echo "make setup      what make check needs on the host: apt packages if missing, Python packages into $(VENV)/"
+	@echo "make summarise TRACE=f | scaffold TRACE=f NAME=n | validate SCENARIO=f | open: canbench (venv or image)"
 	@echo "make ucan       build the userspace CAN bus (hub, preload library, ucanctl)"
 	@echo "make firmware   build zenoh-node for Linux (C component + Rust Zenoh port)"
 	@echo "make zenohd     install zenohd $(ZENOHD_VERSION) from crates.io into $(CACHE)"
@@ -190,8 +195,45 @@ check-faults: ucan firmware zenohd
 check-compose: images
 	BENCH_REQUIRE_IMAGES=1 $(PYTEST) -q tests/compose
 
-check: check-python check-ucan check-firmware check-bus check-kernel check-bridge check-faults fuzz check-compose
+# make check's phases, in order (scripts/run-phases: progress and each phase's time)
+CHECK_PHASES := check-python check-ucan check-firmware check-bus check-kernel check-bridge check-faults fuzz check-compose
+check: setup
+	@MAKE="$(MAKE)" scripts/run-phases check $(CHECK_PHASES)
 	@echo "make check: all project tests passed"
+
+# -- host set-up: make check installs what it needs (scripts/host-deps: apt-get as root or with
+# passwordless sudo, else it names the command), Python packages into $(VENV)/ --------------
+HOST_APT_CHECK := gcc libc6-dev python3 python3-venv can-utils cmake ninja-build clang libclang-rt-14-dev \
+                  iproute2 util-linux qemu-system-x86 busybox-static cpio kmod \
+                  gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf
+setup:
+	@scripts/host-deps "make check" $(HOST_APT_CHECK)
+	@$(MAKE) --no-print-directory venv
+
+# the venv is (re)made when pyproject.toml changes; a half-made one is removed
+venv: $(VENV)/.installed
+$(VENV)/.installed: pyproject.toml
+	@echo "setup: Python packages into $(VENV)/ (pip install -e '.[test,viewer]')"
+	@rm -rf $(VENV) && python3 -m venv $(VENV) && \
+	 $(VENV)/bin/pip install -q --disable-pip-version-check -e '.[test,viewer]' || { rm -rf $(VENV); exit 1; }
+	@touch $@
+	@echo "setup: $(VENV)/bin/canbench ready (or: source $(VENV)/bin/activate)"
+
+# canbench for scenario writing, right after make test or make check: from $(VENV)/ when it
+# exists, else in the orchestrator image with this checkout mounted at its own path.
+CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run --rm -u $$(id -u):$$(id -g) \
+           -v $(CURDIR):$(CURDIR) -w $(CURDIR) canbench/orchestrator:$(BENCH_TAG) canbench)
+CANBENCH_DEP = $(if $(wildcard $(VENV)/bin/canbench),,images)
+summarise: $(CANBENCH_DEP)
+	@$(CANBENCH) summarise $(TRACE)
+scaffold: $(CANBENCH_DEP)
+	@$(CANBENCH) scaffold $(TRACE) --name $(NAME)
+validate: $(CANBENCH_DEP)
+	@$(CANBENCH) validate $(SCENARIO)
+open:
+	@test -f reports/latest/report.html || { echo "open: no reports/latest/report.html (make test writes it)" >&2; exit 1; }
+	@echo "$(CURDIR)/reports/latest/report.html"
+	@if command -v xdg-open >/dev/null && [ -n "$${DISPLAY:-}$${WAYLAND_DISPLAY:-}" ]; then xdg-open reports/latest/report.html; fi
 
 # The benchmarks' loads (bench/tools): can-load, the stamped CAN load, echo ECU and counting
 # reader; hop_latency, one hop of a bus; zn-flood, a paced Rust publisher (same zenoh and
@@ -241,7 +283,11 @@ bench: images
 	  bench run-bench /repo/$(BENCH_OUT) $(BENCHMARKS)
 	@echo "make bench: results in $(BENCH_OUT)"
 
-bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind
+# canbench view into an .rrd at 50 000 CAN frames/s + a 640x480 image at 10 Hz (docs/viewer.md)
+bench-viewer:
+	$(PYTHON) -m bench.viewer --out $(BENCH_OUT)
+
+bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-viewer
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }
@@ -255,10 +301,12 @@ base: preflight
 images: base
 	@scripts/build-images $(BENCH_TAG) $(BENCH_BASE)
 
+# every scenario validated first (exit 2, nothing started), then run JOBS at a time, each in
+# its own compose project; SHARD=k/n: this runner's share; one summary in reports/<suite>/
+JOBS  ?= 1
+SHARD ?=
 test: images
-	@status=0; for s in $(SCENARIO); do scripts/bench-run $$s || status=1; done; \
-	 if [ $$status -eq 0 ]; then echo "make test: all scenarios passed"; else echo "make test: FAILED (see above; reports/latest)"; fi; \
-	 exit $$status
+	@JOBS=$(JOBS) SHARD=$(SHARD) scripts/bench-suite $(SCENARIO)
 
 # Nightly soak: one hour, memory slope and descriptor growth gated (docs/faults.md).
 SOAK_SCENARIO ?= scenarios/nightly/soak.yaml
