@@ -19,7 +19,7 @@ frame at the same place in the stream, if that one has the same id and length
 from __future__ import annotations
 
 import bisect
-from collections import Counter, defaultdict, deque
+from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -181,42 +181,63 @@ def match_subset(expected: list[Observed], observed: list[Observed]) -> Comparis
     return c
 
 
+STAMP_SLACK_NS = 5_000_000  # a frame this much "before it was sent" is matched anyway: a bench error, not a loss
+BEHIND_SCAN = 4096           # matched copies looked past for a late one (a later frame is a duplicate + a loss)
+
+
 class _Copies:
     """The sent frames with one key, in stream order, and which of them are matched."""
 
     def __init__(self) -> None:
         self.frames: list[Observed] = []
         self.indices: list[int] = []
+        self.times: list[int] = []
         self.used = bytearray()
         self.head = 0  # every copy before it is matched
 
     def add(self, o: Observed) -> None:
         self.frames.append(o)
         self.indices.append(o.index)
+        self.times.append(o.t_ns)
         self.used.append(0)
 
-    def take_nearest(self, frontier: int) -> Observed | None:
-        """The unmatched copy nearest to the frontier (earlier one on a tie), marked matched."""
-        n = len(self.frames)
-        pos = bisect.bisect_right(self.indices, frontier)
-        ahead = pos
+    def take(self, frontier: int, t_ns: int) -> Observed | None:
+        """The copy a frame received at t_ns is, marked matched (None: it is none of them).
+        Only a copy sent by t_ns can be it. Of those, the one with the fewest frames of other
+        contents between it and the frontier; on a tie the one ahead (a loss is the simpler
+        story than a late frame; within a run of identical frames the earliest one: nothing
+        tells them apart). If no copy was sent by t_ns, the next one ahead if it was sent at
+        most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error."""
+        n = len(self.indices)
+        ahead_at = bisect.bisect_right(self.indices, frontier)
+        ahead = ahead_at
         while ahead < n and self.used[ahead]:
             ahead += 1
-        ahead_distance = self.indices[ahead] - frontier if ahead < n else None
-        chosen = ahead if ahead < n else None
-        behind = pos - 1
-        # a copy behind the frontier (a frame that arrives late) wins if it is as near or nearer
-        while behind >= self.head and (ahead_distance is None or frontier - self.indices[behind] <= ahead_distance):
-            if not self.used[behind]:
-                chosen = behind
+        best = None
+        best_distance = None
+        if ahead < n and self.times[ahead] <= t_ns:
+            best = ahead
+            best_distance = (self.indices[ahead] - frontier) - (ahead - ahead_at)
+        behind_at = bisect.bisect_left(self.indices, frontier)
+        behind = behind_at - 1
+        scanned = 0
+        while behind >= self.head and scanned < BEHIND_SCAN:
+            distance = (frontier - self.indices[behind]) - (behind_at - 1 - behind)
+            if best_distance is not None and distance >= best_distance:
+                break
+            if not self.used[behind] and self.times[behind] <= t_ns:
+                best = behind
                 break
             behind -= 1
-        if chosen is None:
+            scanned += 1
+        if best is None and ahead < n and self.times[ahead] <= t_ns + STAMP_SLACK_NS:
+            best = ahead
+        if best is None:
             return None
-        self.used[chosen] = 1
+        self.used[best] = 1
         while self.head < n and self.used[self.head]:
             self.head += 1
-        return self.frames[chosen]
+        return self.frames[best]
 
     def __bool__(self) -> bool:
         return self.head < len(self.frames)
@@ -240,10 +261,11 @@ def _classify(sent: list[Observed], received: list[Observed],
     leftovers: list[Observed] = []
     others: list[Observed] = []
     frontier = -1  # the furthest sent index matched so far
+    leftover_frontier: list[int] = []  # where the stream had got to when each leftover arrived
     for r in received:
         k = _key(r.frame)
         copies = waiting.get(k)
-        nearest = copies.take_nearest(frontier) if copies else None
+        nearest = copies.take(frontier, r.t_ns) if copies else None
         if nearest is not None:
             frontier = max(frontier, nearest.index)
             match_of[nearest.index] = r
@@ -255,18 +277,23 @@ def _classify(sent: list[Observed], received: list[Observed],
             c.duplicates.append(r)
         else:
             leftovers.append(r)
+            leftover_frontier.append(frontier)
     if explained is not None:
         c.received -= len(others)
     lost = [s for s in sent if s.index not in match_of]
-    # corruption: an unknown frame where a lost frame of the same id and length was due
-    lost_by_id: dict[tuple, deque[Observed]] = defaultdict(deque)
+    # corruption: an unknown frame where a lost frame of the same id and length was due: the
+    # one nearest to where the stream had got to (ahead of it on a tie)
+    lost_by_id: dict[tuple, list[Observed]] = defaultdict(list)
     for s in lost:
         lost_by_id[(s.frame.can_id, s.frame.extended, s.frame.dlc)].append(s)
     corrupted_sent = set()
-    for r in leftovers:
+    for r, at in zip(leftovers, leftover_frontier, strict=True):
         candidates = lost_by_id.get((r.frame.can_id, r.frame.extended, r.frame.dlc))
         if candidates:
-            s = candidates.popleft()
+            i = bisect.bisect_right([o.index for o in candidates], at)
+            if i == len(candidates) or (i > 0 and at - candidates[i - 1].index < candidates[i].index - at):
+                i -= 1
+            s = candidates.pop(i)
             corrupted_sent.add(s.index)
             diff = [i for i, (a, b) in enumerate(zip(s.frame.data, r.frame.data, strict=False)) if a != b]
             c.corrupted.append((s, r, diff))

@@ -113,7 +113,7 @@ def test_command_written_twice_or_corrupted_or_invented():
     bus = [o.frame for o in bus_with(commands, [])]
     bus[3] = wire.Frame(f.can_id, f.dlc, bytes([f.data[0], f.data[1] ^ 0x80]))  # corrupted on the way
     bus += [commands[5].frame, wire.Frame(0x7AB, 0)]                            # a duplicate, an invented frame
-    observed = [Observed(fr, i, i, line=i + 1) for i, fr in enumerate(bus)]
+    observed = [Observed(fr, 1_000_000 * i + 300_000, i, line=i + 1) for i, fr in enumerate(bus)]
     c, theirs = compare_commands(commands, observed, Counter())
     assert [s.index for s, _, _ in c.corrupted] == [3] and c.corrupted[0][2] == [1]
     assert len(c.duplicates) == 1 and [o.frame.can_id for o in c.unexpected] == [0x7AB]
