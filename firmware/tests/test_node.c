@@ -263,8 +263,28 @@ static void test_config_checks(void)
 	CHECK(zn_node_check_config(&cfg, err, sizeof(err)) != ESP_OK && strstr(err, "router"));
 }
 
+/* A session configuration that cannot work is a configuration error (exit code 2 on Linux);
+ * and the port is told the largest message the node needs, so it reassembles nothing larger. */
+static void test_open(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = base_config(0);
+	mock_zenoh_open_result(ZN_PORT_ERR_CONFIG);
+	CHECK(zn_node_init(&cfg) == ESP_ERR_INVALID_ARG);
+	mock_reset();
+	mock_zenoh_open_result(-1);
+	CHECK(zn_node_init(&cfg) == ESP_FAIL);
+	mock_reset();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	size_t max = mock_zenoh_last_open().rx_message_max;
+	CHECK(max >= ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE + ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES));
+	CHECK(max <= 64 * 1024); /* not Zenoh's 1 GiB */
+	zn_node_stop();
+}
+
 int main(void)
 {
+	test_open();
 	test_immediate_mode();
 	test_filters();
 	test_batching();

@@ -23,7 +23,13 @@ typedef struct {
 	const char *listen;	 /* comma-separated endpoints, may be empty */
 	const char *config_file; /* optional JSON5 file applied first (TLS, auth, ...) */
 	int compression;	 /* 1 = compress the transport (negotiated: used when the peer agrees) */
+	size_t rx_message_max;	 /* largest message reassembled from fragments (bytes); larger ones are
+				    dropped by the port, never buffered whole. 0 = the port's default */
 } zn_session_config_t;
+
+/* zn_open's result when the configuration cannot work (invalid, or a file it
+ * names cannot be read): no retry would heal it. Any other failure is -1. */
+#define ZN_PORT_ERR_CONFIG (-2)
 
 typedef enum { ZN_CONGESTION_DROP = 0, ZN_CONGESTION_BLOCK = 1 } zn_congestion_t;
 
@@ -38,9 +44,9 @@ typedef void (*zn_sample_cb)(const uint8_t *payload, size_t len, const uint8_t *
 /* Writes the reply into buf (at most cap bytes) and returns its length. */
 typedef size_t (*zn_query_cb)(char *buf, size_t cap, void *ctx);
 
-/* Opens a session. With connect endpoints and mode client it does not wait for
- * the router: the port keeps retrying in the background. Multicast scouting is
- * always off; endpoints are explicit. */
+/* Opens a session. In client mode it retries until the router answers (with a
+ * logged backoff), unless the configuration cannot work (ZN_PORT_ERR_CONFIG,
+ * reason logged). Multicast scouting is always off; endpoints are explicit. */
 int zn_open(const zn_session_config_t *config, zn_session_t **out);
 int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
 int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);

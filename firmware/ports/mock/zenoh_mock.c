@@ -37,6 +37,8 @@ static size_t nputs;
 static struct zn_subscriber *subs[MOCK_DECLS];
 static struct zn_token *tokens[MOCK_DECLS];
 static struct zn_queryable *queryables[MOCK_DECLS];
+static int open_result;
+static zn_session_config_t last_open;
 
 void mock_can_reset(void);
 
@@ -49,6 +51,7 @@ void mock_reset(void)
 	memset(subs, 0, sizeof(subs));
 	memset(tokens, 0, sizeof(tokens));
 	memset(queryables, 0, sizeof(queryables));
+	open_result = 0;
 	pthread_mutex_unlock(&lock);
 	mock_can_reset();
 }
@@ -69,9 +72,21 @@ static void drop(void **table, void *item)
 			table[i] = NULL;
 }
 
+void mock_zenoh_open_result(int rc)
+{
+	open_result = rc;
+}
+
+zn_session_config_t mock_zenoh_last_open(void)
+{
+	return last_open;
+}
+
 int zn_open(const zn_session_config_t *config, zn_session_t **out)
 {
-	(void)config;
+	last_open = *config;
+	if (open_result)
+		return open_result;
 	*out = calloc(1, sizeof(**out));
 	return 0;
 }

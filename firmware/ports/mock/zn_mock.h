@@ -8,6 +8,7 @@
 #include <time.h>
 
 #include "driver/can.h"
+#include "zn_port_zenoh.h"
 
 #define MOCK_MAX_PUTS 4096
 #define MOCK_PAYLOAD_MAX 16384
@@ -58,6 +59,10 @@ size_t mock_zenoh_wait_puts(size_t n, int timeout_ms);
 int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
 		       size_t attachment_len);
 int mock_zenoh_has_token(const char *key);
+/* What the next zn_open returns (0, -1, ZN_PORT_ERR_CONFIG); mock_reset sets 0. */
+void mock_zenoh_open_result(int rc);
+/* The session configuration of the last zn_open. */
+zn_session_config_t mock_zenoh_last_open(void);
 size_t mock_zenoh_query(const char *key, char *buf, size_t cap);
 
 #endif

@@ -69,17 +69,63 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 	return ESP_OK;
 }
 
-esp_err_t zn_node_init(const zn_node_config_t *cfg)
+/* Withdraws the tokens (nobody should send commands to a bridge on its way out) and closes
+ * the command subscribers: no callback is inside a tx queue once this returns. */
+static void withdraw(void)
 {
-	char err[256];
-	if (zn_node.running)
-		return ESP_ERR_INVALID_STATE;
-	if (zn_node_check_config(cfg, err, sizeof(err)) != ESP_OK) {
-		zn_log("E", "invalid configuration: %s", err);
-		return ESP_ERR_INVALID_ARG;
+	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
+		struct bus *b = &zn_node.buses[i];
+		zn_undeclare_token(b->token);
+		zn_undeclare_token(b->ros_token);
+		b->token = b->ros_token = NULL;
 	}
+	zn_undeclare_token(zn_node.ros_node_token);
+	zn_node.ros_node_token = NULL;
+	for (size_t i = 0; i < zn_node.cfg.bus_count; i++)
+		zn_tx_close(&zn_node.buses[i]);
+}
+
+/* Undeclares, closes and frees whatever init took (all of it after a stop, part of it after
+ * a failed init: every handle may be NULL). The threads are stopped. */
+static void release(int final_stats)
+{
+	withdraw();
+	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
+		struct bus *b = &zn_node.buses[i];
+		zn_undeclare_publisher(b->pub);
+		if (b->ros_pub)
+			zn_undeclare_publisher(b->ros_pub);
+	}
+	zn_undeclare_queryable(zn_node.stats_q);
+	char *stats = final_stats ? malloc(STATS_JSON_MAX) : NULL;
+	if (stats && zn_node_stats_json(stats, STATS_JSON_MAX))
+		zn_log("I", "final stats: %s", stats);
+	free(stats);
+	zn_close(zn_node.session);
+	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
+		struct bus *b = &zn_node.buses[i];
+		zn_can_close(b->can);
+		free(b->queue);
+		free(b->txq);
+		free(b->payload);
+		free(b->attachment);
+		zn_cond_free(b->nonempty);
+		zn_cond_free(b->tx_ready);
+		zn_cond_free(b->tx_idle);
+		zn_mutex_free(b->tx_lock);
+		zn_mutex_free(b->lock);
+		zn_mutex_free(b->can_lock);
+	}
+	zn_cond_free(zn_node.stop_cond);
+	zn_mutex_free(zn_node.stop_lock);
 	memset(&zn_node, 0, sizeof(zn_node));
-	zn_node.cfg = *cfg;
+	for (size_t i = 0; i < ZN_MAX_BUSES; i++) /* a callback Zenoh starts this late finds the gate shut */
+		zn_node.buses[i].cb_closed = 1;
+}
+
+/* Everything init does once the configuration is valid; on failure, what it took is released by the caller. */
+static esp_err_t start(const zn_node_config_t *cfg)
+{
 	zn_node.start_ns = zn_monotonic_ns();
 	ZN_TRY(zn_mutex_new(&zn_node.stop_lock));
 	ZN_TRY(zn_cond_new(&zn_node.stop_cond));
@@ -90,8 +136,14 @@ esp_err_t zn_node_init(const zn_node_config_t *cfg)
 		.listen = cfg->listen,
 		.config_file = cfg->zenoh_config_file[0] ? cfg->zenoh_config_file : NULL,
 		.compression = cfg->compression,
+		.rx_message_max = ZN_RX_MESSAGE_MAX,
 	};
-	if (zn_open(&scfg, &zn_node.session) != 0) {
+	int open_rc = zn_open(&scfg, &zn_node.session);
+	if (open_rc == ZN_PORT_ERR_CONFIG) {
+		zn_log("E", "cannot open the Zenoh session: its configuration cannot work (above)");
+		return ESP_ERR_INVALID_ARG; /* a configuration error: exit code 2 */
+	}
+	if (open_rc != 0) {
 		zn_log("E", "cannot open the Zenoh session");
 		return ESP_FAIL;
 	}
@@ -134,28 +186,32 @@ esp_err_t zn_node_init(const zn_node_config_t *cfg)
 	return ESP_OK;
 }
 
+esp_err_t zn_node_init(const zn_node_config_t *cfg)
+{
+	char err[256];
+	if (zn_node.running)
+		return ESP_ERR_INVALID_STATE;
+	if (zn_node_check_config(cfg, err, sizeof(err)) != ESP_OK) {
+		zn_log("E", "invalid configuration: %s", err);
+		return ESP_ERR_INVALID_ARG;
+	}
+	memset(&zn_node, 0, sizeof(zn_node));
+	zn_node.cfg = *cfg;
+	esp_err_t rc = start(cfg);
+	if (rc != ESP_OK) {
+		if (zn_node.running)
+			zn_node_stop(); /* threads were started: stop them as on shutdown */
+		else
+			release(0);
+	}
+	return rc;
+}
+
 void zn_node_stop(void)
 {
 	if (!zn_node.running)
 		return;
-	/* withdraw the tokens first: nobody should send commands to a bridge on its way out */
-	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
-		if (zn_node.buses[i].token) {
-			zn_undeclare_token(zn_node.buses[i].token);
-			zn_node.buses[i].token = NULL;
-		}
-		if (zn_node.buses[i].ros_token) {
-			zn_undeclare_token(zn_node.buses[i].ros_token);
-			zn_node.buses[i].ros_token = NULL;
-		}
-	}
-	if (zn_node.ros_node_token) {
-		zn_undeclare_token(zn_node.ros_node_token);
-		zn_node.ros_node_token = NULL;
-	}
-	/* no command callback inside the tx queue from here on */
-	for (size_t i = 0; i < zn_node.cfg.bus_count; i++)
-		zn_tx_close(&zn_node.buses[i]);
+	withdraw();
 	zn_mutex_lock(zn_node.stop_lock);
 	zn_node.stopping = 1;
 	zn_cond_signal(zn_node.stop_cond);
@@ -174,33 +230,5 @@ void zn_node_stop(void)
 		zn_thread_join(b->transmitter); /* writes what is queued while the bus takes it */
 	}
 	zn_thread_join(zn_node.monitor);
-	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
-		struct bus *b = &zn_node.buses[i];
-		zn_undeclare_publisher(b->pub);
-		if (b->ros_pub)
-			zn_undeclare_publisher(b->ros_pub);
-	}
-	zn_undeclare_queryable(zn_node.stats_q);
-	char *stats = malloc(STATS_JSON_MAX);
-	if (stats && zn_node_stats_json(stats, STATS_JSON_MAX))
-		zn_log("I", "final stats: %s", stats);
-	free(stats);
-	zn_close(zn_node.session);
-	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
-		struct bus *b = &zn_node.buses[i];
-		zn_can_close(b->can);
-		free(b->queue);
-		free(b->txq);
-		free(b->payload);
-		free(b->attachment);
-		zn_cond_free(b->nonempty);
-		zn_cond_free(b->tx_ready);
-		zn_cond_free(b->tx_idle);
-		zn_mutex_free(b->tx_lock);
-		zn_mutex_free(b->lock);
-		zn_mutex_free(b->can_lock);
-	}
-	zn_cond_free(zn_node.stop_cond);
-	zn_mutex_free(zn_node.stop_lock);
-	zn_node.running = 0;
+	release(1);
 }
