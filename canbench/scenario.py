@@ -1,5 +1,5 @@
 """Scenario files (scenarios/*.yaml): load, validate against the JSON Schema
-(scenarios/schema.json, the one source of truth for keys, types and units),
+(canbench/scenario.schema.json, the one source of truth for keys, types and units),
 and report problems as file:line: field: message."""
 from __future__ import annotations
 

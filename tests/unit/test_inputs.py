@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from canbench import cli, scenario
+from canbench import cli, compose, scenario
 from canbench.errors import ScenarioError, TraceError
 from canbench.trace import read_trace
 
@@ -120,7 +120,7 @@ def test_repeated_fault_steps_expand_until_their_end(tmp_path):
 def test_partition_gives_the_bridge_its_own_router_listener(tmp_path):
     write(tmp_path, "trace.log", GOOD_TRACE)
     path = write(tmp_path, "s.yaml", scenario_text(faults="\n  - {at_s: 1, action: partition, duration_s: 2}"))
-    services = cli.compose_override(scenario.load(path), "/scenarios/s.yaml")["services"]
+    services = compose.compose_override(scenario.load(path), "/scenarios/s.yaml")["services"]
     assert "tcp/0.0.0.0:7446" in services["router"]["command"]
     assert services["bridge"]["environment"]["ZENOH_ROUTER_ADDRESS"] == "tcp/router:7446"
     assert services["orchestrator"]["volumes"] == ["/var/run/docker.sock:/var/run/docker.sock"]

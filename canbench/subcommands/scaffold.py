@@ -1,0 +1,30 @@
+"""canbench scaffold TRACE --name N: a scenario replaying a trace, gates derived from it."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .. import authoring, scenario
+from ..errors import InputError
+
+
+def cmd_scaffold(args) -> int:
+    out = args.out or Path("scenarios") / f"{args.name}.yaml"
+    if out.exists() and not args.force:
+        raise InputError(str(out), None, "exists already (--force to overwrite)")
+    text = authoring.scaffold(args.trace, args.name, out, args.bitrate)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    scenario.load(out)  # what we write must be valid
+    print(f"{out}: written; review its gates, then: make test SCENARIO={out}")
+    return 0
+
+
+def add_subparser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("scaffold", help="write a scenario replaying a trace")
+    p.add_argument("trace", type=Path)
+    p.add_argument("--name", required=True, help="scenario name (lowercase, digits, - and _)")
+    p.add_argument("--out", type=Path, help="default scenarios/<name>.yaml")
+    p.add_argument("--bitrate", type=int, default=500_000)
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=cmd_scaffold)
