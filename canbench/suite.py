@@ -5,6 +5,9 @@
   canbench suite summary SUITE_DIR                index.html, junit.xml and summary.json of the
                                                   runs listed in SUITE_DIR/runs.tsv; exit code
                                                   of the suite
+  canbench suite compare OLD_REPORTS NEW_REPORTS  `canbench compare` of every scenario run in the
+                                                  suites under NEW against its passed run in OLD
+                                                  (nightly CI: OLD is the last good night's)
 
 Shards are balanced by expected duration (longest first onto the least loaded shard) and
 depend only on the scenario files, so n runners given the same files split them exactly,
@@ -20,7 +23,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from . import scenario
+from . import compare, scenario
 from .errors import InputError, ScenarioError
 
 # A run's fixed cost on top of its traffic phase (compose up, readiness, analysis, reports,
@@ -180,6 +183,42 @@ def summarise(suite_dir: Path) -> int:
     return code
 
 
+def suite_runs(reports: Path, passed_only: bool = False) -> dict[str, Path]:
+    """scenario name -> run directory, for every run of the suites under reports (several shards'
+    downloads side by side); the newest run of a name wins."""
+    runs: dict[str, tuple[str, Path]] = {}
+    for summary in sorted(reports.glob("**/summary.json")):
+        for r in json.loads(summary.read_text()).get("runs", []):
+            run_dir = summary.parent.parent / r["run_id"] if r.get("run_id") else None
+            if passed_only and r.get("exit_code") != 0:
+                continue
+            if run_dir is not None and (run_dir / "metrics.json").exists():
+                name = Path(r["scenario"]).stem
+                if name not in runs or runs[name][0] < r["run_id"]:
+                    runs[name] = (r["run_id"], run_dir)
+    return {name: run_dir for name, (_, run_dir) in runs.items()}
+
+
+def compare_suites(old_reports: Path, new_reports: Path) -> int:
+    """Exit 1 if any scenario regressed against its baseline; a scenario without one is named."""
+    old, new = suite_runs(old_reports, passed_only=True), suite_runs(new_reports)
+    if not new:
+        raise InputError(str(new_reports), None, "no suite summary.json with runs under it (make test writes them)")
+    regressed = []
+    for name, run_dir in sorted(new.items()):
+        if name not in old:
+            print(f"{name}: no baseline in {old_reports} (a first good run becomes one)")
+            continue
+        a, b = compare.load_metrics(old[name]), compare.load_metrics(run_dir)
+        rows = compare.compare(a, b)
+        print(f"{name}: {old[name].name} -> {run_dir.name}\n{compare.render(rows, a, b)}")
+        if any(r.regression for r in rows):
+            regressed.append(name)
+    print(f"suite compare: {len(regressed)} of {len(new)} scenarios regressed{': ' if regressed else ''}"
+          f"{', '.join(regressed)}")
+    return 1 if regressed else 0
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="suite_cmd", required=True)
     q = sub.add_parser("plan", help="the scenarios of one shard, longest first, with expected seconds")
@@ -187,6 +226,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     q.add_argument("--shard", help="K/N: the K-th of N balanced shares (default: all)")
     q = sub.add_parser("summary", help="index.html, junit.xml and summary.json of a suite's runs")
     q.add_argument("suite_dir", type=Path)
+    q = sub.add_parser("compare", help="canbench compare of every scenario against the baseline suites")
+    q.add_argument("old_reports", type=Path, help="reports of the last good run (their suite summary.json)")
+    q.add_argument("new_reports", type=Path, help="reports of this run")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -194,6 +236,8 @@ def main(args: argparse.Namespace) -> int:
         for seconds, path in plan(args.scenarios, args.shard):
             print(f"{seconds:.0f}\t{path}")
         return 0
+    if args.suite_cmd == "compare":
+        return compare_suites(args.old_reports, args.new_reports)
     code = summarise(args.suite_dir)
     print(f"suite: {args.suite_dir}/index.html", file=sys.stderr)
     return code

@@ -94,3 +94,36 @@ def test_summary_merges_every_run(tmp_path):
 def test_suite_exit_code(codes, expected):
     runs = [suite.Run(f"s{i}", None if c == 2 else f"r{i}", c, 1) for i, c in enumerate(codes)]
     assert suite.exit_code(runs) == expected
+
+
+def metrics(p50: float, lost: int = 0) -> dict:
+    summary = {"sent": 100, "matched": 100 - lost, "lost": lost, "duplicates": 0, "corrupted": 0, "reordered": 0,
+               "latency": {"count": 100, "p50_ms": p50, "p90_ms": p50, "p99_ms": p50, "max_ms": p50}}
+    return {"schema_version": 1, "run_id": "r", "scenario": "s", "can_to_zenoh": {"vcan0": summary},
+            "verdicts": {"test_check[integrity]": "passed" if not lost else "failed"}}
+
+
+def write_suite(reports: Path, suite_name: str, runs: dict[str, tuple[dict, int]]) -> None:
+    (reports / suite_name).mkdir(parents=True)
+    entries = []
+    for name, (m, code) in runs.items():
+        run_id = f"2026-{suite_name}-{name}"
+        (reports / run_id).mkdir()
+        (reports / run_id / "metrics.json").write_text(json.dumps(m))
+        entries.append({"scenario": f"scenarios/{name}.yaml", "run_id": run_id, "exit_code": code})
+    (reports / suite_name / "summary.json").write_text(json.dumps({"runs": entries}))
+
+
+def test_suite_compare_against_the_last_good_night(tmp_path, capsys):
+    old, new = tmp_path / "old", tmp_path / "new"
+    # two shards' downloads side by side; the baseline's failed run is no baseline
+    write_suite(old, "suite-a", {"smoke": (metrics(0.5), 0), "burst": (metrics(0.5), 0)})
+    write_suite(old, "suite-b", {"peer": (metrics(0.5, lost=3), 1)})
+    write_suite(new, "suite-c", {"smoke": (metrics(0.5), 0), "burst": (metrics(0.5), 0)})
+    write_suite(new, "suite-d", {"peer": (metrics(0.5), 0)})
+    assert cli.main(["suite", "compare", str(old), str(new)]) == 0
+    out = capsys.readouterr().out
+    assert "peer: no baseline" in out and "suite compare: 0 of 3 scenarios regressed" in out
+    write_suite(new, "suite-e", {"burst": (metrics(1.5), 0)})  # newer run of burst: p50 x3
+    assert cli.main(["suite", "compare", str(old), str(new)]) == 1
+    assert "suite compare: 1 of 3 scenarios regressed: burst" in capsys.readouterr().out
