@@ -1,6 +1,7 @@
-/* fuzz_decode.c - libFuzzer harness for the bridge's decoder: any payload is
+/* fuzz_decode.c - libFuzzer harness for the bridge's decoders: any payload is
  * either a valid batch whose every frame re-encodes to the same bytes, or is
- * refused with a named reason. */
+ * refused with a named reason; the same bytes as a command's attachment are
+ * accepted only when they describe exactly the frames they count. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -25,6 +26,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	} else if (count != 0 || strcmp(zn_wire_reason(rc), "unknown") == 0) {
 		abort();
 	}
+	size_t frames = size >= 4 ? (size_t)(copy[2] | copy[3] << 8) : 0;
+	rc = zn_attachment_check(copy, size, frames);
+	if (rc == ZN_WIRE_OK ? size != ZN_ATTACHMENT_SIZE(frames) || copy[0] != ZN_ATTACHMENT_VERSION
+			     : rc != ZN_WIRE_ERR_ATTACHMENT)
+		abort();
 	free(copy);
 	return 0;
 }
