@@ -182,7 +182,8 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 
 esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
 {
-	if ((fault.kind != TXDROP && fault.kind != TXFLIP) || __atomic_add_fetch(&fault.tx_count, 1, __ATOMIC_RELAXED) % fault.n)
+	if ((fault.kind != TXDROP && fault.kind != TXFLIP) ||
+	    __atomic_add_fetch(&fault.tx_count, 1, __ATOMIC_RELAXED) % fault.n)
 		return __real_zn_can_transmit(can, msg, timeout_ms);
 	if (fault.kind == TXDROP)
 		return ESP_OK; /* "written", silently lost */

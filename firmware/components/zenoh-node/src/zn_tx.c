@@ -52,7 +52,9 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 		uint32_t queued = b->tx_len;
 		zn_mutex_unlock(b->tx_lock);
 		if (COUNT(b->n.tx_queue_full) == 0)
-			zn_log("W", "%s: tx queue full (%" PRIu32 " of %" PRIu32 " frames queued): refused a command of %zu frames; further refusals only counted",
+			zn_log("W",
+			       "%s: tx queue full (%" PRIu32 " of %" PRIu32
+			       " frames queued): refused a command of %zu frames; further refusals only counted",
 			       b->name, queued, b->tx_cap, count);
 		return;
 	}
@@ -133,7 +135,9 @@ void zn_tx_transmitter_thread(void *arg)
 		}
 		failed_cmd = e.cmd;
 		if (COUNT(b->n.can_tx_errors) == 0)
-			zn_log("W", "%s: CAN transmit failed (bus stalled or gone): the rest of that command is abandoned (tx_abandoned); further failures only counted",
+			zn_log("W",
+			       "%s: CAN transmit failed (bus stalled or gone): the rest of that command is abandoned "
+			       "(tx_abandoned); further failures only counted",
 			       b->name);
 	}
 }
