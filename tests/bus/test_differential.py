@@ -15,12 +15,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import differential  # this test's folder: on sys.path, as pytest imports the test
 import pytest
 from conftest import KERNEL_VCAN, REPO, Bus, ensure_kernel_vcan
 
 PROBE = Path(__file__).with_name("differential.py")
-sys.path.insert(0, str(PROBE.parent))
-import differential  # noqa: E402
 
 pytestmark = pytest.mark.bus
 
