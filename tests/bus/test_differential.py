@@ -15,7 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-import differential  # this test's folder: on sys.path, as pytest imports the test
+import differential  # importable: pytest imports a test with its own folder first on the path
 import pytest
 from conftest import KERNEL_VCAN, REPO, Bus, ensure_kernel_vcan
 
