@@ -12,7 +12,7 @@ pytestmark = pytest.mark.unit
 REPO = Path(__file__).resolve().parents[2]
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 GENERATED = {"build", "reports"}  # written by builds and runs, not part of the tree
-EXAMPLES = {"scenarios/my-drive.yaml",  # what README's walkthrough has the reader write
+EXAMPLES = {"scenarios/my-drive.yaml", "scenarios/traces/drive.log",  # what README's walkthrough writes
             "scenarios/x.yaml"}  # an error message README shows
 PATH = re.compile(r"[\w.\-*]+(?:/[\w.\-*]+)+/?|[\w.\-*]+/")
 
