@@ -7,7 +7,7 @@ import re
 import statistics
 from pathlib import Path
 
-ATTACHMENT_HEADER = 12  # zenoh_node.h: version, reserved, count u16, first sequence u64; then rx ns u64 per frame
+ATTACHMENT_HEADER = 12  # zn_wire.h: version, flags, count u16, first sequence u64; then rx ns u64 per frame
 
 
 def zenoh_frames(path: Path):
