@@ -122,7 +122,9 @@ class Execution:
         """A fault step killed an ECU: what its send log holds is what it sent."""
         log = self.run_dir / f"ecu-{name}.sent.tsv"
         sent = sum(1 for line in open(log) if not line.startswith("#")) if log.exists() else 0
-        self._mark_done(name, {"name": name, "killed": True, "sent": sent})
+        self.done[name] = {"name": name, "killed": True, "sent": sent}
+        if self.senders <= set(self.done):
+            self.senders_done.set()
 
     def traffic(self) -> None:
         """Fault steps and commands run while the ECUs send; returns once every ECU said done."""
@@ -139,8 +141,9 @@ class Execution:
             for name in self.senders - set(self.done):
                 summary_file = self.run_dir / f"ecu-{name}.json"
                 if summary_file.exists():
-                    self._mark_done(name, json.loads(summary_file.read_text()))
-            if self.senders_done.is_set():
+                    self.done[name] = json.loads(summary_file.read_text())
+            if self.senders <= set(self.done):  # also when there is no sender at all
+                self.senders_done.set()
                 break
             progress(f"{time.monotonic() - started:5.1f} s of up to {self.scenario.duration_s:g} s: "
                      f"{len(set(self.done) & self.senders)}/{len(self.senders)} ECUs done, "
