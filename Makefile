@@ -156,11 +156,14 @@ check-bridge: ucan firmware firmware-asan zenohd
 	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
 	$(ASAN_ENV) UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_ASAN_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
 
+# The hub's message validator, then the hub's state (sequences over many connections, in process).
 fuzz-ucan:
 	cmake -S ucan -B $(BUILD)/ucan-fuzz $(CMAKE_GEN) -DCMAKE_C_COMPILER=clang -DUCAN_FUZZ=ON >/dev/null
-	ninja -C $(BUILD)/ucan-fuzz fuzz_hub_msg
-	mkdir -p $(BUILD)/ucan-fuzz/corpus
+	ninja -C $(BUILD)/ucan-fuzz fuzz_hub_msg fuzz_hub_state
+	mkdir -p $(BUILD)/ucan-fuzz/corpus $(BUILD)/ucan-fuzz/corpus-state
 	$(BUILD)/ucan-fuzz/fuzz_hub_msg -max_total_time=$(FUZZ_SECONDS) -max_len=4200 $(BUILD)/ucan-fuzz/corpus
+	$(BUILD)/ucan-fuzz/fuzz_hub_state -max_total_time=$(FUZZ_SECONDS) -max_len=2048 -rss_limit_mb=1024 \
+	  $(BUILD)/ucan-fuzz/corpus-state
 
 fuzz-firmware:
 	cmake -S firmware -B $(BUILD)/firmware-fuzz $(CMAKE_GEN) -DCMAKE_C_COMPILER=clang -DZN_FUZZ=ON -DZN_BUILD_BRIDGE=OFF >/dev/null

@@ -730,7 +730,8 @@ static void handle_getopt(uint32_t idx, const uint8_t *msg)
 		opts.type = UCAN_MSG_GETOPT;
 		opts.bound = (uint8_t)c->bound;
 		opts.header_mode = (uint8_t)c->header_mode;
-		memcpy(reply + sizeof(opts), c->filters, c->opts.nfilters * sizeof(struct can_filter));
+		if (c->opts.nfilters) /* an unbound client has none (NULL) */
+			memcpy(reply + sizeof(opts), c->filters, c->opts.nfilters * sizeof(struct can_filter));
 		len = sizeof(opts) + c->opts.nfilters * sizeof(struct can_filter);
 		break;
 	}
@@ -1104,4 +1105,21 @@ void hub_shutdown(void)
 	memset(&hub, 0, sizeof(hub));
 	hub.listen_fd = hub.epoll_fd = hub.stats_timer_fd = hub.lock_fd = hub.spare_fd = -1;
 	hub.default_queue = HUB_DEFAULT_QUEUE_FRAMES;
+}
+
+void hub_check_invariants(void)
+{
+	uint32_t max_limit = hub.default_queue > UCAN_MAX_RCVBUF / CANFD_MTU ? hub.default_queue
+									     : UCAN_MAX_RCVBUF / CANFD_MTU;
+	assert(hub.ndirty == 0 && drain_depth == 0);
+	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
+		const struct client *c = &hub.clients[i];
+		assert(!c->dirty && !c->draining);
+		if (c->fd < 0) {
+			assert(c->queue == NULL && c->queue_len == 0);
+			continue;
+		}
+		assert(c->queue_len <= c->queue_cap && c->queue_cap <= c->queue_limit + UCAN_CTL_RESERVE);
+		assert(c->queue_limit <= max_limit);
+	}
 }

@@ -27,6 +27,8 @@ void hub_request_stop(void);
 /* Closes every connection and frees everything, so hub_add_iface/hub_start can run again. */
 void hub_shutdown(void);
 const char *hub_socket_path(void);
+/* Aborts unless what must hold between rounds holds (queues within bounds, flush list empty). */
+void hub_check_invariants(void);
 void hub_log(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
 #endif
