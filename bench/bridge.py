@@ -40,6 +40,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from canbench import wire
+from canbench.capture import iter_zenoh_capture
 from canbench.errors import RunError
 from canbench.rig import Rig, Router, start_bridge, zn_capture
 from canbench.runkeys import open_session
@@ -70,7 +72,7 @@ SETTLE_S = 10.0
 def count_frames(path: Path) -> int:
     if not path.exists():
         return 0
-    return sum(len(line.split("\t")[2]) // 32 for line in open(path) if line.count("\t") == 3)
+    return sum(len(s.payload) // wire.WIRE_SIZE for s in iter_zenoh_capture(path, growing=True))
 
 
 def bus_keys(prefix: str, group: list[str], direction: str) -> list[str]:

@@ -29,7 +29,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from canbench.capture import CAPTURE_RCVBUF
+from canbench.capture import CAPTURE_RCVBUF, iter_zenoh_capture
 from canbench.rig import Procs, Router, stop, zn_capture
 from canbench.runkeys import open_session
 
@@ -66,10 +66,9 @@ def zenoh_run(args, workdir: Path, rate: int, block: bool) -> dict:
         wait_lines(tsv, ZENOH_COUNT)
         stop(capture, close_stdin=True)
         times, seqs = [], []
-        for line in open(tsv, "rb"):
-            fields = line.split(b"\t")
-            times.append(int(fields[0]))
-            seqs.append(int.from_bytes(bytes.fromhex(fields[3].strip().decode()), "little"))
+        for sample in iter_zenoh_capture(tsv):
+            times.append(sample.t_ns)
+            seqs.append(int.from_bytes(sample.attachment or b"", "little"))  # zn-flood's attachment: its counter
         gaps = sum(1 for a, b in zip(seqs, seqs[1:], strict=False) if b != a + 1)
         offered = ZENOH_COUNT / seconds
         sustained = (len(times) - 1) / ((times[-1] - times[0]) / 1e9) if len(times) > 1 else 0

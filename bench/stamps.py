@@ -7,25 +7,25 @@ import re
 import statistics
 from pathlib import Path
 
-ATTACHMENT_HEADER = 12  # zn_wire.h: version, flags, count u16, first sequence u64; then rx ns u64 per frame
+from canbench import wire
+from canbench.capture import iter_zenoh_capture
+from canbench.trace import iter_candump
 
 
 def zenoh_frames(path: Path):
     """(CAN id, send stamp, receive ns, the bridge's CAN receive stamp or None) per frame in a
-    zn-capture TSV: batched samples hold several frames, zenoh-node's attachment a stamp per frame."""
+    zn-capture TSV (possibly still being written): batched samples hold several frames,
+    zenoh-node's attachment a stamp per frame (zn-flood's attachment is its own counter)."""
     if not path.exists():
         return
-    for line in open(path):
-        parts = line.rstrip("\n").split("\t")
-        if len(parts) != 4:
-            continue
-        recv, payload = int(parts[0]), bytes.fromhex(parts[2])
-        att = bytes.fromhex(parts[3]) if parts[3] != "-" else b""
-        for n, i in enumerate(range(0, len(payload) - 15, 16)):
-            at = ATTACHMENT_HEADER + 8 * n
-            can_rx = int.from_bytes(att[at:at + 8], "little") if len(att) >= at + 8 else None
-            yield (int.from_bytes(payload[i:i + 4], "little") & 0x1FFFFFFF,
-                   int.from_bytes(payload[i + 8:i + 16], "little"), recv, can_rx)
+    for sample in iter_zenoh_capture(path, growing=True):
+        try:
+            rx_stamps = wire.decode_attachment(sample.attachment).rx_times_ns if sample.attachment else ()
+        except wire.WireError:
+            rx_stamps = ()
+        for n, f in enumerate(wire.decode_batch(sample.payload)):
+            can_rx = rx_stamps[n] if n < len(rx_stamps) else None
+            yield f.can_id, int.from_bytes(f.data, "little"), sample.t_ns, can_rx
 
 
 def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]:
@@ -45,19 +45,12 @@ def can_stamp_split(path: Path, can_id: int) -> dict:
 
 
 def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
-    """(send stamp, bus receive ns) per frame with can_id in a candump -L log."""
-    out = []
+    """(send stamp, bus receive ns) per 8-byte frame with can_id (11-bit) in a candump -L log
+    (possibly still being written)."""
     if not path.exists():
-        return out
-    want = f"{can_id:03X}#"
-    for line in open(path):
-        parts = line.split()
-        if len(parts) == 3 and parts[2].startswith(want):
-            sec, usec = parts[0].strip("()").split(".")
-            data = bytes.fromhex(parts[2].split("#", 1)[1])
-            if len(data) == 8:
-                out.append((int.from_bytes(data, "little"), int(sec) * 1_000_000_000 + int(usec) * 1000))
-    return out
+        return []
+    return [(int.from_bytes(f.data, "little"), t_ns) for _, t_ns, _, f in iter_candump(path, growing=True)
+            if f.can_id == can_id and not f.extended and f.dlc == 8]
 
 
 def load_rate(report: str, count: int) -> int | None:

@@ -193,9 +193,13 @@ def format_sample_line(sample: Sample) -> str:
     return f"{sample.t_ns}\t{sample.key}\t{sample.payload.hex()}\t{att}\n"
 
 
-def iter_zenoh_capture(path: Path) -> Iterator[Sample]:
+def iter_zenoh_capture(path: Path, growing: bool = False) -> Iterator[Sample]:
+    """Every sample of a zn-capture file. growing: the capture may still be writing, so a last
+    line without its newline is not there yet (skipped, not an error)."""
     with open(path) as f:
         for lineno, line in enumerate(f, 1):
+            if growing and not line.endswith("\n"):
+                return
             try:
                 yield parse_sample_line(line)
             except ValueError as e:

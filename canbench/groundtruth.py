@@ -91,10 +91,11 @@ def _in_run(runs: list[int], i: int) -> bool:
 def _deliver(truth: BusTruth, rng: random.Random, faults: list[tuple[str, int, int]], wrong_key: str,
              max_batch: int) -> list[Item]:
     items = [Item(i, f, truth.key) for i, (_, f) in enumerate(truth.sent)]
-    # positions are sent indices; apply from the back so earlier positions stay valid
+    # applied from the back: faults are FAULT_SPACING apart, so frame i is still at position i
     for kind, i, arg in sorted(faults, key=lambda x: -x[1]):
-        at = next(p for p, it in enumerate(items) if it.sent == i and it.kind == "ok")
+        at = i
         it = items[at]
+        assert it.sent == i and it.kind == "ok"
         if kind == "drop":
             del items[at]
         elif kind == "dup":
@@ -126,8 +127,8 @@ def _deliver(truth: BusTruth, rng: random.Random, faults: list[tuple[str, int, i
     return items
 
 
-def _observable(truth: BusTruth, runs: list[int], items: list[Item], kind: str, i: int,
-                delivered: set[int]) -> bool:
+def _observable(truth: BusTruth, runs: list[int], arrivals: dict[int, int], kind: str, i: int,
+                lost: list[int]) -> bool:
     """The captures can tell this fault: no identical copy of the frame is sent between it and
     its arrival (+ STAMP_SLACK_NS), except a drop inside a run of identical frames."""
     if kind == "drop":
@@ -137,17 +138,17 @@ def _observable(truth: BusTruth, runs: list[int], items: list[Item], kind: str, 
         return False
     if kind == "corrupt" and (frame.remote or not frame.dlc):
         return False
-    arrival = max(it.t_ns for it in items if it.sent == i)
+    arrival = arrivals[i]
     for j in range(i + 1, len(truth.sent)):
         t, f = truth.sent[j]
         if t > arrival + STAMP_SLACK_NS:
             break
         if f == frame:
             return False
-    if kind == "dup" and any(truth.sent[j][1] == frame for j in range(i) if j not in delivered):
+    if kind == "dup" and any(truth.sent[j][1] == frame for j in lost if j < i):
         return False  # a lost copy before it: the duplicate reads as that copy, late
     if kind == "swap":  # the neighbour moves too
-        return i + 1 < len(truth.sent) and _observable(truth, runs, items, "delay", i + 1, delivered) \
+        return i + 1 < len(truth.sent) and _observable(truth, runs, arrivals, "delay", i + 1, lost) \
             and truth.sent[i + 1][1] != frame
     return True
 
@@ -206,8 +207,11 @@ def generate(seed: int, frames_per_bus: int, buses: int = 1, faults: int = 4, ma
         batch_seed = rng.random()
         while True:  # drop the faults the captures could not tell, until the rest all can be told
             items = _deliver(truth, random.Random(batch_seed), planned, f"vehicle/can/{bus}/wrong", max_batch)
-            delivered = {it.sent for it in items if it.kind == "ok" and it.key == truth.key}
-            keep = [f for f in planned if _observable(truth, runs, items, f[0], f[1], delivered)]
+            arrivals: dict[int, int] = {}
+            for it in items:
+                arrivals[it.sent] = max(arrivals.get(it.sent, 0), it.t_ns)
+            lost = sorted(i for k, i, _ in planned if k in ("drop", "corrupt", "wrongkey"))
+            keep = [f for f in planned if _observable(truth, runs, arrivals, f[0], f[1], lost)]
             if keep == planned and _corrupted_is_new(truth, items):
                 break
             planned = keep if keep != planned else [f for f in planned if f[0] != "corrupt"]

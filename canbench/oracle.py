@@ -30,7 +30,7 @@ from .errors import TraceError
 from .stats import latency_stats, percentile
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Observed:
     frame: wire.Frame
     t_ns: int          # CAN: bus timestamp; Zenoh: receive time
@@ -40,6 +40,9 @@ class Observed:
     seq: int = -1      # Zenoh: bridge sequence number
     bridge_rx_ns: int = 0  # Zenoh: CAN receive time the bridge put in the attachment
     origin: str = "can.log"  # the file `line` refers to
+
+
+FRAME_CACHE = 1 << 20  # distinct frame contents kept for sharing (then it starts again: only memory is at stake)
 
 
 def read_candump(path: Path, interface: str | None = None, drops: dict[str, int] | None = None) -> list[Observed]:
@@ -76,11 +79,14 @@ def zenoh_frames(samples: Iterable[Sample], key: str) -> tuple[list[Observed], l
     """Frames of the samples on key, in arrival order; and problems (bad payloads, other keys)."""
     out: list[Observed] = []
     problems: list[str] = []
+    cache: dict[bytes, wire.Frame] = {}
     for t_ns, sample_key, payload, att in samples:
         if sample_key != key:
             continue
+        if len(cache) > FRAME_CACHE:
+            cache.clear()
         try:
-            frames = wire.decode_batch(payload)
+            frames = wire.decode_batch(payload, cache)
             meta = wire.decode_attachment(att) if att is not None else None
         except wire.WireError as e:
             problems.append(f"undecodable sample on {sample_key} at {t_ns}: {e}")

@@ -28,6 +28,7 @@ FRAME_TEXT = re.compile(CANDUMP_LINE.pattern.replace(r"^\((?P<sec>\d+)\.(?P<frac
 DROPCOUNT = re.compile(r"^DROPCOUNT: dropped (\d+) CAN frames? on '([^']*)' socket \(total drops (\d+)\)")
 CAN_ERR_FLAG = 0x20000000
 MAX_TRACE_FRAMES = 10_000_000
+FRAME_CACHE = 1 << 20  # distinct frame texts kept for sharing (then it starts again: only memory is at stake)
 
 
 @dataclass(frozen=True)
@@ -55,17 +56,27 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
     return Frame(can_id, len(data), data, extended)
 
 
-def parse_line(line: str, path: str = "<candump>", lineno: int | None = None) -> tuple[int, str, Frame] | None:
+def parse_line(line: str, path: str = "<candump>", lineno: int | None = None,
+               cache: dict[tuple[str, str], Frame] | None = None) -> tuple[int, str, Frame] | None:
     """(timestamp ns since the epoch, interface, frame) of one candump -L line; None for lines
     canplayer skips (not starting with '('; candump -d's DROPCOUNT lines). The fraction is
-    microseconds (candump -L) or nanoseconds, taken exactly: no float on the way."""
+    microseconds (candump -L) or nanoseconds, taken exactly: no float on the way.
+    cache: frames already parsed, by their text (one object per content: traffic repeats)."""
     if not line.startswith("("):
         return None
     m = CANDUMP_LINE.match(line)
     if not m:
         raise TraceError(path, lineno, f"not a candump -L frame: {line.strip()[:80]!r}")
     t_ns = int(m["sec"]) * 1_000_000_000 + int(m["frac"].ljust(9, "0"))
-    return t_ns, m["iface"], _frame(m, path, lineno)
+    if cache is None:
+        return t_ns, m["iface"], _frame(m, path, lineno)
+    text = (m["id"], m["body"])
+    frame = cache.get(text)
+    if frame is None:
+        if len(cache) > FRAME_CACHE:
+            cache.clear()
+        frame = cache[text] = _frame(m, path, lineno)
+    return t_ns, m["iface"], frame
 
 
 def parse_frame_text(text: str, path: str = "<frame>", lineno: int | None = None) -> tuple[str, Frame]:
@@ -82,13 +93,17 @@ def format_line(t_ns: int, iface: str, frame: Frame) -> str:
     return f"({sec}.{ns // 1000:06d}) {frame.candump(iface)}"
 
 
-def iter_candump(path: str | Path, interface: str | None = None,
-                 drops: dict[str, int] | None = None) -> Iterator[tuple[int, int, str, Frame]]:
+def iter_candump(path: str | Path, interface: str | None = None, drops: dict[str, int] | None = None,
+                 growing: bool = False) -> Iterator[tuple[int, int, str, Frame]]:
     """(line number, t_ns, interface, frame) of every frame line of a candump -L file.
-    drops: filled with the frames candump says the kernel dropped, per interface (DROPCOUNT)."""
+    drops: filled with the frames candump says the kernel dropped, per interface (DROPCOUNT).
+    growing: candump may still be writing, so a last line without its newline is skipped."""
+    cache: dict[tuple[str, str], Frame] = {}
     with open(path, errors="replace") as f:
         for lineno, raw in enumerate(f, 1):
-            parsed = parse_line(raw.lstrip(), str(path), lineno)
+            if growing and not raw.endswith("\n"):
+                return
+            parsed = parse_line(raw.lstrip(), str(path), lineno, cache)
             if parsed is None:
                 if drops is not None and (m := DROPCOUNT.match(raw)):
                     drops[m[2]] = drops.get(m[2], 0) + int(m[1])

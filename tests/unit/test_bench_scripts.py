@@ -22,7 +22,7 @@ def test_zenoh_stamps_reads_every_frame_of_a_batch_and_filters_by_id(tmp_path):
     tsv = tmp_path / "z.tsv"
     tsv.write_text(f"{T0 + 500_000}\tvehicle/can/rx\t{frame(0x100, T0)}{frame(0x322, T0 + 1)}\t-\n"
                    f"{T0 + 900_000}\tvehicle/can/rx\t{frame(0x100, T0 + 2)}\t01000100\n"
-                   "truncated line\n")
+                   f"{T0 + 990_000}\tvehicle/can/rx\t{frame(0x100, T0 + 3)[:12]}")  # still being written
     assert stamps.zenoh_stamps(tsv) == [(T0, T0 + 500_000), (T0 + 1, T0 + 500_000), (T0 + 2, T0 + 900_000)]
     assert stamps.zenoh_stamps(tsv, 0x322) == [(T0 + 1, T0 + 500_000)]
     assert stamps.zenoh_stamps(tmp_path / "missing.tsv") == []
