@@ -240,6 +240,30 @@ static void test_multi_bus_keys(void)
 	zn_node_stop();
 }
 
+/* The bus lost under the running node (hub restarted): the reader reopens it and counts it,
+ * frames and commands flow again, each once, sequence numbers go on. */
+static void test_can_reopen(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	can_message_t a = frame(0x101, 0, 0, 1, 1), c = frame(0x102, 0, 0, 1, 2), cmd = frame(0x201, 0, 0, 1, 3);
+	mock_can_inject("vcan0", &a, 1);
+	CHECK(mock_zenoh_wait_puts(1, WAIT_MS) == 1);
+	mock_can_lose("vcan0");
+	CHECK(stats_soon_has("\"can_reopens\": 1"));
+	mock_can_inject("vcan0", &c, 2);
+	CHECK(mock_zenoh_wait_puts(2, WAIT_MS) == 2);
+	CHECK(mock_zenoh_put(1)->payload[0] == 0x02 && le64(mock_zenoh_put(1)->attachment + 4) == 1);
+	uint8_t wire[16];
+	zn_wire_encode(&cmd, wire, sizeof(wire));
+	deliver(wire, 16, NULL, 0);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1 && mock_can_tx("vcan0", 0).identifier == 0x201);
+	CHECK(stats_soon_has("\"tx_frames\": 1"));
+	CHECK(mock_zenoh_put_count() == 2 && mock_can_tx_count("vcan0") == 1); /* nothing twice */
+	zn_node_stop();
+}
+
 static void test_config_checks(void)
 {
 	char err[256];
@@ -291,6 +315,7 @@ int main(void)
 	test_flush_on_stop();
 	test_commands();
 	test_multi_bus_keys();
+	test_can_reopen();
 	test_config_checks();
 	CHECK_DONE("test_node");
 }

@@ -19,10 +19,12 @@ struct mock_bus {
 	can_message_t tx[MOCK_FRAMES];
 	size_t tx_len;
 	int stalled;
+	unsigned generation; /* handles of an older generation are of a bus that went away */
 };
 
 struct zn_can {
 	struct mock_bus *bus;
+	unsigned generation;
 };
 
 static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
@@ -97,6 +99,15 @@ void mock_can_stall(const char *bus, int stalled)
 	pthread_mutex_unlock(&lock);
 }
 
+void mock_can_lose(const char *bus)
+{
+	pthread_mutex_lock(&lock);
+	find_bus(bus, 1)->generation++;
+	pthread_cond_broadcast(&arrived);
+	pthread_cond_broadcast(&sent);
+	pthread_mutex_unlock(&lock);
+}
+
 can_message_t mock_can_tx(const char *bus, size_t i)
 {
 	can_message_t m;
@@ -114,6 +125,7 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 	zn_can_t *c = calloc(1, sizeof(*c));
 	pthread_mutex_lock(&lock);
 	c->bus = find_bus(name, 1);
+	c->generation = c->bus->generation;
 	pthread_mutex_unlock(&lock);
 	*out = c;
 	return ESP_OK;
@@ -124,11 +136,16 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
 	struct mock_bus *b = can->bus;
-	while (b->rx_len == 0)
+	while (b->rx_len == 0 || can->generation != b->generation) {
+		if (can->generation != b->generation) {
+			pthread_mutex_unlock(&lock);
+			return ESP_FAIL;
+		}
 		if (pthread_cond_timedwait(&arrived, &lock, &ts) != 0) {
 			pthread_mutex_unlock(&lock);
 			return ESP_ERR_TIMEOUT;
 		}
+	}
 	*msg = b->rx[b->rx_head];
 	*rx_time_ns = b->rx_time[b->rx_head];
 	b->rx_head = (b->rx_head + 1) % MOCK_FRAMES;
@@ -141,6 +158,10 @@ esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_m
 {
 	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
+	if (can->generation != can->bus->generation) {
+		pthread_mutex_unlock(&lock);
+		return ESP_FAIL;
+	}
 	while (can->bus->stalled)
 		if (can->bus->stalled == MOCK_HOLD)
 			pthread_cond_wait(&sent, &lock);

@@ -48,6 +48,9 @@ size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms);
  * waits, whatever its timeout, until the stall is lifted (0). */
 enum { MOCK_HOLD = 2 };
 void mock_can_stall(const char *bus, int stalled);
+/* The bus goes away under its open handles (hub restarted, interface down): they fail from
+ * now on; a zn_can_open after this gets a working handle again. */
+void mock_can_lose(const char *bus);
 can_message_t mock_can_tx(const char *bus, size_t i);
 
 /* Zenoh */
