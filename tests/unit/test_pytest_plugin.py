@@ -7,24 +7,13 @@ import json
 from pathlib import Path
 
 import pytest
+from synthetic import synthetic_run
 
-from canbench import analysis, checks, oracle, run, scenario, wire
+from canbench import checks, run
 
 pytestmark = pytest.mark.unit
 pytest_plugins = ["pytester"]
 REPO = Path(__file__).resolve().parents[2]
-
-
-def synthetic_run(run_dir: Path, lose: int | None) -> analysis.RunResult:
-    """smoke.yaml's bus trace as captured, and the Zenoh side without frame `lose`."""
-    sc = scenario.load(REPO / "scenarios" / "smoke.yaml")
-    (run_dir / "can.log").write_text((REPO / "scenarios" / "traces" / "powertrain-2s.log").read_text())
-    with open(run_dir / "zenoh.tsv", "w") as f:
-        for i, o in enumerate(oracle.read_candump(run_dir / "can.log", "vcan0")):
-            if i != lose:
-                f.write(f"{o.t_ns + 400_000}\tvehicle/can/rx\t{wire.encode(o.frame).hex()}\t"
-                        f"{wire.encode_attachment(i, [o.t_ns]).hex()}\n")
-    return analysis.analyse(sc, "synthetic", run_dir, "vehicle/can", {}, None, 2.0)
 
 
 def test_without_a_run_every_check_skips_and_nothing_is_written(pytester, monkeypatch):
@@ -40,7 +29,7 @@ def test_a_run_records_verdicts_into_metrics_and_writes_reports(pytester, monkey
 
     def execute(sc, run_id, run_dir, router, **kw):
         executed.append((sc.name, run_id, router))
-        return synthetic_run(run_dir, lose=50)
+        return synthetic_run(run_dir)
     monkeypatch.setattr(run, "execute", execute)
     scenario_file = REPO / "scenarios" / "smoke.yaml"
     outcome = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--pyargs", "canbench.scenario_checks",
