@@ -178,7 +178,7 @@ fuzz: fuzz-ucan fuzz-firmware
 # in Debian's kernel under QEMU (ucan/vm/vcan-vm), where the bridge's CAN port runs too.
 KERNEL_LANE_BRIDGE_TESTS := every_frame_kind or invalid_commands or sigterm
 # Under emulation every process start counts: the interpreter itself, not a version-manager
-# shim (pyenv's is a bash script), and no entry-point scan for pytest plugins (none is used).
+# shim (pyenv's is a bash script), and no entry-point scan for pytest plugins (the lane needs none; canbench's is for bench runs).
 VM_PYTHON = $(shell $(PYTHON) -c 'import sys; print(sys.executable)')
 check-kernel: ucan firmware zenohd
 	@if [ "$$(BENCH_CAN=auto scripts/detect-can)" = kernel ]; then \
