@@ -6,7 +6,8 @@ For each size: canbench.groundtruth makes the traffic (one bus, heavy repetition
 every ~1000 frames, batches of up to 16 frames per sample) and writes can.log and zenoh.tsv
 as candump and zn-capture do; a fresh process then analyses them as a run does (both
 captures read through the bench's codecs, matched, summarised, cycle times per id) and
-reports wall and CPU time and peak RSS; the counts are checked against the truth.
+reports CPU and wall time (wall depends on what else runs) and peak RSS; the counts are
+checked against the truth.
 
   python3 -m bench.oracle_scale --frames 100000 300000 1000000 [--out DIR]
 
@@ -78,17 +79,18 @@ def main() -> int:
             got = json.loads(child.stdout)
         agree = all(got[k] == made[k] for k in ("lost", "duplicates", "corrupted", "reordered"))
         rows.append({**made, **got, "agrees_with_truth": agree,
-                     "us_per_frame": round(got["wall_s"] / n * 1e6, 2),
+                     "cpu_us_per_frame": round(got["cpu_s"] / n * 1e6, 2),
                      "bytes_per_frame": round(got["peak_rss_mib"] * 2**20 / n)})
         r = rows[-1]
-        print(f"{n:>10} frames: analysed in {r['wall_s']} s (reading {r['read_s']} s), peak RSS {r['peak_rss_mib']} "
-              f"MiB, {r['us_per_frame']} us and {r['bytes_per_frame']} B per frame; truth "
+        print(f"{n:>10} frames: analysed in {r['cpu_s']} s CPU ({r['wall_s']} s wall, reading {r['read_s']} s), "
+              f"peak RSS "
+              f"{r['peak_rss_mib']} MiB, {r['cpu_us_per_frame']} us CPU and {r['bytes_per_frame']} B per frame; truth "
               f"{'agrees' if agree else 'DISAGREES'} ({r['faults']} faults)", flush=True)
     last = rows[-1]
-    hour = {"frames": HOUR_FRAMES, "wall_min": round(last["us_per_frame"] * HOUR_FRAMES / 1e6 / 60, 1),
+    hour = {"frames": HOUR_FRAMES, "cpu_min": round(last["cpu_us_per_frame"] * HOUR_FRAMES / 1e6 / 60, 1),
             "peak_rss_gib": round(last["bytes_per_frame"] * HOUR_FRAMES / 2**30, 1)}
     print(f"an hour of a saturated 1 Mbit/s bus ({HOUR_FRAMES} frames), extrapolated linearly from "
-          f"{last['frames']} frames: {hour['wall_min']} min, {hour['peak_rss_gib']} GiB peak RSS")
+          f"{last['frames']} frames: {hour['cpu_min']} min of CPU, {hour['peak_rss_gib']} GiB peak RSS")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "oracle_scale.json").write_text(json.dumps({"sizes": rows, "hour_extrapolated": hour}, indent=2))

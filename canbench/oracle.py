@@ -19,9 +19,11 @@ frame at the same place in the stream, if that one has the same id and length
 from __future__ import annotations
 
 import bisect
+import gc
 from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from functools import wraps
 from pathlib import Path
 
 from . import trace, wire
@@ -45,6 +47,23 @@ class Observed:
 FRAME_CACHE = 1 << 20  # distinct frame contents kept for sharing (then it starts again: only memory is at stake)
 
 
+def _without_gc(fn):
+    """Runs fn with the cyclic collector paused: reading and matching build millions of objects
+    and no cycles, and the collector walking them cost a quarter of the analysis's CPU time
+    (bench/oracle_scale.py)."""
+    @wraps(fn)
+    def paused(*args, **kwargs):
+        was = gc.isenabled()
+        gc.disable()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            if was:
+                gc.enable()
+    return paused
+
+
+@_without_gc
 def read_candump(path: Path, interface: str | None = None, drops: dict[str, int] | None = None) -> list[Observed]:
     """The frames of a candump -L capture (of one interface), each with its line."""
     return [Observed(frame, t_ns, i, line=lineno)
@@ -75,6 +94,7 @@ def read_sent_log(path: Path) -> list[SentRecord]:
     return out
 
 
+@_without_gc
 def zenoh_frames(samples: Iterable[Sample], key: str) -> tuple[list[Observed], list[str]]:
     """Frames of the samples on key, in arrival order; and problems (bad payloads, other keys)."""
     out: list[Observed] = []
@@ -256,6 +276,7 @@ class _everything(Counter):
         return 1 << 62
 
 
+@_without_gc
 def _classify(sent: list[Observed], received: list[Observed],
               explained: Counter | None) -> tuple[Comparison, list[Observed]]:
     c = Comparison(sent=len(sent), received=len(received))
