@@ -1,8 +1,11 @@
 """Differential probe of a CAN bus: one fixed sequence of sockets (filters,
 inverted filters, RTR/EFF/ERR bits, join, FD, own-message echo, loopback off,
 binding to any, a second interface) and frames, then what every reader
-received, byte for byte and in order, as JSON. Run on the userspace hub and on
-kernel vcan; the two outputs must be identical (tests/bus/test_differential.py).
+received, byte for byte and in order, with each frame's SO_TIMESTAMPNS stamp
+and when the reader got it, as JSON: {"readers": {name: [record]}, "sends":
+[{"bytes", "iface", "sent_ns"}]}. Run on the userspace hub and on kernel
+vcan; the frames must be identical and the stamps obey the kernel's rules
+(tests/bus/test_differential.py).
 
 Usage: python3 differential.py > result.json   (vcan0, vcan1 must exist)"""
 from __future__ import annotations
@@ -12,6 +15,7 @@ import select
 import socket
 import struct
 import sys
+import time
 
 CAN_EFF_FLAG, CAN_RTR_FLAG, CAN_ERR_FLAG, CAN_INV_FILTER = 0x80000000, 0x40000000, 0x20000000, 0x20000000
 CAN_SFF_MASK, CAN_EFF_MASK = 0x7FF, 0x1FFFFFFF
@@ -66,8 +70,14 @@ SENDS = [
 ]
 
 
+SO_TIMESTAMPNS = 35  # asm-generic/socket.h (SCM_TIMESTAMPNS); not in Python's socket module
+STAMP = struct.Struct("@qq")  # struct timespec on a 64-bit ABI
+ANCILLARY = socket.CMSG_SPACE(STAMP.size)
+
+
 def open_socket(iface: str, filters, options: dict) -> socket.socket:
     s = socket.socket(socket.PF_CAN, socket.SOCK_RAW, socket.CAN_RAW)
+    s.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
     if filters is not None:
         s.setsockopt(socket.SOL_CAN_RAW, CAN_RAW_FILTER, b"".join(struct.pack("=II", i, m) for i, m in filters))
     for opt, value in options.items():
@@ -76,11 +86,24 @@ def open_socket(iface: str, filters, options: dict) -> socket.socket:
     return s
 
 
-def describe(data: bytes, flags: int, addr) -> dict:
+def stamp_of(ancillary: list) -> int | None:
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:  # SCM_TIMESTAMPNS
+            sec, nsec = STAMP.unpack_from(data)
+            return sec * 1_000_000_000 + nsec
+    return None
+
+
+def describe(data: bytes, flags: int, addr, ancillary: list, received_ns: int) -> dict:
+    """stamp_ns, received_ns: compared by their own rules, not byte for byte (STAMP_KEYS)."""
     can_id = struct.unpack_from("=I", data)[0]
     return {"iface": addr[0] if isinstance(addr, tuple) else addr, "size": len(data), "can_id": f"{can_id:08X}",
             "bytes": data.hex(), "confirm": bool(flags & socket.MSG_CONFIRM),
-            "dontroute": bool(flags & socket.MSG_DONTROUTE)}
+            "dontroute": bool(flags & socket.MSG_DONTROUTE), "stamp_ns": stamp_of(ancillary),
+            "received_ns": received_ns}
+
+
+STAMP_KEYS = ("stamp_ns", "received_ns")
 
 
 def main() -> int:
@@ -91,7 +114,9 @@ def main() -> int:
         "quiet": open_socket("vcan0", None, {CAN_RAW_LOOPBACK: 0}),
     }
     readers["own_messages"] = senders["main"]
+    sends = []
     for sender, iface, data in SENDS:
+        sends.append({"sender": sender, "iface": iface, "bytes": data.hex(), "sent_ns": time.time_ns()})
         senders[sender].sendto(data, (iface,))
     # drain every reader together until none got anything for QUIET_S: one quiet period per
     # run, not one per reader (the real-kernel lane pays every second ten times)
@@ -99,9 +124,9 @@ def main() -> int:
     out: dict[str, list] = {name: [] for name in readers}
     while ready := select.select(list(names), [], [], QUIET_S)[0]:
         for s in ready:
-            data, _, flags, addr = s.recvmsg(72)
-            out[names[s]].append(describe(data, flags, addr))
-    json.dump(out, sys.stdout, indent=1, sort_keys=True)
+            data, ancillary, flags, addr = s.recvmsg(72, ANCILLARY)
+            out[names[s]].append(describe(data, flags, addr, ancillary, time.time_ns()))
+    json.dump({"readers": out, "sends": sends}, sys.stdout, indent=1, sort_keys=True)
     return 0
 
 

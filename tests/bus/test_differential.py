@@ -1,7 +1,10 @@
 """Differential check: the same frame sequences (tests/bus/differential.py) on
 the userspace hub and on real kernel vcan must give every reader the same
-frames, byte for byte, in the same order per sender. Kernel vcan here natively
-when the kernel has it, else Debian's kernel in QEMU (ucan/vm/vcan-vm).
+frames, byte for byte, in the same order per sender, and stamps by the
+kernel's rules: every reader of a frame sees one stamp, stamps never decrease
+on an interface, a frame is stamped after it was sent and before any reader
+got it. Kernel vcan here natively when the kernel has it, else Debian's
+kernel in QEMU (ucan/vm/vcan-vm).
 
 Known, deliberate divergence (docs/userspace-bus.md): frames written on
 different sockets are ordered per socket by the hub, while kernel vcan orders
@@ -32,9 +35,49 @@ def sender_of(can_id_hex: str) -> str:
     return "?"
 
 
+def without_stamps(record: dict) -> dict:
+    return {k: v for k, v in record.items() if k not in differential.STAMP_KEYS}
+
+
 def per_sender(result: dict) -> dict:
-    return {reader: {s: [r for r in records if sender_of(r["can_id"]) == s] for s in ("main", "fd", "quiet")}
-            for reader, records in result.items()}
+    return {reader: {s: [without_stamps(r) for r in records if sender_of(r["can_id"]) == s]
+                     for s in ("main", "fd", "quiet")}
+            for reader, records in result["readers"].items()}
+
+
+def frame_key(iface: str, frame_hex: str) -> tuple[str, str]:
+    """A frame of the probe by its interface, id and DLC (the kernel adds CANFD_FDF to FD flags)."""
+    return iface, frame_hex[:10]
+
+
+def stamp_problems(result: dict) -> list[str]:
+    """The kernel's stamp rules, each violation named with its reader and frame."""
+    problems = []
+    sent = {frame_key(s["iface"], s["bytes"]): s["sent_ns"] for s in result["sends"]}
+    stamps_of: dict[tuple[str, str], dict[str, int]] = {}
+    for reader, records in sorted(result["readers"].items()):
+        last: dict[str, int] = {}
+        for r in records:
+            frame, stamp = f"{r['iface']} {r['can_id']}", r["stamp_ns"]
+            if stamp is None:
+                problems.append(f"reader {reader}: {frame} came without SCM_TIMESTAMPNS")
+                continue
+            key = frame_key(r["iface"], r["bytes"])
+            stamps_of.setdefault(key, {})[reader] = stamp
+            if stamp > r["received_ns"]:
+                problems.append(f"reader {reader}: {frame} stamped {stamp - r['received_ns']} ns after it got it")
+            if key in sent and stamp < sent[key]:
+                problems.append(f"reader {reader}: {frame} stamped {sent[key] - stamp} ns before it was sent")
+            if stamp < last.get(r["iface"], 0):
+                problems.append(f"reader {reader}: {frame} stamped {last[r['iface']] - stamp} ns before the "
+                                f"frame it got earlier on {r['iface']}")
+            last[r["iface"]] = stamp
+    for (iface, head), by_reader in sorted(stamps_of.items()):
+        if len(set(by_reader.values())) > 1:
+            spread = max(by_reader.values()) - min(by_reader.values())
+            problems.append(f"{iface} frame {head}: {len(set(by_reader.values()))} different stamps across "
+                            f"{len(by_reader)} readers (spread {spread} ns)")
+    return problems
 
 
 def differences(a: dict, b: dict) -> list[str]:
@@ -84,9 +127,20 @@ def userspace_result(tmp_path: Path, test_fault: str = "") -> dict:
 
 def test_userspace_bus_matches_kernel_vcan(kernel_result, tmp_path):
     ours = userspace_result(tmp_path)
-    assert set(ours) == set(kernel_result)
-    assert sum(len(v) for v in kernel_result.values()) > 50  # the probe really exercised the bus
+    assert set(ours["readers"]) == set(kernel_result["readers"])
+    assert sum(len(v) for v in kernel_result["readers"].values()) > 50  # the probe really exercised the bus
     assert differences(ours, kernel_result) == []
+    assert stamp_problems(kernel_result) == []  # the rules are the kernel's
+    assert stamp_problems(ours) == []
+
+
+def test_stamp_rules_catch_a_stamp_per_reader(kernel_result):
+    """A bus that stamps each reader's copy when it delivers it (as the hub did) is caught."""
+    shifted = json.loads(json.dumps(kernel_result))
+    for i, record in enumerate(shifted["readers"]["fd"]):
+        record["stamp_ns"] += 1000 + i
+    problems = stamp_problems(shifted)
+    assert any("different stamps" in p for p in problems), problems
 
 
 def test_broken_emulation_is_caught_and_named(kernel_result, tmp_path):

@@ -63,7 +63,8 @@ static int pick(struct input *in)
 
 static void cookie_of(unsigned serial, char *out)
 {
-	snprintf(out, UCAN_COOKIE_MAX, "ucan/fz/%u", serial);
+	/* abstract names are machine-wide: the pid keeps parallel fuzzers apart */
+	snprintf(out, UCAN_COOKIE_MAX, "ucan/fz/%d/%u", (int)getpid(), serial);
 }
 
 static unsigned serial_of[MAX_CONNS];
@@ -79,7 +80,7 @@ static void send_opts(int c, uint32_t type, uint8_t flags)
 	struct ucan_sockopts o = { .type = type, .ifindex = flags & 16 ? 0 : UCAN_IFINDEX_BASE + (flags >> 7),
 				   .rcvbuf = flags & 64 ? 1u << 20 : 0, .loopback = !(flags & 4),
 				   .recv_own = !!(flags & 2), .fd_frames = !!(flags & 32), .nfilters = 1 };
-	o.pad[0] = flags & 8 ? SO_TIMESTAMPNS : 0; /* where the timestamp option goes, if the hub knows it */
+	o.timestamps = flags & 8 ? UCAN_TS_NSEC : UCAN_TS_NONE;
 	uint8_t msg[sizeof(o) + sizeof(struct can_filter)] = { 0 };
 	memcpy(msg, &o, sizeof(o));
 	send_msg(c, msg, sizeof(msg));

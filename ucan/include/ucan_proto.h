@@ -9,8 +9,9 @@
  *   8 bytes          control (ucan_ctl: ACK of BIND, switch to header mode)
  *   16 / 72 bytes    "bare" frame: socket bound to one interface, no own-message
  *                    echo, so native read()/readv() of a struct can_frame works
- *   24 / 80 bytes    ucan_rxhdr + frame: sockets bound to *any* or receiving
- *                    their own messages need the source interface and own flag
+ *   40 / 96 bytes    ucan_rxhdr + frame: sockets bound to *any*, receiving
+ *                    their own messages or asking for timestamps need the source
+ *                    interface, the own flag and the frame's one bus stamp
  * Client -> hub messages all start with a uint32_t type.
  */
 #ifndef UCAN_PROTO_H
@@ -62,9 +63,14 @@ struct ucan_rxhdr {
 	uint32_t ifindex;
 	uint8_t flags; /* UCAN_RX_OWN */
 	uint8_t pad[3];
+	/* CLOCK_REALTIME when the hub took the frame from its sender (bitrate
+	 * interfaces: when its transmission ended); the same for every reader */
+	uint64_t stamp_sec;
+	uint32_t stamp_nsec;
+	uint32_t pad2;
 };
 #define UCAN_RX_OWN 0x01
-static_assert(sizeof(struct ucan_rxhdr) == 8, "rx header size");
+static_assert(sizeof(struct ucan_rxhdr) == 24, "rx header size");
 
 struct ucan_txhdr {
 	uint32_t type; /* UCAN_MSG_FRAME */
@@ -80,11 +86,24 @@ struct ucan_sockopts {
 	uint32_t rcvbuf; /* SO_RCVBUF requested by the program, bytes (0 = default) */
 	uint8_t loopback, recv_own, fd_frames, join_filters;
 	uint8_t bound, header_mode; /* set by the hub in GETOPT replies only */
-	uint8_t pad[2];
+	uint8_t timestamps;	    /* enum ucan_ts: nonzero = frames carry their stamp */
+	uint8_t pad;
 	uint32_t nfilters;
 	struct can_filter filters[]; /* nfilters entries */
 };
 static_assert(sizeof(struct ucan_sockopts) == 28, "sockopts header size");
+
+/* What the program asked for (the hub only needs to know "stamps or not"; the
+ * library keeps the kind, and gets it back after exec through GETOPT). */
+enum ucan_ts {
+	UCAN_TS_NONE = 0,
+	UCAN_TS_IOCTL = 1,	   /* SIOCGSTAMP(NS) was used: stamps kept, no control message */
+	UCAN_TS_USEC = 2,	   /* SO_TIMESTAMP: SCM_TIMESTAMP, struct timeval */
+	UCAN_TS_NSEC = 3,	   /* SO_TIMESTAMPNS: SCM_TIMESTAMPNS, struct timespec */
+	UCAN_TS_USEC_NEW = 4, /* SO_TIMESTAMP_NEW: 64-bit fields on every ABI */
+	UCAN_TS_NSEC_NEW = 5, /* SO_TIMESTAMPNS_NEW */
+};
+#define UCAN_TS_MAX UCAN_TS_NSEC_NEW
 
 struct ucan_barrier {
 	uint32_t type;

@@ -70,6 +70,7 @@ struct iface {
 	struct ucan_ifinfo info;
 	struct ucan_ifstats stats;
 	uint64_t window_bits;
+	struct timespec last_stamp; /* stamps never go back on an interface, even if the clock does */
 	/* bitrate emulation */
 	int timerfd;
 	struct pending_frame *pending;
@@ -477,14 +478,28 @@ static void flush_dirty(void)
 
 /* ---- the bus ---- */
 
-static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame *frame, size_t size, int own)
+/* The one stamp of a frame, taken as it goes on the bus: every reader (the
+ * sender's echo included) gets it, as every socket does from kernel vcan. */
+static struct timespec bus_stamp(struct iface *ifc)
+{
+	struct timespec now;
+	clock_gettime(CLOCK_REALTIME, &now);
+	if (ts_before_eq(&now, &ifc->last_stamp))
+		now = ifc->last_stamp; /* the clock was set back: hold, never decrease */
+	ifc->last_stamp = now;
+	return now;
+}
+
+static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame *frame, size_t size, int own,
+		       const struct timespec *stamp)
 {
 	struct client *c = &hub.clients[idx];
 	uint8_t msg[sizeof(struct ucan_rxhdr) + CANFD_MTU];
 	size_t len = 0;
 
 	if (c->header_mode) {
-		struct ucan_rxhdr hdr = { .ifindex = ifc->info.ifindex, .flags = own ? UCAN_RX_OWN : 0 };
+		struct ucan_rxhdr hdr = { .ifindex = ifc->info.ifindex, .flags = own ? UCAN_RX_OWN : 0,
+					  .stamp_sec = (uint64_t)stamp->tv_sec, .stamp_nsec = (uint32_t)stamp->tv_nsec };
 		memcpy(msg, &hdr, sizeof(hdr));
 		len = sizeof(hdr);
 	}
@@ -517,6 +532,7 @@ static void bus_transmit(struct iface *ifc, uint32_t sender, uint32_t sender_gen
 	 * with loopback off nobody on this host sees the frame, the sender included */
 	if (!loopback)
 		return;
+	struct timespec stamp = bus_stamp(ifc);
 	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
 		struct client *c = &hub.clients[i];
 		if (c->fd < 0 || !c->bound)
@@ -531,7 +547,7 @@ static void bus_transmit(struct iface *ifc, uint32_t sender, uint32_t sender_gen
 		if (!can_raw_accepts(frame->can_id, c->filters, c->opts.nfilters, c->opts.err_mask,
 				     c->opts.join_filters))
 			continue;
-		deliver_to(i, ifc, frame, size, own);
+		deliver_to(i, ifc, frame, size, own, &stamp);
 	}
 }
 
@@ -661,7 +677,7 @@ static void apply_sockopts(uint32_t idx, const uint8_t *msg, size_t len)
 
 static int needs_header(const struct client *c)
 {
-	return c->opts.ifindex == 0 || c->opts.recv_own;
+	return c->opts.ifindex == 0 || c->opts.recv_own || c->opts.timestamps;
 }
 
 static void handle_stats(uint32_t idx)
@@ -1111,6 +1127,7 @@ void hub_check_invariants(void)
 {
 	uint32_t max_limit = hub.default_queue > UCAN_MAX_RCVBUF / CANFD_MTU ? hub.default_queue
 									     : UCAN_MAX_RCVBUF / CANFD_MTU;
+	(void)max_limit; /* release builds (NDEBUG) check nothing */
 	assert(hub.ndirty == 0 && drain_depth == 0);
 	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
 		const struct client *c = &hub.clients[i];
@@ -1119,7 +1136,8 @@ void hub_check_invariants(void)
 			assert(c->queue == NULL && c->queue_len == 0);
 			continue;
 		}
-		assert(c->queue_len <= c->queue_cap && c->queue_cap <= c->queue_limit + UCAN_CTL_RESERVE);
+		/* (a limit lowered by SETOPT leaves what is queued: drops until below) */
+		assert(c->queue_len <= c->queue_cap && c->queue_cap <= max_limit + UCAN_CTL_RESERVE);
 		assert(c->queue_limit <= max_limit);
 	}
 }

@@ -2,15 +2,17 @@
  * use the ucan-hub bus: LD_PRELOAD=libucan-preload.so candump vcan0
  *
  * socket(PF_CAN, SOCK_RAW, CAN_RAW) returns an AF_UNIX SOCK_SEQPACKET socket
- * that connects to the hub at bind (or first sendto). poll/select/epoll,
- * O_NONBLOCK, SO_TIMESTAMP(NS) and SO_RCVTIMEO stay native: they work on the
- * unix socket as they would on a CAN socket. The calls that see CAN addresses,
- * options or frame layout are intercepted; every call on any other fd goes
- * straight to libc after one table lookup.
+ * connected to the hub. poll/select/epoll, O_NONBLOCK and SO_RCVTIMEO stay
+ * native: they work on the unix socket as they would on a CAN socket. The
+ * calls that see CAN addresses, options, stamps or frame layout are
+ * intercepted; every call on any other fd goes straight to libc after one
+ * table lookup. SO_TIMESTAMP(NS) and SIOCGSTAMP(NS) return the one stamp the
+ * hub gave the frame (the kernel's own stamp of the unix message would be
+ * each reader's delivery time).
  *
  * Not emulated (documented in docs/userspace-bus.md): CAN_BCM, ISO-TP, J1939,
- * netlink (ip link), SIOCGSTAMP, rebinding a bound socket, programs that are
- * static or issue raw syscalls. */
+ * netlink (ip link), SO_TIMESTAMPING, rebinding a bound socket, programs that
+ * are static or issue raw syscalls. */
 #define _GNU_SOURCE
 #include <dirent.h>
 #include <dlfcn.h>
@@ -34,8 +36,22 @@
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
+#include <linux/sockios.h>
 
 #include "ucan_proto.h"
+
+#ifndef SO_TIMESTAMP_NEW /* linux < 5.1 headers: only the old options exist */
+#define SO_TIMESTAMP_OLD SO_TIMESTAMP
+#define SO_TIMESTAMPNS_OLD SO_TIMESTAMPNS
+#define SO_TIMESTAMP_NEW 63
+#define SO_TIMESTAMPNS_NEW 64
+#define SIOCGSTAMP_OLD SIOCGSTAMP
+#define SIOCGSTAMPNS_OLD SIOCGSTAMPNS
+#endif
+#ifndef SIOCGSTAMP_NEW
+#define SIOCGSTAMP_NEW _IOR(SOCK_IOC_TYPE, 0x06, long long[2])
+#define SIOCGSTAMPNS_NEW _IOR(SOCK_IOC_TYPE, 0x07, long long[2])
+#endif
 
 #define HUB_REPLY_TIMEOUT_MS 5000
 #define IFLIST_REFRESH_NS 1000000000ll /* re-ask the hub about unknown names at most once a second */
@@ -55,6 +71,8 @@ struct csock {
 	ino_t ino; /* behind the library's back and reused from ours */
 	struct ucan_sockopts opts;
 	struct can_filter filters[UCAN_MAX_FILTERS];
+	int ioctl_stamps;	    /* SIOCGSTAMP(NS) used: stamps stay on without SO_TIMESTAMP */
+	struct timespec last_stamp; /* of the last frame read, for SIOCGSTAMP(NS); 0 = none yet */
 };
 
 /* ---- real libc functions ---- */
@@ -536,7 +554,8 @@ PUBLIC int bind(int fd, const struct sockaddr *addr, socklen_t len)
 		goto out;
 	}
 	cs->bound = 1;
-	atomic_store(&cs->header_mode, cs->opts.ifindex == 0 || cs->opts.recv_own);
+	/* as the hub decides (needs_header): interface, own flag or stamp per frame */
+	atomic_store(&cs->header_mode, cs->opts.ifindex == 0 || cs->opts.recv_own || cs->opts.timestamps);
 	rc = 0;
 out:
 	pthread_mutex_unlock(&cs->lock);
@@ -622,11 +641,109 @@ static int int_opt(const void *val, socklen_t len, uint8_t *out)
 	return 0;
 }
 
+/* ---- timestamps: the hub's one stamp per frame ---- */
+
+static uint8_t ts_kind(int name)
+{
+	switch (name) {
+	case SO_TIMESTAMP_OLD: return UCAN_TS_USEC;
+	case SO_TIMESTAMPNS_OLD: return UCAN_TS_NSEC;
+	case SO_TIMESTAMP_NEW: return UCAN_TS_USEC_NEW;
+	case SO_TIMESTAMPNS_NEW: return UCAN_TS_NSEC_NEW;
+	default: return UCAN_TS_NONE;
+	}
+}
+
+/* As the kernel's sock_set_timestamp: one kind at a time, 0 turns both off. */
+static int set_timestamps(struct csock *cs, int fd, int name, const void *val, socklen_t len)
+{
+	int on;
+	if (!val || len < (socklen_t)sizeof(int)) {
+		errno = EINVAL;
+		return -1;
+	}
+	memcpy(&on, val, sizeof(on));
+	pthread_mutex_lock(&cs->lock);
+	uint8_t before = cs->opts.timestamps;
+	cs->opts.timestamps = on ? ts_kind(name) : cs->ioctl_stamps ? UCAN_TS_IOCTL : UCAN_TS_NONE;
+	int rc = 0;
+	/* synchronous like the other options: frames after this call carry stamps */
+	if (cs->bound && cs->opts.timestamps != before)
+		rc = push_opts(cs, fd, UCAN_MSG_SETOPT, 1);
+	pthread_mutex_unlock(&cs->lock);
+	return rc;
+}
+
+/* SIOCGSTAMP(NS): the stamp of the last frame read. The first call turns
+ * stamps on and, with nothing read yet, fails with ENOENT, as the kernel's. */
+static int get_stamp_ioctl(struct csock *cs, int fd, unsigned long request, void *arg)
+{
+	if (!arg) {
+		errno = EFAULT;
+		return -1;
+	}
+	pthread_mutex_lock(&cs->lock);
+	struct timespec ts = cs->last_stamp;
+	int rc = 0;
+	if (!cs->ioctl_stamps) {
+		cs->ioctl_stamps = 1;
+		if (cs->opts.timestamps == UCAN_TS_NONE) {
+			cs->opts.timestamps = UCAN_TS_IOCTL;
+			if (cs->bound)
+				rc = push_opts(cs, fd, UCAN_MSG_SETOPT, 1);
+		}
+	}
+	pthread_mutex_unlock(&cs->lock);
+	if (rc < 0)
+		return -1;
+	if (ts.tv_sec == 0 && ts.tv_nsec == 0) {
+		errno = ENOENT;
+		return -1;
+	}
+	int64_t pair[2] = { ts.tv_sec, request == SIOCGSTAMP_OLD || request == SIOCGSTAMP_NEW ? ts.tv_nsec / 1000
+											       : ts.tv_nsec };
+	if (request == SIOCGSTAMP_OLD) {
+		struct timeval tv = { .tv_sec = ts.tv_sec, .tv_usec = ts.tv_nsec / 1000 };
+		memcpy(arg, &tv, sizeof(tv));
+	} else if (request == SIOCGSTAMPNS_OLD) {
+		memcpy(arg, &ts, sizeof(ts));
+	} else {
+		memcpy(arg, pair, sizeof(pair));
+	}
+	return 0;
+}
+
+/* Appends the stamp's control message after whatever the kernel put there
+ * (used bytes of room); MSG_CTRUNC if it does not fit, as put_cmsg does. */
+static void put_stamp_cmsg(struct msghdr *user, size_t used, size_t room, uint8_t kind, const struct timespec *ts)
+{
+	int64_t data[2] = { ts->tv_sec, kind == UCAN_TS_USEC || kind == UCAN_TS_USEC_NEW ? ts->tv_nsec / 1000 : ts->tv_nsec };
+	static const int types[] = { [UCAN_TS_USEC] = SO_TIMESTAMP_OLD, [UCAN_TS_NSEC] = SO_TIMESTAMPNS_OLD,
+				     [UCAN_TS_USEC_NEW] = SO_TIMESTAMP_NEW, [UCAN_TS_NSEC_NEW] = SO_TIMESTAMPNS_NEW };
+	static_assert(sizeof(struct timeval) == sizeof(data) && sizeof(struct timespec) == sizeof(data),
+		      "old and new stamp layouts agree on this ABI");
+	size_t off = CMSG_ALIGN(used);
+	if (!user->msg_control || off + CMSG_LEN(sizeof(data)) > room) {
+		user->msg_flags |= MSG_CTRUNC;
+		user->msg_controllen = used;
+		return;
+	}
+	struct cmsghdr *cm = (struct cmsghdr *)((uint8_t *)user->msg_control + off);
+	cm->cmsg_level = SOL_SOCKET;
+	cm->cmsg_type = types[kind];
+	cm->cmsg_len = CMSG_LEN(sizeof(data));
+	memcpy(CMSG_DATA(cm), data, sizeof(data));
+	size_t end = off + CMSG_SPACE(sizeof(data));
+	user->msg_controllen = end < room ? end : room;
+}
+
 PUBLIC int setsockopt(int fd, int level, int name, const void *val, socklen_t len)
 {
 	struct csock *cs = lookup_live(fd);
 	if (!cs)
 		return get_setsockopt()(fd, level, name, val, len);
+	if (level == SOL_SOCKET && ts_kind(name) != UCAN_TS_NONE)
+		return set_timestamps(cs, fd, name, val, len);
 	if (level == SOL_SOCKET) {
 		int rc = get_setsockopt()(fd, level, name, val, len);
 		if (rc == 0 && (name == SO_RCVBUF || name == SO_RCVBUFFORCE) && len == sizeof(int)) {
@@ -713,6 +830,11 @@ PUBLIC int getsockopt(int fd, int level, int name, void *val, socklen_t *len)
 			return put_int_opt(val, len, SOCK_RAW);
 		case SO_PROTOCOL:
 			return put_int_opt(val, len, CAN_RAW);
+		case SO_TIMESTAMP_OLD:
+		case SO_TIMESTAMPNS_OLD:
+		case SO_TIMESTAMP_NEW:
+		case SO_TIMESTAMPNS_NEW:
+			return put_int_opt(val, len, cs->opts.timestamps == ts_kind(name));
 		default:
 			return get_getsockopt()(fd, level, name, val, len);
 		}
@@ -811,8 +933,16 @@ PUBLIC int ioctl(int fd, unsigned long request, ...)
 
 	struct ifreq *ifr = arg;
 	struct ucan_ifinfo ifi;
-	int is_can = lookup_live(fd) != NULL;
+	struct csock *cs = lookup_live(fd);
+	int is_can = cs != NULL;
 	switch (request) {
+	case SIOCGSTAMP_OLD:
+	case SIOCGSTAMPNS_OLD:
+	case SIOCGSTAMP_NEW:
+	case SIOCGSTAMPNS_NEW:
+		if (cs)
+			return get_stamp_ioctl(cs, fd, request, arg);
+		return get_ioctl()(fd, request, arg);
 	case SIOCGIFINDEX:
 	case SIOCGIFMTU:
 	case SIOCGIFFLAGS:
@@ -952,14 +1082,23 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 		}
 		uint32_t ifindex = cs->opts.ifindex;
 		int own = 0;
+		struct timespec stamp = { 0, 0 };
 		if (header_mode) {
 			n -= (ssize_t)sizeof(hdr);
 			ifindex = hdr.ifindex;
 			own = hdr.flags & UCAN_RX_OWN;
+			stamp = (struct timespec){ (time_t)hdr.stamp_sec, (long)hdr.stamp_nsec };
 		}
+		uint8_t ts = cs->opts.timestamps;
+		if (ts != UCAN_TS_NONE && stamp.tv_sec == 0) /* queued before stamps were asked for */
+			clock_gettime(CLOCK_REALTIME, &stamp);
+		if (stamp.tv_sec)
+			cs->last_stamp = stamp;
 		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
 		user->msg_controllen = msg.msg_controllen;
 		user->msg_flags = msg.msg_flags | MSG_DONTROUTE | (own ? MSG_CONFIRM : 0);
+		if (ts >= UCAN_TS_USEC)
+			put_stamp_cmsg(user, msg.msg_controllen, controllen, ts, &stamp);
 		if (user->msg_name)
 			fill_can_addr(user->msg_name, &user->msg_namelen, ifindex);
 		else

@@ -24,7 +24,7 @@ static int validate_sockopts(const uint8_t *msg, size_t len, const struct ucan_i
 	if (opts.ifindex != 0 && !ucan_find_if(ifs, nifs, opts.ifindex))
 		return UCAN_MSG_ERR_IFINDEX;
 	if (opts.loopback > 1 || opts.recv_own > 1 || opts.fd_frames > 1 || opts.join_filters > 1 ||
-	    opts.bound || opts.header_mode || opts.pad[0] || opts.pad[1])
+	    opts.bound || opts.header_mode || opts.timestamps > UCAN_TS_MAX || opts.pad)
 		return UCAN_MSG_ERR_FLAGS;
 	return (int)opts.type;
 }

@@ -17,7 +17,7 @@ enum ucan_msg_error {
 	UCAN_MSG_ERR_FILTERS = -5,	/* filter count over CAN_RAW_FILTER_MAX */
 	UCAN_MSG_ERR_FRAME = -6,	/* frame size / length invalid for the interface */
 	UCAN_MSG_ERR_COOKIE = -7,	/* barrier cookie not NUL-terminated */
-	UCAN_MSG_ERR_FLAGS = -8,	/* boolean option not 0/1, or a reserved field set */
+	UCAN_MSG_ERR_FLAGS = -8,	/* boolean option not 0/1, unknown timestamp kind, or a reserved field set */
 };
 
 /* Returns the message type (> 0) or an enum ucan_msg_error. */

@@ -7,6 +7,9 @@
  *                                  as on the kernel; then bind and receive one frame
  *   preload_probe stale <iface>    descriptors closed behind the library's back
  *                                  (fclose(fdopen()), the raw syscall) are not CAN any more
+ *   preload_probe stamp <iface>    SIOCGSTAMP before any frame (ENOENT), then for each of
+ *                                  two frames: read() + SIOCGSTAMP(NS), then recvmsg with
+ *                                  SO_TIMESTAMPNS; prints "stamp <sec>.<nsec>" per frame
  *
  * Prints one line per result; exit 0 when everything held, 1 otherwise. */
 #define _GNU_SOURCE
@@ -21,12 +24,14 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/epoll.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 #include <linux/can.h>
+#include <linux/sockios.h>
 #include <netinet/in.h>
 
 #define UNBOUND_WAIT_MS 200
@@ -220,10 +225,56 @@ static void probe_stale(const char *iface)
 	close(u);
 }
 
+/* ---- the bus's stamp, as kernel CAN sockets give it ---- */
+
+static void probe_stamp(const char *iface)
+{
+	int s = can_socket();
+	can_bind(s, iface);
+	struct timeval tv;
+	int rc = ioctl(s, SIOCGSTAMP, &tv);
+	result(rc < 0 && errno == ENOENT, "SIOCGSTAMP before any frame: %d (%s)", rc, rc < 0 ? strerror(errno) : "");
+	printf("ready\n");
+	fflush(stdout);
+	struct can_frame f;
+	ssize_t n = read(s, &f, sizeof(f));
+	struct timespec ns;
+	int a = ioctl(s, SIOCGSTAMP, &tv), b = ioctl(s, SIOCGSTAMPNS, &ns);
+	result(n == (ssize_t)sizeof(f) && a == 0 && b == 0 && tv.tv_sec == ns.tv_sec && tv.tv_usec == ns.tv_nsec / 1000,
+	       "read() then SIOCGSTAMP %ld.%06ld and SIOCGSTAMPNS %ld.%09ld", (long)tv.tv_sec, (long)tv.tv_usec,
+	       (long)ns.tv_sec, ns.tv_nsec);
+	printf("stamp %ld.%09ld\n", (long)ns.tv_sec, ns.tv_nsec);
+
+	int on = 1;
+	setsockopt(s, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
+	int got = 0;
+	socklen_t len = sizeof(got);
+	getsockopt(s, SOL_SOCKET, SO_TIMESTAMPNS, &got, &len);
+	result(got == 1, "SO_TIMESTAMPNS reads back %d", got);
+	printf("ready\n");
+	fflush(stdout);
+	char control[CMSG_SPACE(sizeof(struct timespec))];
+	struct iovec iov = { &f, sizeof(f) };
+	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = control,
+			     .msg_controllen = sizeof(control) };
+	n = recvmsg(s, &mh, 0);
+	struct timespec cm = { 0, 0 };
+	int count = 0;
+	for (struct cmsghdr *c = CMSG_FIRSTHDR(&mh); c; c = CMSG_NXTHDR(&mh, c), count++)
+		if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_TIMESTAMPNS)
+			memcpy(&cm, CMSG_DATA(c), sizeof(cm));
+	b = ioctl(s, SIOCGSTAMPNS, &ns);
+	result(n == (ssize_t)sizeof(f) && count == 1 && b == 0 && cm.tv_sec == ns.tv_sec && cm.tv_nsec == ns.tv_nsec,
+	       "recvmsg: %d control message(s), SCM_TIMESTAMPNS %ld.%09ld, SIOCGSTAMPNS the same", count,
+	       (long)cm.tv_sec, cm.tv_nsec);
+	printf("stamp %ld.%09ld\n", (long)cm.tv_sec, cm.tv_nsec);
+	close(s);
+}
+
 int main(int argc, char **argv)
 {
 	if (argc != 3) {
-		fprintf(stderr, "Usage: preload_probe fork|unbound|stale <iface>\n");
+		fprintf(stderr, "Usage: preload_probe fork|unbound|stale|stamp <iface>\n");
 		return 2;
 	}
 	signal(SIGPIPE, SIG_IGN);
@@ -233,6 +284,8 @@ int main(int argc, char **argv)
 		probe_unbound(argv[2]);
 	else if (strcmp(argv[1], "stale") == 0)
 		probe_stale(argv[2]);
+	else if (strcmp(argv[1], "stamp") == 0)
+		probe_stamp(argv[2]);
 	else {
 		fprintf(stderr, "preload_probe: unknown probe '%s'\n", argv[1]);
 		return 2;
