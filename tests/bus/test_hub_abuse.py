@@ -89,6 +89,7 @@ def test_out_of_descriptors_refuses_connections_without_spinning(hub):
     readable forever: 1.7 s of CPU per 2 s idle and a 27 MB log under --nofile=32. Now the
     connection is accepted on a spare descriptor and closed at once, counted."""
     with OwnHub(hub.workdir / "nofile", "vcan0", nofile=32) as small:
+        rss_before = rss_kib(small.proc.pid)
         clients = [Client(small.workdir) for _ in range(40)]  # more than 32 descriptors can hold
         start_cpu, start = cpu_seconds(small.proc.pid), time.monotonic()
         while time.monotonic() - start < 1.0:  # a measurement window, not a wait for something
@@ -101,6 +102,7 @@ def test_out_of_descriptors_refuses_connections_without_spinning(hub):
             c.close()
         assert small.stats()["hub"]["refused_connections"] >= 8
         assert small.proc.poll() is None
+        assert rss_kib(small.proc.pid) - rss_before < RSS_GROWTH_CEILING_KIB
         still_serves(small)
 
 

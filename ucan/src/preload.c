@@ -674,8 +674,9 @@ static int set_timestamps(struct csock *cs, int fd, int name, const void *val, s
 	return rc;
 }
 
-/* SIOCGSTAMP(NS): the stamp of the last frame read. The first call turns
- * stamps on and, with nothing read yet, fails with ENOENT, as the kernel's. */
+/* SIOCGSTAMP(NS): the stamp of the last frame read without SO_TIMESTAMP(NS).
+ * The first call turns stamps on and, with nothing read yet, fails with
+ * ENOENT, as the kernel's. */
 static int get_stamp_ioctl(struct csock *cs, int fd, unsigned long request, void *arg)
 {
 	if (!arg) {
@@ -1092,8 +1093,8 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 		uint8_t ts = cs->opts.timestamps;
 		if (ts != UCAN_TS_NONE && stamp.tv_sec == 0) /* queued before stamps were asked for */
 			clock_gettime(CLOCK_REALTIME, &stamp);
-		if (stamp.tv_sec)
-			cs->last_stamp = stamp;
+		if (stamp.tv_sec && ts < UCAN_TS_USEC) /* as linux 6.1: a stamp sent as a control */
+			cs->last_stamp = stamp;		 /* message is not SIOCGSTAMP's any more */
 		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
 		user->msg_controllen = msg.msg_controllen;
 		user->msg_flags = msg.msg_flags | MSG_DONTROUTE | (own ? MSG_CONFIRM : 0);
@@ -1379,6 +1380,7 @@ static void adopt_inherited(int fd)
 				memcpy(cs->filters, reply + sizeof(opts), opts.nfilters * sizeof(struct can_filter));
 				opts.bound = opts.header_mode = 0;
 				cs->opts = opts;
+				cs->ioctl_stamps = opts.timestamps == UCAN_TS_IOCTL;
 			}
 		}
 	}
