@@ -153,9 +153,10 @@ def _observable(truth: BusTruth, runs: list[int], arrivals: dict[int, int], kind
     return True
 
 
-def _corrupted_is_new(truth: BusTruth, items: list[Item]) -> bool:
+def _not_new(truth: BusTruth, items: list[Item]) -> set[int]:
+    """Corrupted frames that read as another frame the bus carried (a duplicate and a loss)."""
     contents = {f for _, f in truth.sent}
-    return all(it.frame not in contents for it in items if it.kind == "corrupt")
+    return {it.sent for it in items if it.kind == "corrupt" and it.frame in contents}
 
 
 def _truth(truth: BusTruth, runs: list[int]) -> None:
@@ -212,9 +213,10 @@ def generate(seed: int, frames_per_bus: int, buses: int = 1, faults: int = 4, ma
                 arrivals[it.sent] = max(arrivals.get(it.sent, 0), it.t_ns)
             lost = sorted(i for k, i, _ in planned if k in ("drop", "corrupt", "wrongkey"))
             keep = [f for f in planned if _observable(truth, runs, arrivals, f[0], f[1], lost)]
-            if keep == planned and _corrupted_is_new(truth, items):
+            untellable = _not_new(truth, items)
+            if keep == planned and not untellable:
                 break
-            planned = keep if keep != planned else [f for f in planned if f[0] != "corrupt"]
+            planned = keep if keep != planned else [f for f in planned if f[1] not in untellable]
         truth.delivered = items
         truth.faults = [(k, i) for k, i, _ in planned]
         _truth(truth, runs)

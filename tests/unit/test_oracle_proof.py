@@ -45,7 +45,8 @@ def assert_truth(truth: groundtruth.BusTruth, c: oracle.Comparison, keys: set[st
     assert (f"vehicle/can/{truth.bus}/wrong" in keys) == any(k == "wrongkey" for k, _ in truth.faults)
 
 
-@settings(max_examples=150, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, derandomize=True, database=None, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), frames=st.integers(20, 300), buses=st.integers(1, 3),
        faults=st.integers(0, 8), max_batch=st.sampled_from([1, 1, 4, 16]))
 def test_oracle_finds_the_truth(seed, frames, buses, faults, max_batch):
