@@ -1,22 +1,24 @@
 /* fuzz_hub_state.c - libFuzzer harness for the hub's state (hub.c, in process):
- * an input is a program of loop rounds over up to MAX_CONNS real connections
- * to its listening socket. Each round, clients act while the hub waits (as if
- * it were stopped: whatever they do is handled in one round, in the order it
- * became readable), then the hub runs one round. Clients open and bind in
+ * an input is a program of rounds over up to MAX_CONNS real connections to
+ * its listening socket. Each round, clients act while the hub waits (as if it
+ * were stopped: whatever they do is handled in one loop round, in the order
+ * it became readable), then the hub runs one loop round or catches up. Clients open and bind in
  * bulk (up to a full slot table), send frames and floods, BARRIERs naming
  * each other, queries, raw bytes, close, read or never read. The oracle:
  * ASan/UBSan, the hub's assertions, hub_check_invariants after each round
  * (queues within their bounds), and nothing leaked at the end.
  *
  * Grammar (bytes; a missing byte reads as 0):
- *   input  := round*          round := count op{1 + count % 16}
+ *   input  := round*          round := count op{1 + count % 16}, then one
+ *                             loop round (count bit 7) or until the hub is idle
  *   op     := kind arg...     connection arguments: bit 7 set = the newest
  *                             connection, else index % open connections
- *   kind % 10: 0 open 1+a%8 (b: bind flags)   1 fill the slot table (b)
- *              2 frame (c, id, len)            3 barrier (c, target)
- *              4 close (c)                     5 query (c, kind, target)
- *              6 read (c, or all if a == 0)    7 raw (c, len, bytes)
- *              8 flood 8*(1+n%32) frames (c, n) 9 setopt (c, bind flags)
+ *   kind % 11: 0 open 1+a%8 (b: bind flags)   1 fill the slot table (b)
+ *              2 frame (c, id: bit 7 vcan1, len: bit 7 FD)
+ *              3 barrier (c, target)           4 close (c)
+ *              5 query (c, kind, target)       6 read (c, or all if a == 0)
+ *              7 raw (c, len, bytes)           8 flood 8*(1+n%32) frames (c, n)
+ *              9 setopt (c, bind flags)        10 reconnect: close c, open one (b)
  *   bind flags: bit 0 unbound, 1 recv_own, 2 loopback off, 3 timestamps,
  *               4 any interface, 5 fd frames, 6 rcvbuf 1 MiB */
 #define _GNU_SOURCE
@@ -35,6 +37,7 @@
 
 #define MAX_CONNS 200
 #define SLOT_TABLE 64 /* the hub's client table grows by doubling from this */
+#define MAX_CATCH_UP_ROUNDS 64
 
 struct input {
 	const uint8_t *data;
@@ -130,10 +133,8 @@ static void send_frame(int c, uint8_t id, uint8_t len)
 {
 	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU] = { 0 };
 	struct ucan_txhdr hdr = { .type = UCAN_MSG_FRAME, .ifindex = UCAN_IFINDEX_BASE + (id >> 7) };
-	struct canfd_frame f = { .can_id = id, .len = (uint8_t)(len % 65) };
-	int fd_frame = len & 0x80 || f.len > 8;
-	if (!fd_frame && f.len > 8)
-		f.len = 8;
+	int fd_frame = len & 0x80; /* else classic: every reader takes it */
+	struct canfd_frame f = { .can_id = id, .len = (uint8_t)(fd_frame ? len % 65 : len % 9) };
 	memcpy(msg, &hdr, sizeof(hdr));
 	memcpy(msg + sizeof(hdr), &f, sizeof(f));
 	send_msg(c, msg, sizeof(hdr) + (fd_frame ? CANFD_MTU : CAN_MTU));
@@ -141,7 +142,7 @@ static void send_frame(int c, uint8_t id, uint8_t len)
 
 static void do_op(struct input *in)
 {
-	uint8_t kind = next(in) % 10;
+	uint8_t kind = next(in) % 11;
 	switch (kind) {
 	case 0: {
 		unsigned n = 1 + next(in) % 8;
@@ -213,6 +214,15 @@ static void do_op(struct input *in)
 		send_opts(c, UCAN_MSG_SETOPT, next(in));
 		break;
 	}
+	case 10: { /* a program restarting: its slot is free for whoever connects next */
+		int c = pick(in);
+		uint8_t flags = next(in);
+		if (c >= 0) {
+			close_conn(c);
+			open_conn(flags);
+		}
+		break;
+	}
 	}
 }
 
@@ -235,12 +245,18 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	if (hub_add_iface("vcan0") < 0 || hub_add_iface("vcan1:mtu=16") < 0 || hub_start(&opts) < 0)
 		abort();
 	while (in.pos < in.size) {
-		unsigned ops = 1 + next(&in) % 16;
-		while (ops--)
+		uint8_t count = next(&in);
+		for (unsigned ops = 1 + count % 16; ops; ops--)
 			do_op(&in);
-		if (hub_run_once(0) < 0)
-			abort();
-		hub_check_invariants();
+		/* bit 7: one loop round, else the hub catches up (until a round finds nothing) */
+		for (unsigned round = 0; round < (count & 0x80 ? 1u : MAX_CATCH_UP_ROUNDS); round++) {
+			int events = hub_run_once(0);
+			if (events < 0)
+				abort();
+			hub_check_invariants();
+			if (events == 0)
+				break;
+		}
 	}
 	while (conns.n)
 		close_conn(0);
