@@ -110,7 +110,11 @@ class BenchRun:
                 lat = s["latency"]
                 p50 = "-" if lat["p50_ms"] is None else f"{lat['p50_ms']:.3f}"
                 p99 = "-" if lat["p99_ms"] is None else f"{lat['p99_ms']:.3f}"
+                low = "-" if lat.get("min_ms") is None else f"{lat['min_ms']:.3f}"
                 tr.write_line(f"{label:13} {bus:6} {s['matched']:>7}/{s['sent']:<7} matched  lost {s['lost']:<5} "
                               f"dup {s['duplicates']:<4} corrupt {s['corrupted']:<4} reorder {s['reordered']:<4} "
-                              f"p50 {p50} ms  p99 {p99} ms")
+                              f"min {low} ms  p50 {p50} ms  p99 {p99} ms")
+        outcome = (result.metrics.get("validity") or {}).get("outcome", "valid")
+        if outcome != "valid":  # the bench spoilt the run: said first, and that the bridge was not judged
+            tr.write_line(f"{outcome.upper()}: no verdict on the bridge (valid_run says why)", red=True, bold=True)
         tr.write_line(f"report: {result.run_dir / 'report.html'}")
