@@ -252,6 +252,7 @@ def run(args) -> int:
         rr.save(str(args.save))
     else:
         rr.spawn()
+    rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)  # ROS's axes (REP 103): x forward, z up
     if args.urdf:
         # Rerun's URDF importer: links become coordinate frames named as in the URDF, joints
         # transforms between them, so TF frames of the same names attach live data to the model

@@ -40,7 +40,7 @@ def log_image(ctx: Context, path: str, msg) -> None:
     else:  # explicit sizes: from an array's shape alone Rerun would take a 1-pixel-high image for 2D
         archetype = rr.Image(bytes=pixels.tobytes(), width=msg.width, height=msg.height,
                              color_model=model, datatype=pixels.dtype.type)  # type: ignore[arg-type]
-    ctx.log(path, archetype, frame=msg.header.frame_id)
+    ctx.log(path, archetype)  # no coordinate frame: an image is 2D; CameraInfo's pinhole carries the camera's
 
 
 MEDIA_TYPES = {"jpeg": "image/jpeg", "jpg": "image/jpeg", "png": "image/png"}
@@ -53,7 +53,7 @@ def log_compressed_image(ctx: Context, path: str, msg) -> None:
     media = next((MEDIA_TYPES[w] for w in words if w in MEDIA_TYPES), None)
     if media is None:
         raise ValueError(f"compressed image format {msg.format!r} is neither jpeg nor png")
-    ctx.log(path, rr.EncodedImage(contents=bytes(msg.data), media_type=media), frame=msg.header.frame_id)
+    ctx.log(path, rr.EncodedImage(contents=bytes(msg.data), media_type=media))
 
 
 @logger("sensor_msgs/msg/CameraInfo")
