@@ -7,6 +7,8 @@ Liveliness token (rmw_zenoh docs/design.md), '%' standing for '/':
           [/<topic>/<dds type>/<type hash>/<qos>]
   kinds: NN node, MP publisher, MS subscription, SS service server, SC client
 Data key: <domain>/<topic without outer '/'>/<dds type>/<type hash>
+Node/Publisher: the bench's own ROS 2 publishers (tests, benchmarks) declare these
+tokens and attach rmw_zenoh's per-sample attachment, as rmw_zenoh nodes do.
 
 Type hashes follow REP-2011 (rosidl_generator_type_description): sha256 of
 the type description JSON without default values; checked in the unit tests

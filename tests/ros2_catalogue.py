@@ -231,6 +231,11 @@ def check_markers(c: Columns) -> None:
     assert "Clear:is_recursive" in c[f"{base}/8"]  # DELETE of marker 8
 
 
+def check_markers_cleared(c: Columns) -> None:
+    assert "Boxes3D:half_sizes" in c["/ros2/markers_cleared/a/1/shape"]
+    assert c["/ros2/markers_cleared"]["Clear:is_recursive"] == [[True]]  # DELETEALL: the whole topic
+
+
 CASES = [
     Case("/tf", "tf2_msgs/msg/TFMessage", m.TFMessage(transforms=[
         tf("map", "odom", (1, 0, 0)), tf("odom", "base_link", (2, 3, 0), q_z(90)),
@@ -281,6 +286,8 @@ CASES = [
         marker("shapes", 7, 3, scale=m.Vector3(1, 1, 3), color=RED),
         marker("shapes", 8, 1, scale=m.Vector3(1, 1, 1), color=RED),
         marker("shapes", 8, 1, action=2)]), check_markers),
+    Case("/markers_cleared", "visualization_msgs/msg/MarkerArray", m.MarkerArray(markers=[
+        marker("a", 1, 1, scale=m.Vector3(1, 1, 1), color=RED), marker("", 0, 0, action=3)]), check_markers_cleared),
     Case("/chatter", "std_msgs/msg/String", m.String("hello viewer"),
          lambda c: c["/ros2/chatter"]["TextLog:text"] == [["hello viewer"]] or _fail(c, "/ros2/chatter")),
     Case("/cabin/temperature", "sensor_msgs/msg/Temperature", m.Temperature(temperature=21.5),
