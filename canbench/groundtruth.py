@@ -76,7 +76,7 @@ def traffic(rng: random.Random, n: int, t0_ns: int) -> list[tuple[int, wire.Fram
     return out[:n]
 
 
-def _runs(sent: list[tuple[int, wire.Frame]]) -> list[int]:
+def identical_runs(sent: list[tuple[int, wire.Frame]]) -> list[int]:
     """For each frame, the index of the first frame of its run of identical back-to-back frames."""
     start: list[int] = []
     for i, (_, f) in enumerate(sent):
@@ -84,7 +84,7 @@ def _runs(sent: list[tuple[int, wire.Frame]]) -> list[int]:
     return start
 
 
-def _in_run(runs: list[int], i: int) -> bool:
+def in_run(runs: list[int], i: int) -> bool:
     return runs[i] != i or (i + 1 < len(runs) and runs[i + 1] == runs[i])
 
 
@@ -134,7 +134,7 @@ def _observable(truth: BusTruth, runs: list[int], arrivals: dict[int, int], kind
     if kind == "drop":
         return True
     frame = truth.sent[i][1]
-    if _in_run(runs, i):
+    if in_run(runs, i):
         return False
     if kind == "corrupt" and (frame.remote or not frame.dlc):
         return False
@@ -201,7 +201,7 @@ def generate(seed: int, frames_per_bus: int, buses: int = 1, faults: int = 4, ma
         bus = f"vcan{b}"
         key = "vehicle/can/rx" if buses == 1 else f"vehicle/can/{bus}/rx"
         truth = BusTruth(bus, key, traffic(rng, frames_per_bus, 1_700_000_000_000_000_000 + b * 37_000))
-        runs = _runs(truth.sent)
+        runs = identical_runs(truth.sent)
         slots = list(range(2, frames_per_bus - 8, FAULT_SPACING))
         chosen = sorted(rng.sample(slots, min(faults, len(slots))))
         planned = [(rng.choice(kinds), i, rng.randint(1, 4)) for i in chosen]
