@@ -47,7 +47,8 @@ def analyse(where: Path) -> dict:
     from canbench import oracle
     from canbench.capture import iter_zenoh_capture
     started, cpu0 = time.monotonic(), time.process_time()
-    received, problems = oracle.zenoh_frames(iter_zenoh_capture(where / "zenoh.tsv"), "vehicle/can/rx")
+    by_key, _ = oracle.zenoh_frames_by_key(iter_zenoh_capture(where / "zenoh.tsv"), {"vehicle/can/rx"})
+    received, problems = by_key["vehicle/can/rx"]
     can = oracle.read_candump(where / "can.log", "vcan0")
     read_s = time.monotonic() - started
     c = oracle.compare(can, received)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from . import oracle, wire
-from .capture import read_zenoh_capture
+from .capture import iter_zenoh_capture
 from .faults import disruptive
 from .runkeys import rx_key, tx_key
 from .scenario import Scenario
@@ -95,11 +95,11 @@ def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.O
 def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: dict[str, dict],
             bridge_stats: dict | None, traffic_s: float, baseline: dict | None = None,
             faults: dict | None = None) -> RunResult:
-    samples = read_zenoh_capture(run_dir / "zenoh.tsv")
     n = len(scenario.bus_names)
-    expected_keys = {rx_key(prefix, b, n) for b in scenario.bus_names}
-    expected_keys |= {tx_key(prefix, b, n) for b in scenario.bus_names}
-    unexpected_keys = sorted({key for _, key, _, _ in samples if key not in expected_keys})
+    rx_keys = {rx_key(prefix, b, n) for b in scenario.bus_names}
+    on_zenoh, keys_seen = oracle.zenoh_frames_by_key(iter_zenoh_capture(run_dir / "zenoh.tsv"), rx_keys)
+    expected_keys = rx_keys | {tx_key(prefix, b, n) for b in scenario.bus_names}
+    unexpected_keys = sorted(keys_seen - expected_keys)
     commands_log = run_dir / "commands.tsv"
     commands = [(r.bus, oracle.Observed(r.frame, r.t_ns, i, line=r.log_line, origin="commands.tsv"))
                 for i, r in enumerate(oracle.read_sent_log(commands_log) if commands_log.exists() else [])]
@@ -108,7 +108,7 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
     for bus in scenario.bus_names:
         key = rx_key(prefix, bus, n)
         can_frames = oracle.read_candump(run_dir / "can.log", bus)
-        zenoh_frames, problems = oracle.zenoh_frames(samples, key)
+        zenoh_frames, problems = on_zenoh[key]
         bus_commands = [c for b, c in commands if b == bus]
         tx = None
         from_ecus = can_frames

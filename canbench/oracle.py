@@ -94,15 +94,25 @@ def read_sent_log(path: Path) -> list[SentRecord]:
     return out
 
 
-@_without_gc
 def zenoh_frames(samples: Iterable[Sample], key: str) -> tuple[list[Observed], list[str]]:
-    """Frames of the samples on key, in arrival order; and problems (bad payloads, other keys)."""
-    out: list[Observed] = []
-    problems: list[str] = []
+    """Frames of the samples on key, in arrival order; and problems (bad payloads)."""
+    return zenoh_frames_by_key(samples, {key})[0][key]
+
+
+@_without_gc
+def zenoh_frames_by_key(samples: Iterable[Sample], keys: set[str]) \
+        -> tuple[dict[str, tuple[list[Observed], list[str]]], set[str]]:
+    """In one pass over a capture (iter_zenoh_capture: never all samples in memory at once):
+    per key of `keys`, its frames in arrival order and its problems (bad payloads); and every
+    key a sample came on."""
+    out: dict[str, tuple[list[Observed], list[str]]] = {k: ([], []) for k in keys}
+    seen: set[str] = set()
     cache: dict[bytes, wire.Frame] = {}
     for t_ns, sample_key, payload, att in samples:
-        if sample_key != key:
+        seen.add(sample_key)
+        if sample_key not in out:
             continue
+        frames_on_key, problems = out[sample_key]
         if len(cache) > FRAME_CACHE:
             cache.clear()
         try:
@@ -112,10 +122,10 @@ def zenoh_frames(samples: Iterable[Sample], key: str) -> tuple[list[Observed], l
             problems.append(f"undecodable sample on {sample_key} at {t_ns}: {e}")
             continue
         for i, f in enumerate(frames):
-            out.append(Observed(f, t_ns, len(out), key=sample_key,
-                                seq=meta.first_seq + i if meta else -1,
-                                bridge_rx_ns=meta.rx_times_ns[i] if meta and i < meta.count else 0))
-    return out, problems
+            frames_on_key.append(Observed(f, t_ns, len(frames_on_key), key=sample_key,
+                                          seq=meta.first_seq + i if meta else -1,
+                                          bridge_rx_ns=meta.rx_times_ns[i] if meta and i < meta.count else 0))
+    return out, seen
 
 
 def _key(f: wire.Frame) -> tuple:
