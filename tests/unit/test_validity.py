@@ -116,3 +116,17 @@ def test_the_bridges_own_account_is_cross_checked_never_trusted(tmp_path):
     assert d["seq"]["count"] == 1 and d["seq"]["examples"][0].startswith("seq 99 -> 105 for ")
     # reported, not a verdict: the run is valid and the frames are all there
     assert checks.assess(r)["outcome"] == "valid" and checks.integrity(r) == []
+
+
+def test_report_shows_the_outcome_instead_of_a_verdict_and_the_min_latency(tmp_path):
+    from canbench import report
+    r = seeded(tmp_path, latency_ns=lambda i: -120_000 if i == 7 else 400_000)
+    problems = checks.failing(r)
+    r.metrics["verdicts"] = {f"test_check[{c}]": "failed" if c in problems else "skipped" if c != "valid_run"
+                             else "passed" for c in checks.CHECKS}
+    r.metrics["problems"], r.metrics["passed"] = problems, False
+    report.write_html(r, tmp_path / "report.html")
+    page = (tmp_path / "report.html").read_text()
+    assert "BENCH ERROR</span></h1>" in page and "FAILED" not in page
+    assert "<th>min ms</th>" in page and "<td>-0.120</td>" in page
+    assert "bench error: vcan0 CAN -&gt; Zenoh: 1 of 388 matched frames arrived before they were sent" in page
