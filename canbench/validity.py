@@ -77,10 +77,9 @@ def capture_problems(result: RunResult) -> list[str]:
     return out
 
 
-def _send_log_order(path: Path) -> str | None:
+def _send_log_order(path: Path, records: list[oracle.SentRecord]) -> str | None:
     """A send log whose frames do not follow their trace (send times going back, or trace lines
     out of order other than a loop starting again at its first line)."""
-    records = oracle.read_sent_log(path)
     first_line = records[0].source_line if records else 0
     bad = []
     for a, b in zip(records, records[1:], strict=False):
@@ -105,14 +104,15 @@ def emulator_problems(result: RunResult) -> list[str]:
                        f"max {error['max']:.3f} ms): it fell behind its trace")
         log = result.run_dir / f"ecu-{name}.sent.tsv"
         if log.exists():
-            order = _send_log_order(log)
+            records = oracle.read_sent_log(log)
+            order = _send_log_order(log, records)
             if order:
                 out.append(f"ECU {name}: {order}")
             bus = summary.get("bus")
             # order only: stamped 0, so the ECU's clock (perf_counter mapped to the wall clock at its
             # start, which can drift from the bus's over an hour) never keeps a frame from matching
             sent = [oracle.Observed(r.frame, 0, i, line=r.log_line, origin=log.name)
-                    for i, r in enumerate(oracle.read_sent_log(log))]
+                    for i, r in enumerate(records)]
             on_bus = next((b.bus_frames for b in result.buses if b.bus == bus), None)
             if on_bus and sent:
                 reordered = oracle.match_subset(sent, on_bus).reordered

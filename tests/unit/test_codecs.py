@@ -2,6 +2,8 @@
 zn-capture's TSV, with exact nanosecond stamps and file:line errors."""
 from __future__ import annotations
 
+from collections import Counter
+
 import pytest
 
 from canbench import trace, wire
@@ -78,3 +80,19 @@ def test_zenoh_capture_line_round_trip(tmp_path):
     path.write_text(format_sample_line(samples[0]) + "12\tkey\tzz\n")
     with pytest.raises(ValueError, match="zenoh.tsv:2: not a zn-capture line"):
         list(iter_zenoh_capture(path))
+
+
+def test_the_running_capture_counts_frames_and_ids_as_it_grows(tmp_path):
+    from canbench.capture import ZenohCapture
+    path = tmp_path / "zenoh.tsv"
+    cap = ZenohCapture.__new__(ZenohCapture)  # its counters without a zn-capture process
+    cap.path, cap._offset, cap._partial, cap._samples = path, 0, b"", 0
+    cap._decoded, cap._frames, cap._ids = {}, Counter(), {}
+    two = wire.encode(wire.Frame(0x100, 1, b"\x07")) + wire.encode(wire.Frame(0x18FF0001, 0, b"", True))
+    line = format_sample_line(Sample(1, "vehicle/can/rx", two, None))
+    path.write_text(line + line[:20])  # the second line still being written
+    assert cap.frames_on({"vehicle/can/rx"}) == 2
+    with open(path, "a") as f:
+        f.write(line[20:] + format_sample_line(Sample(2, "vehicle/can/tx", b"\x01" * 16, None)))  # not a frame
+    assert cap.frames_on({"vehicle/can/rx", "vehicle/can/tx"}) == 5
+    assert cap.frames_with_ids({"vehicle/can/rx": {0x100, 0x18FF0001}, "vehicle/can/tx": {1}}) == 4
