@@ -8,6 +8,12 @@
  * ASan/UBSan, the hub's assertions, hub_check_invariants after each round
  * (queues within their bounds), and nothing leaked at the end.
  *
+ * Code coverage alone does not tell a round that closes and reopens a slot
+ * in a full table from one that does either alone: the shape of each round
+ * (table full, frame sent, slot freed, slot taken, a BARRIER naming a
+ * connection of this round) is fed back as libFuzzer extra counters, so
+ * inputs reaching a new combination are kept and built on.
+ *
  * Grammar (bytes; a missing byte reads as 0):
  *   input  := round*          round := count op{1 + count % 16}, then one
  *                             loop round (count bit 7) or until the hub is idle
@@ -49,7 +55,13 @@ static uint8_t next(struct input *in)
 	return in->pos < in->size ? in->data[in->pos++] : 0;
 }
 
+enum shape { TABLE_FULL = 1, FRAME_SENT = 2, SLOT_FREED = 4, SLOT_TAKEN = 8, BARRIER_TO_NEW = 16 };
+__attribute__((used, section("__libfuzzer_extra_counters"))) static uint8_t round_shapes[32];
+
 static struct {
+	unsigned shape; /* enum shape bits of the round being written */
+	unsigned round; /* rounds so far in this input */
+	unsigned born[MAX_CONNS]; /* the round each connection was opened in */
 	int fd[MAX_CONNS];
 	unsigned n;
 	unsigned serial; /* abstract names unique within an input */
@@ -107,7 +119,9 @@ static void open_conn(uint8_t flags)
 		abort();
 	}
 	serial_of[conns.n] = conns.serial++;
+	conns.born[conns.n] = conns.round;
 	conns.fd[conns.n++] = fd;
+	conns.shape |= SLOT_TAKEN;
 	if (!(flags & 1))
 		send_opts((int)conns.n - 1, UCAN_MSG_BIND, flags);
 }
@@ -117,8 +131,10 @@ static void close_conn(int c)
 	if (c < 0)
 		return;
 	close(conns.fd[c]);
+	conns.shape |= SLOT_FREED;
 	conns.n--;
 	conns.fd[c] = conns.fd[conns.n];
+	conns.born[c] = conns.born[conns.n];
 	serial_of[c] = serial_of[conns.n];
 }
 
@@ -138,6 +154,8 @@ static void send_frame(int c, uint8_t id, uint8_t len)
 	memcpy(msg, &hdr, sizeof(hdr));
 	memcpy(msg + sizeof(hdr), &f, sizeof(f));
 	send_msg(c, msg, sizeof(hdr) + (fd_frame ? CANFD_MTU : CAN_MTU));
+	if (c >= 0)
+		conns.shape |= FRAME_SENT;
 }
 
 static void do_op(struct input *in)
@@ -170,6 +188,8 @@ static void do_op(struct input *in)
 		if (t >= 0)
 			cookie_of(serial_of[t], b.cookie);
 		send_msg(c, &b, sizeof(b));
+		if (c >= 0 && t >= 0 && conns.born[t] == conns.round)
+			conns.shape |= BARRIER_TO_NEW;
 		break;
 	}
 	case 4:
@@ -246,8 +266,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		abort();
 	while (in.pos < in.size) {
 		uint8_t count = next(&in);
+		conns.shape = conns.n && conns.n % SLOT_TABLE == 0 ? TABLE_FULL : 0;
+		conns.round++;
 		for (unsigned ops = 1 + count % 16; ops; ops--)
 			do_op(&in);
+		round_shapes[conns.shape]++;
 		/* bit 7: one loop round, else the hub catches up (until a round finds nothing) */
 		for (unsigned round = 0; round < (count & 0x80 ? 1u : MAX_CATCH_UP_ROUNDS); round++) {
 			int events = hub_run_once(0);
@@ -263,6 +286,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	hub_run_once(0);
 	hub_check_invariants();
 	hub_shutdown();
-	conns.serial = 0;
+	conns.serial = conns.round = 0;
 	return 0;
 }
