@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import bisect
 import gc
+from array import array
 from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -143,7 +144,7 @@ class Comparison:
     unexpected: list[Observed] = field(default_factory=list)
     reordered: list[tuple[Observed, Observed]] = field(default_factory=list)  # (frame, frame it overtook)
     reordered_per_id: int = 0
-    latency_ms: list[float] = field(default_factory=list)
+    latency_ms: array[float] = field(default_factory=lambda: array("d"))  # 8 bytes a frame: an hour's stays small
     lost_in_faults: list[Observed] = field(default_factory=list)  # lost inside a fault window: allowed, counted
     recovery_s: list[float | None] = field(default_factory=list)  # per fault window: end -> first bridged frame
     attachment: dict | None = None  # CAN -> Zenoh: where the bridge's own account disagrees (attachment_check)
@@ -294,7 +295,6 @@ def _classify(sent: list[Observed], received: list[Observed],
     for s in sent:
         waiting.setdefault(_key(s.frame), _Copies()).add(s)
     seen_keys = set(waiting)
-    match_of: dict[int, Observed] = {}  # sent index -> received
     leftovers: list[Observed] = []
     others: list[Observed] = []
     frontier = -1  # the furthest sent index matched so far
@@ -305,7 +305,6 @@ def _classify(sent: list[Observed], received: list[Observed],
         nearest = copies.take(frontier, r.t_ns) if copies else None
         if nearest is not None:
             frontier = max(frontier, nearest.index)
-            match_of[nearest.index] = r
             c.matched.append((nearest, r))
         elif explained is not None and explained[k] > 0:
             explained[k] -= 1
@@ -317,7 +316,8 @@ def _classify(sent: list[Observed], received: list[Observed],
             leftover_frontier.append(frontier)
     if explained is not None:
         c.received -= len(others)
-    lost = [s for s in sent if s.index not in match_of]
+    lost = sorted((copies.frames[i] for copies in waiting.values() for i in range(copies.head, len(copies.frames))
+                   if not copies.used[i]), key=lambda o: o.index)
     # corruption: an unknown frame where a lost frame of the same id and length was due: the
     # one nearest to where the stream had got to (ahead of it on a tie)
     lost_by_id: dict[tuple, list[Observed]] = defaultdict(list)

@@ -17,6 +17,7 @@ import base64
 import html
 import io
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -94,7 +95,7 @@ def _png(fig) -> str:
     return f'<img alt="" src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}">'
 
 
-def _latency_plots(series: dict[str, list[float]]) -> str:
+def _latency_plots(series: dict[str, Sequence[float]]) -> str:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -203,7 +204,7 @@ def write_html(result: RunResult, path: Path) -> None:
                              s["reordered"], _ms(lat.get("min_ms")), _ms(lat["p50_ms"]), _ms(lat["p90_ms"]),
                              _ms(lat["p99_ms"]), _ms(lat["max_ms"]),
                              " · ".join(f"{k} {v['count']}" for k, v in disagrees.items() if v["count"])])
-    series = {}
+    series: dict[str, Sequence[float]] = {}
     for b in result.buses:
         series[f"{b.bus} CAN->Zenoh"] = b.comparison.latency_ms
         if b.zenoh_to_can:
