@@ -34,6 +34,8 @@ def run_dir(tmp_path_factory):
                         f"{wire.encode_attachment(i, [o.t_ns]).hex()}\n")
     result = analysis.analyse(sc, "synthetic", tmp, "vehicle/can", {}, None, 2.0)
     result.metrics["passed"] = False
+    t0 = result.buses[0].bus_frames[0].t_ns
+    result.buses[0].commands = [oracle.Observed(wire.Frame(0x7A0, 2, b"\x01\x02"), t0 + 1000, 0, origin="commands.tsv")]
     recording.write_mcap(result, tmp / "recording.mcap", dbc.load_dbc(sc.dbc))
     return tmp
 
@@ -49,7 +51,7 @@ def frame_tuple(stamp: int, m) -> tuple[int, int, bool, int, str]:
 
 
 def test_ros2_decoder_finds_every_frame_of_can_log(run_dir):
-    frames, zenoh, speeds, latencies = [], 0, [], []
+    frames, zenoh, speeds, latencies, commands = [], 0, [], [], []
     with open(run_dir / "recording.mcap", "rb") as f:
         reader = make_reader(f, decoder_factories=[mcap_ros2.DecoderFactory()])
         assert reader.get_header().profile == "ros2"
@@ -65,9 +67,12 @@ def test_ros2_decoder_finds_every_frame_of_can_log(run_dir):
                 speeds.append(msg.data)
             elif channel.topic == "/latency/vcan0":
                 latencies.append(msg.data)
+            elif channel.topic == "/commands/vcan0":
+                commands.append(frame_tuple(message.log_time, msg))
     assert frames == bus_frames(run_dir)  # all 388, in order, ids and data
     assert zenoh == 387 and len(latencies) == 387 and all(abs(v - 0.4) < 1e-9 for v in latencies)
     assert len(speeds) == 200 and len(set(speeds)) > 10
+    assert commands == [(1700000000005774000, 0x7A0, False, 2, "0102")]
 
 
 def test_rerun_imports_the_recording(run_dir):
@@ -98,3 +103,4 @@ def test_canbench_view_shows_the_recording(run_dir):
     assert shown == len(bus_frames(run_dir))
     assert logged["/can/vcan0/0C0/EngineSpeed"] == logged["/signals/vcan0/EngineData/EngineSpeed"]  # both decodings
     assert len(logged["/signals/vcan0/EngineData/EngineSpeed"]) == 200  # the recording's signals
+    assert logged["/commands/vcan0/7A0/raw"] == ["7A0#0102"]
