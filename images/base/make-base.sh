@@ -2,7 +2,8 @@
 # make-base.sh - provide the bench's base image (make base).
 #
 # Usage: make-base.sh <base-image> <output-tag> [ca-bundle]
-#   1. use <base-image> if Docker has it, else try `docker pull` (bounded);
+#   1. use <base-image> if Docker has it (or the debootstrap image made here earlier
+#      because it could not be pulled), else try `docker pull` (bounded);
 #   2. if that fails (no registry), build an equivalent image from Debian
 #      packages with debootstrap (bookworm, minbase) and `docker import` it;
 #   3. either way, tag <output-tag> = that image plus the CA bundle (default:
@@ -24,12 +25,13 @@ local_base=canbench/debootstrap:$suite
 if docker image inspect "$base" >/dev/null 2>&1; then
 	echo "base: using $base (already present)"
 	from=$base
+elif docker image inspect "$local_base" >/dev/null 2>&1; then
+	# made here before, because $base could not be pulled then: not tried again on every run
+	echo "base: using $local_base built earlier from Debian packages ($base could not be pulled)"
+	from=$local_base
 elif timeout 120 docker pull "$base" >/dev/null 2>&1; then
 	echo "base: pulled $base"
 	from=$base
-elif docker image inspect "$local_base" >/dev/null 2>&1; then
-	echo "base: $base cannot be pulled; using $local_base built earlier from Debian packages"
-	from=$local_base
 else
 	echo "base: $base cannot be pulled; building $local_base from Debian packages with debootstrap"
 	# debootstrap installs itself when it can (root or passwordless sudo), else names the command
@@ -62,10 +64,20 @@ SOURCES
 fi
 
 [ -r "$ca" ] || { echo "base: CA bundle $ca is not readable (set BENCH_CA_BUNDLE)" >&2; exit 1; }
+# what $out is made of, recorded when it was made: unchanged, it is not built again (a warm
+# make test saves the build's seconds; the image, and so every image's layer cache, stays)
+inputs="$(docker image inspect -f '{{.Id}}' "$from") $(cat "$ca" "$here/Dockerfile" | sha256sum | cut -c1-16)"
+stamp=$work/inputs
+if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$inputs $(docker image inspect -f '{{.Id}}' "$out" 2>/dev/null)" ]; then
+	echo "base: $out up to date ($from + CA bundle from $ca)"
+	exit 0
+fi
 ctx=$(mktemp -d)
 trap 'rm -rf "$ctx"' EXIT
 cp "$ca" "$ctx/bench-ca-bundle.pem"
 cp "$here/Dockerfile" "$ctx/"
 docker build -q --build-arg FROM_IMAGE="$from" -t "$out" "$ctx" >/dev/null 2>"$ctx/build.err" ||
 	{ cat "$ctx/build.err" >&2; exit 1; }
+mkdir -p "$work"
+echo "$inputs $(docker image inspect -f '{{.Id}}' "$out")" >"$stamp"
 echo "base: $out = $from + CA bundle from $ca"
