@@ -30,6 +30,7 @@ import zenoh
 
 from . import ros2, ros2_msgs, wire
 from .dbc import load_dbc
+from .errors import InputError
 from .viewer_args import DEFAULT_ENDPOINT
 from .viewer_types import LOGGERS, Context
 from .viewer_types.can import CanColumns
@@ -247,6 +248,9 @@ def _interrupt(signum, frame) -> None:
 
 
 def run(args) -> int:
+    for option, path in (("--urdf", args.urdf), ("--dbc", args.dbc), ("source", args.source)):
+        if path is not None and not Path(path).is_file():
+            raise InputError(str(path), None, f"{option}: no such file")
     rr.init("canbench-view", spawn=False)
     if args.save:
         rr.save(str(args.save))

@@ -64,3 +64,13 @@ def test_occupancy_grey_levels_keep_unknown_apart():
     grey = occupancy_grey(np.arange(-1, 102, dtype=np.int8))
     assert grey[0] == grey[-1] == UNKNOWN_GREY and UNKNOWN_GREY not in grey[1:-1]
     assert grey[1] == 254 and grey[101] == 0 and all(np.diff(grey[1:-1].astype(int)) <= 0)
+
+
+@pytest.mark.parametrize("option", ["--urdf", "--dbc"])
+def test_missing_files_are_named(option, tmp_path):
+    import subprocess
+    import sys
+    missing = tmp_path / "missing.file"
+    rc = subprocess.run([sys.executable, "-m", "canbench.cli", "view", option, str(missing), "--save",
+                         str(tmp_path / "x.rrd")], capture_output=True, text=True, timeout=60)
+    assert rc.returncode == 2 and f"{missing}: {option}: no such file" in rc.stderr
