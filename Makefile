@@ -278,7 +278,7 @@ bench-callgrind: ucan firmware zenohd bench-tools zn-flood
 # Benchmarks for nightly runs, never part of check (docs/benchmark.md, docs/userspace-bus.md):
 # in compose, with the binaries of the images `make test` runs (compose.bench.yaml, no network);
 # BENCHMARKS= picks some of them. bench-host runs the same scripts with the host's builds.
-BENCHMARKS ?= bus bridge capture paths callgrind
+BENCHMARKS ?= bus bridge capture paths callgrind viewer
 bench: images
 	@scripts/build-images $(BENCH_TAG) $(BENCH_BASE) bench
 	@mkdir -p $(BENCH_OUT)
