@@ -1,88 +1,20 @@
-"""Reports of a run, next to metrics.json in reports/<run-id>/:
-
-  recording.mcap  CAN frames, Zenoh samples and commands on documented channels
-                  (JSON messages with JSON Schemas: Foxglove and Rerun open it),
-                  plus decoded signals when the scenario names a DBC file
-  report.html     one self-contained page: verdicts, latency histogram + CDF per
-                  direction, per-id table, timeline, emulator fidelity, links
-
-MCAP channels (message encoding json, schema encoding jsonschema):
-  /can/<bus>            canbench.CanFrame    every frame on the bus (log time: bus timestamp)
-  /zenoh/<bus>          canbench.ZenohFrame  every frame the consumer received (log time: receive)
-  /commands/<bus>       canbench.CanFrame    every command put on the tx key (log time: put)
-  /signals/<bus>/<msg>  canbench.Signals     DBC-decoded signals of bus frames"""
+"""report.html of a run, next to metrics.json in reports/<run-id>/: one
+self-contained page: verdicts, latency histogram + CDF per direction, per-id
+table, timeline, emulator fidelity, links to the run's files (recording.mcap,
+the ROS 2 recording, is canbench/recording.py's)."""
 from __future__ import annotations
 
 import base64
 import html
 import io
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mcap.writer import Writer
-
-from . import oracle, wire
-from .dbc import decode_signals
+from . import wire
 
 if TYPE_CHECKING:
     from .analysis import RunResult
-
-FRAME_FIELDS = {
-    "bus": {"type": "string"}, "id": {"type": "integer"}, "id_hex": {"type": "string"},
-    "extended": {"type": "boolean"}, "remote": {"type": "boolean"}, "dlc": {"type": "integer"},
-    "data": {"type": "string", "description": "hex"}, "source": {"type": "string", "description": "file:line"},
-}
-SCHEMAS = {
-    "canbench.CanFrame": {"type": "object", "properties": FRAME_FIELDS},
-    "canbench.ZenohFrame": {"type": "object", "properties": {
-        **FRAME_FIELDS, "key": {"type": "string"}, "seq": {"type": "integer"},
-        "bridge_rx_ns": {"type": "integer"}, "latency_ms": {"type": "number"}}},
-    "canbench.Signals": {"type": "object", "additionalProperties": {"type": "number"}},
-}
-
-
-def _frame_json(bus: str, o: oracle.Observed) -> dict:
-    f = o.frame
-    return {"bus": bus, "id": f.can_id, "id_hex": wire.id_hex(f.can_id, f.extended),
-            "extended": f.extended, "remote": f.remote, "dlc": f.dlc, "data": f.data.hex().upper(),
-            "source": f"{o.origin}:{o.line}" if o.line else ""}
-
-
-def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
-    with open(path, "wb") as out:
-        writer = Writer(out)
-        writer.start(profile="", library="canbench")
-        schema_ids = {name: writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
-                      for name, schema in SCHEMAS.items()}
-        channels: dict[str, int] = {}
-        seqs: dict[str, int] = {}
-
-        def emit(topic: str, schema: str, t_ns: int, message: dict) -> None:
-            if topic not in channels:
-                channels[topic] = writer.register_channel(topic, "json", schema_ids[schema])
-            seqs[topic] = seqs.get(topic, 0) + 1
-            writer.add_message(channels[topic], log_time=t_ns, publish_time=t_ns, sequence=seqs[topic],
-                               data=json.dumps(message).encode())
-
-        for b in result.buses:
-            latency_of = {r.index: (r.t_ns - s.t_ns) / 1e6 for s, r in b.comparison.matched}
-            for o in b.bus_frames:
-                emit(f"/can/{b.bus}", "canbench.CanFrame", o.t_ns, _frame_json(b.bus, o))
-                if dbc is not None and not o.frame.remote:
-                    signals = decode_signals(dbc, o.frame)
-                    if signals:
-                        emit(f"/signals/{b.bus}/{signals[0]}", "canbench.Signals", o.t_ns, signals[1])
-            for o in b.zenoh_frames:
-                emit(f"/zenoh/{b.bus}", "canbench.ZenohFrame", o.t_ns,
-                     {**_frame_json(b.bus, o), "key": o.key, "seq": o.seq, "bridge_rx_ns": o.bridge_rx_ns,
-                      "latency_ms": latency_of.get(o.index)})
-            for o in b.commands:
-                emit(f"/commands/{b.bus}", "canbench.CanFrame", o.t_ns, _frame_json(b.bus, o))
-        writer.add_metadata("canbench.run", {"run_id": result.run_id, "scenario": result.scenario.name,
-                                             "passed": str(result.metrics.get("passed"))})
-        writer.finish()
 
 
 # ---- HTML ----
