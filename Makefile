@@ -163,7 +163,7 @@ fuzz-ucan:
 	mkdir -p $(BUILD)/ucan-fuzz/corpus $(BUILD)/ucan-fuzz/corpus-state
 	$(BUILD)/ucan-fuzz/fuzz_hub_msg -max_total_time=$(FUZZ_SECONDS) -max_len=4200 $(BUILD)/ucan-fuzz/corpus
 	$(BUILD)/ucan-fuzz/fuzz_hub_state -max_total_time=$(FUZZ_SECONDS) -max_len=2048 -rss_limit_mb=1024 \
-	  $(BUILD)/ucan-fuzz/corpus-state
+	  $(BUILD)/ucan-fuzz/corpus-state ucan/fuzz/seeds/hub_state
 
 fuzz-firmware:
 	cmake -S firmware -B $(BUILD)/firmware-fuzz $(CMAKE_GEN) -DCMAKE_C_COMPILER=clang -DZN_FUZZ=ON -DZN_BUILD_BRIDGE=OFF >/dev/null
