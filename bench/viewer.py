@@ -7,6 +7,9 @@ peak and final RSS, CPU, and the frames and images read back from the .rrd.
 
   python3 -m bench.viewer [--rate 50000] [--seconds 10] [--dbc scenarios/dbc/powertrain.dbc]
 
+With --dbc the frames are the DBC's own messages (its ids, lengths, extended flags), so
+every frame is decoded into signals, and the signals in the .rrd are counted too.
+
 Zenoh: this script listens as a peer on a loopback port and the viewer connects to it
 (or both to --router ENDPOINT); multicast scouting off; the load stops by itself."""
 from __future__ import annotations
@@ -23,6 +26,7 @@ import numpy as np
 import zenoh
 
 from canbench import ros2, ros2_msgs, wire
+from canbench.dbc import decode_signals, load_dbc
 from canbench.rig import free_port
 
 from .common import cpu_s, machine_line, rss_mib, run_id_and_output
@@ -49,11 +53,25 @@ def image_msg() -> ros2_msgs.Image:
                            step=640 * 3, data=pixels.tobytes())
 
 
-def batches(count: int, batch: int) -> list[bytes]:
-    """Distinct ids (0x100 + i % 64) and data, as a busy bus would carry them."""
-    frames = [wire.encode(wire.Frame(0x100 + i % 64, 8, (i * 2654435761 % 2**64).to_bytes(8, "little")))
-              for i in range(batch * 64)]
-    return [b"".join(frames[(k * batch) % len(frames):(k * batch) % len(frames) + batch]) for k in range(count)]
+def batches(count: int, batch: int, db=None) -> list[bytes]:
+    """Distinct ids (0x100 + i % 64) and data, as a busy bus would carry them; with a DBC
+    (cantools database) its messages in turn, each with its length, so every frame decodes."""
+    messages = db.messages if db is not None else []
+    frames = []
+    for i in range(batch * 64):
+        data = (i * 2654435761 % 2**64).to_bytes(8, "little")
+        if messages:
+            m = messages[i % len(messages)]
+            frames.append(wire.Frame(m.frame_id, m.length, data[:m.length], m.is_extended_frame))
+        else:
+            frames.append(wire.Frame(0x100 + i % 64, 8, data))
+    encoded = [wire.encode(f) for f in frames]
+    return [b"".join(encoded[(k * batch) % len(frames):(k * batch) % len(frames) + batch]) for k in range(count)]
+
+
+def signals_in(payload: bytes, db) -> int:
+    """How many signal values the viewer logs for one sample's frames."""
+    return sum(len(d[1]) for f in wire.decode_batch(payload) if (d := decode_signals(db, f))) if db else 0
 
 
 def main() -> int:
@@ -95,14 +113,17 @@ def main() -> int:
         wait(lambda: image_pub.key in (stats(session) or {}).get("subscriptions", []), "the image subscription", 30)
         image = image_msg().serialize()
         samples_per_s = args.rate / args.batch
-        payloads = batches(1000, args.batch)
-        sent_samples = sent_frames = images = 0
+        db = load_dbc(Path(args.dbc)) if args.dbc else None
+        payloads = batches(1000, args.batch, db)
+        signals_per_payload = [signals_in(p, db) for p in payloads]
+        sent_samples = sent_frames = sent_signals = images = 0
         start = time.monotonic()
         next_image = next_rss = start
         while (now := time.monotonic()) - start < args.seconds:
             due = int((now - start) * samples_per_s)
             while sent_samples < due:  # paced by the clock: a late loop catches up, never runs ahead
                 can_pub.put(payloads[sent_samples % len(payloads)])
+                sent_signals += signals_per_payload[sent_samples % len(payloads)]
                 sent_samples += 1
                 sent_frames += args.batch
             if now >= next_image:
@@ -135,6 +156,7 @@ def main() -> int:
     from canbench.viewer import read_rrd_columns
     columns = read_rrd_columns(rrd)
     frames_in_rrd = sum(len(c.get("TextLog:text", [])) for e, c in columns.items() if e.startswith("/can/rx/"))
+    signals_in_rrd = sum(len(c.get("Scalars:scalars", [])) for e, c in columns.items() if e.startswith("/can/rx/"))
     images_in_rrd = len(columns.get("/ros2/camera/image", {}).get("Image:buffer", []))
     result = {
         "run_id": run_id, "machine": machine_line(), "rate_target": args.rate, "batch": args.batch,
@@ -145,15 +167,18 @@ def main() -> int:
         "rss_peak_mib": round(max(rss), 1), "rss_first_mib": round(rss[0], 1), "cpu_s": round(cpu, 1),
         "rss_mib_each_second": [round(v) for v in rss[::2]],
         "frames_in_rrd": frames_in_rrd, "images_in_rrd": images_in_rrd,
+        "signals_sent": sent_signals, "signals_in_rrd": signals_in_rrd,
         "rrd_mib": round(rrd.stat().st_size / 2**20, 1),
     }
     (out / "viewer.json").write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result, indent=2))
     rrd.unlink()
     ok = (result["dropped_samples"] == 0 and frames_in_rrd == sent_frames and images_in_rrd == images
+          and signals_in_rrd == sent_signals
           and result["frames_per_s_logged"] >= args.rate * 0.95)
     print(f"bench.viewer: {'PASS' if ok else 'FAIL'}: {result['frames_per_s_logged']} frames/s logged "
-          f"(target {args.rate}), {images_in_rrd}/{images} images, {result['dropped_samples']} samples dropped, "
+          f"(target {args.rate}), {images_in_rrd}/{images} images, {signals_in_rrd}/{sent_signals} signal values, "
+          f"{result['dropped_samples']} samples dropped, "
           f"RSS peak {result['rss_peak_mib']} MiB; {out / 'viewer.json'}")
     return 0 if ok else 1
 
