@@ -90,6 +90,7 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int]:
     import rerun as rr
 
     from .viewer_types import LOGGERS
+    from .viewer_types.markers import expire
     count = malformed = 0
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages():
@@ -103,4 +104,5 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int]:
             except Exception as e:  # noqa: BLE001 - as live: a bad message is shown and counted, never fatal
                 rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
                 malformed += 1
+    expire(ctx)  # markers whose lifetime ends after the last message
     return count, malformed

@@ -34,10 +34,12 @@ from .errors import InputError
 from .viewer_args import DEFAULT_ENDPOINT
 from .viewer_types import LOGGERS, Context
 from .viewer_types.can import CanColumns
+from .viewer_types.markers import expire
 
 QUEUE_SAMPLES = 100_000  # samples between the network callbacks and the logger thread
 BATCH_SAMPLES = 2_000    # the logger drains up to this many samples before sending CAN columns
 ERRORS_SHOWN = 10        # malformed samples described per topic; the rest are only counted
+IDLE_TICK_S = 0.5        # with no samples, the logger still clears markers whose lifetime ended
 
 
 @dataclass
@@ -178,8 +180,12 @@ class Viewer:
         return on_sample
 
     def _batch(self) -> list[Sample]:
-        """The next samples: blocks for one, then takes what is already queued; None ends the loop."""
-        batch = [self.samples.get()]
+        """The next samples: waits up to IDLE_TICK_S for one (else none), then takes what is
+        already queued; None ends the loop."""
+        try:
+            batch = [self.samples.get(timeout=IDLE_TICK_S)]
+        except queue.Empty:
+            return []
         while batch[-1] is not None and len(batch) < BATCH_SAMPLES:
             try:
                 batch.append(self.samples.get_nowait())
@@ -226,8 +232,11 @@ class Viewer:
                     except ValueError as e:  # WireError
                         self._malformed(sample.key, e)
             can.flush()
+            # markers' lifetimes: up to the newest sample logged (older ones may still be queued)
+            expire(self.ctx, batch[-1].t_ns if batch else time.time_ns())
             with self.lock:
                 self.logged += len(batch)
+        expire(self.ctx)
 
     def stop(self) -> None:
         self.token.undeclare()

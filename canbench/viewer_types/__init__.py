@@ -33,7 +33,7 @@ def logger(type_name: str) -> Callable[[Logger], Logger]:
 
 class Context:
     """What loggers share across messages: the DBC, the TF tree (child -> parent), whether a
-    topic's entities are static (/tf_static), the entities each marker topic has shown."""
+    topic's entities are static (/tf_static), the markers whose lifetime is running."""
 
     def __init__(self, dbc=None):
         self.dbc = dbc
@@ -41,6 +41,7 @@ class Context:
         self.frames_of: dict[str, str] = {}  # entity path -> the frame last declared for it
         self.static = False  # set per sample by the viewer
         self.t_ns = 0  # the sample's receive time, also set per sample
+        self.expiries: dict[str, int] = {}  # marker entity -> when its lifetime ends (ns, receive time)
 
     def frame_path(self, frame: str) -> str:
         """tf/<root>/.../<frame> as far as the tree is known (a cycle stops the walk)."""

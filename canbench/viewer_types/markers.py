@@ -1,7 +1,9 @@
 """visualization_msgs/Marker and MarkerArray: each marker at <topic>/<ns>/<id>, its pose
 a Transform3D there, its shape in the pose's coordinates by marker type; DELETE clears
-that marker, DELETEALL every marker of the topic. Lifetimes are not expired (Rerun keeps
-history; a marker lives until deleted or replaced)."""
+that marker, DELETEALL every marker of the topic. A marker with a lifetime is cleared at
+its receive time + lifetime unless a newer one of that ns/id came first (as RViz does):
+the Clear is logged at that time once a later sample, the viewer's idle tick or the end
+shows it is due (expire)."""
 from __future__ import annotations
 
 import numpy as np
@@ -57,27 +59,49 @@ def shape(m):
     raise ValueError(f"marker {m.ns}/{m.id}: unknown marker type {m.type}")
 
 
+def expire(ctx: Context, until_ns: int | None = None) -> None:
+    """Clear every marker whose lifetime ended by until_ns (None: all still running, at the
+    end), at the time it ended; the timeline is left at the current sample's time."""
+    due = [(t, e) for e, t in ctx.expiries.items() if until_ns is None or t <= until_ns]
+    for t_ns, entity in sorted(due):
+        del ctx.expiries[entity]
+        rr.set_time("time", timestamp=np.datetime64(t_ns, "ns"))
+        rr.log(entity, rr.Clear(recursive=True))
+    if due:
+        rr.set_time("time", timestamp=np.datetime64(ctx.t_ns, "ns"))
+
+
 def log_one(ctx: Context, path: str, m) -> None:
     if m.action == DELETEALL:
+        for entity in [e for e in ctx.expiries if e.startswith(path + "/")]:
+            del ctx.expiries[entity]
         rr.log(path, rr.Clear(recursive=True))
         return
     entity = f"{path}/{m.ns or '_'}/{m.id}"
     if m.action == DELETE:
+        ctx.expiries.pop(entity, None)
         rr.log(entity, rr.Clear(recursive=True))
         return
     if m.action != ADD:
         raise ValueError(f"marker {m.ns}/{m.id}: unknown action {m.action}")
     archetype = shape(m)
+    lifetime_ns = m.lifetime.sec * 1_000_000_000 + m.lifetime.nanosec
+    if lifetime_ns > 0:
+        ctx.expiries[entity] = ctx.t_ns + lifetime_ns
+    else:  # 0: forever, also for a marker that had a lifetime before
+        ctx.expiries.pop(entity, None)
     ctx.pose(entity, m.pose.position, m.pose.orientation, m.header.frame_id)
     rr.log(f"{entity}/shape", archetype, *([rr.CoordinateFrame(entity)] if m.header.frame_id else []))
 
 
 @logger("visualization_msgs/msg/Marker")
 def log_marker(ctx: Context, path: str, msg) -> None:
+    expire(ctx, ctx.t_ns)
     log_one(ctx, path, msg)
 
 
 @logger("visualization_msgs/msg/MarkerArray")
 def log_marker_array(ctx: Context, path: str, msg) -> None:
+    expire(ctx, ctx.t_ns)
     for m in msg.markers:
         log_one(ctx, path, m)
