@@ -1,7 +1,7 @@
 """The bench must catch a broken bridge: each seeded fault of
 zenoh-node-faulty (ZN_FAULT=...) runs a shipped scenario (smoke for CAN ->
 Zenoh, round-trip for Zenoh -> CAN and back) through the real orchestrator
-(pytest tests/scenarios, as in compose) with its ECUs on the host bus, and
+(pytest --pyargs canbench.scenario_checks, as in compose) with its ECUs on the host bus, and
 exactly the checks that guard against that fault must fail, naming the
 affected frames. The same binary without a fault must pass everything."""
 from __future__ import annotations
@@ -68,7 +68,7 @@ def test_seeded_fault_fails_exactly_its_checks(bus, router, tmp_path, case):
         ecus = [bus.popen([sys.executable, "-m", "canbench.cli", "ecu", "--name", e.name, *common])
                 for e in sc.ecus]
         orchestrator = bus.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                                str(REPO / "tests" / "scenarios"), *common], check=False, timeout=RUN_TIMEOUT_S,
+                                "--pyargs", "canbench.scenario_checks", *common], check=False, timeout=RUN_TIMEOUT_S,
                                cwd=REPO)
         for ecu in ecus:
             assert ecu.wait(timeout=RUN_TIMEOUT_S) == 0, ecu.stderr.read()
