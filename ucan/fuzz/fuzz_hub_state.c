@@ -25,8 +25,10 @@
  *              5 query (c, kind, target)       6 read (c, or all if a == 0)
  *              7 raw (c, len, bytes)           8 flood 8*(1+n%32) frames (c, n)
  *              9 setopt (c, bind flags)        10 reconnect: close c, open one (b)
- *   bind flags: bit 0 unbound, 1 recv_own, 2 loopback off, 3 timestamps,
- *               4 any interface, 5 fd frames, 6 rcvbuf 1 MiB */
+ *   bind flags: bit 7 clear: a typical client (bound to vcan0, loopback,
+ *               its own frames back); set: bit 0 unbound, 1 recv_own,
+ *               2 loopback off, 3 timestamps, 4 any interface, 5 fd frames,
+ *               6 vcan1 with rcvbuf 1 MiB */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <stddef.h>
@@ -92,7 +94,9 @@ static void send_msg(int c, const void *msg, size_t len)
 
 static void send_opts(int c, uint32_t type, uint8_t flags)
 {
-	struct ucan_sockopts o = { .type = type, .ifindex = flags & 16 ? 0 : UCAN_IFINDEX_BASE + (flags >> 7),
+	if (!(flags & 0x80))
+		flags = 0x02; /* a typical client: bound to vcan0, loopback on, its own frames back */
+	struct ucan_sockopts o = { .type = type, .ifindex = flags & 16 ? 0 : UCAN_IFINDEX_BASE + !!(flags & 64),
 				   .rcvbuf = flags & 64 ? 1u << 20 : 0, .loopback = !(flags & 4),
 				   .recv_own = !!(flags & 2), .fd_frames = !!(flags & 32), .nfilters = 1 };
 	o.timestamps = flags & 8 ? UCAN_TS_NSEC : UCAN_TS_NONE;
@@ -122,7 +126,7 @@ static void open_conn(uint8_t flags)
 	conns.born[conns.n] = conns.round;
 	conns.fd[conns.n++] = fd;
 	conns.shape |= SLOT_TAKEN;
-	if (!(flags & 1))
+	if (!(flags & 0x80 && flags & 1))
 		send_opts((int)conns.n - 1, UCAN_MSG_BIND, flags);
 }
 
