@@ -34,6 +34,18 @@ def _frames(pairs) -> str:
     return listed + (f", ... ({len(pairs) - SHOW} more)" if len(pairs) > SHOW else "")
 
 
+def _stamp_cause(c: oracle.Comparison) -> str:
+    """Why, when the bridge's stamps (SO_TIMESTAMPNS, in the attachment) are not candump's: the bus
+    gave each reader its own time, as a userspace hub or preload library older than one stamp per
+    frame does (docs/userspace-bus.md, Timestamps): a stale build or image, not the bridge."""
+    stamp = (c.attachment or {}).get("can_stamp", {})
+    if not stamp.get("count"):
+        return ""
+    return (f"; the bus gave its readers different stamps: the bridge's differ from candump's for {stamp['count']} "
+            f"of {len(c.matched)} frames (up to {stamp['max_us']} us), as a ucan hub or preload built before one "
+            f"stamp per frame does: rebuild ucan (make ucan) or the bus image")
+
+
 def bench_errors(result: RunResult) -> list[str]:
     out = []
     for b in result.buses:
@@ -43,7 +55,8 @@ def bench_errors(result: RunResult) -> list[str]:
             if c is not None and negative:
                 worst = min((r.t_ns - s.t_ns) / 1e6 for s, r in negative)
                 out.append(f"{b.bus} {direction}: {len(negative)} of {len(c.matched)} matched frames arrived before "
-                           f"they were sent (min {worst:.3f} ms): the bench's stamps are wrong: {_frames(negative)}")
+                           f"they were sent (min {worst:.3f} ms): the bench's stamps are wrong: {_frames(negative)}"
+                           + _stamp_cause(c))
     return out
 
 
