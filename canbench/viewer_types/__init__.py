@@ -13,67 +13,7 @@ ids, so data carrying header.frame_id sits in the TF tree the tf loggers build
 (and in a URDF's links, which Rerun names the same way)."""
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+from . import can, geometry, images, markers, points, scalars  # noqa: F401 - they register their loggers
+from .registry import LOGGERS, Context, Logger, logger, require
 
-import rerun as rr
-
-Logger = Callable[["Context", str, Any], None]
-LOGGERS: dict[str, Logger] = {}
-
-
-def logger(type_name: str) -> Callable[[Logger], Logger]:
-    def register(fn: Logger) -> Logger:
-        if type_name in LOGGERS:
-            raise ValueError(f"two loggers for {type_name}")
-        LOGGERS[type_name] = fn
-        return fn
-    return register
-
-
-class Context:
-    """What loggers share across messages: the DBC, the TF tree (child -> parent), whether a
-    topic's entities are static (/tf_static), the markers whose lifetime is running."""
-
-    def __init__(self, dbc=None):
-        self.dbc = dbc
-        self.parents: dict[str, str] = {}
-        self.frames_of: dict[str, str] = {}  # entity path -> the frame last declared for it
-        self.static = False  # set per sample by the viewer
-        self.t_ns = 0  # the sample's receive time, also set per sample
-        self.expiries: dict[str, int] = {}  # marker entity -> when its lifetime ends (ns, receive time)
-
-    def frame_path(self, frame: str) -> str:
-        """tf/<root>/.../<frame> as far as the tree is known (a cycle stops the walk)."""
-        chain = [frame]
-        while (parent := self.parents.get(chain[-1])) is not None and parent not in chain:
-            chain.append(parent)
-        return "tf/" + "/".join(reversed(chain))
-
-    def log(self, path: str, *archetypes, frame: str = "") -> None:
-        """rr.log, plus the entity's coordinate frame (header.frame_id) whenever it changes."""
-        if frame and self.frames_of.get(path) != frame:
-            self.frames_of[path] = frame
-            archetypes = (*archetypes, rr.CoordinateFrame(frame))
-        rr.log(path, *archetypes, static=self.static)
-
-    def pose(self, path: str, position, orientation, frame: str) -> None:
-        """A pose as a Transform3D: from its header's frame to a frame named after the entity,
-        in which the entity draws its axes (without a frame: relative to the entity's parent)."""
-        t = [position.x, position.y, position.z]
-        q = rr.Quaternion(xyzw=[orientation.x, orientation.y, orientation.z, orientation.w])
-        transform = rr.Transform3D(translation=t, quaternion=q, parent_frame=frame or None,
-                                   child_frame=path if frame else None)
-        rr.log(path, transform, rr.TransformAxes3D(0.5),
-               *([rr.CoordinateFrame(path)] if frame else []), static=self.static)
-
-    def scalar(self, path: str, value: float) -> None:
-        rr.log(path, rr.Scalars(float(value)))
-
-
-def require(condition: bool, what: str) -> None:
-    if not condition:
-        raise ValueError(what)
-
-
-from . import can, geometry, images, markers, points, scalars  # noqa: E402,F401 - they register their loggers
+__all__ = ["LOGGERS", "Context", "Logger", "logger", "require"]

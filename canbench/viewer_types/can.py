@@ -11,7 +11,7 @@ import rerun as rr
 
 from .. import wire
 from ..dbc import decode_signals
-from . import Context, logger
+from .registry import Context, logger
 
 
 def time_column(times_ns: list[int]) -> rr.TimeColumn:

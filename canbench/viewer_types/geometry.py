@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import rerun as rr
 
-from . import Context, logger
+from .registry import Context, logger
 from .scalars import vector_scalars
 
 

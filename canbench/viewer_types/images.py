@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from . import Context, logger, require
+from .registry import Context, logger, require
 
 # encoding -> (numpy element type, channels, Rerun colour model or None for a depth image, metres per unit)
 ENCODINGS: dict[str, tuple[str, int, str | None, float]] = {

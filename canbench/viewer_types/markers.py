@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from . import Context, logger
+from .registry import Context, logger
 
 ARROW, CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST, CUBE_LIST, SPHERE_LIST, POINTS, TEXT_VIEW_FACING, \
     MESH_RESOURCE, TRIANGLE_LIST, ARROW_STRIP = range(13)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from . import Context, logger, require
+from .registry import Context, logger, require
 
 # PointField datatype -> numpy element type (sensor_msgs/msg/PointField.msg)
 DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}

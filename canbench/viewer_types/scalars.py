@@ -4,7 +4,7 @@ from __future__ import annotations
 import rerun as rr
 
 from ..ros2_msgs import Point
-from . import Context, logger
+from .registry import Context, logger
 
 ZERO = Point()
 
