@@ -6,39 +6,14 @@ it), no canbench on PATH."""
 from __future__ import annotations
 
 import os
-import re
-import shutil
 import subprocess
-from pathlib import Path
 
 import pytest
+from readme_blocks import fresh_clone, path_without_canbench, readme_block
 
 pytestmark = pytest.mark.compose
 
-REPO = Path(__file__).resolve().parents[2]
 LINE_TIMEOUT_S = 300
-
-
-def readme_block(heading: str) -> list[str]:
-    section = (REPO / "README.md").read_text().split(f"\n## {heading}\n", 1)[1]
-    block = re.search(r"```sh\n(.*?)```", section, re.S)
-    assert block, f"README: no sh block under '## {heading}'"
-    return [line.split("#", 1)[0].strip() for line in block.group(1).splitlines() if line.split("#", 1)[0].strip()]
-
-
-def fresh_clone(tmp_path: Path) -> Path:
-    clone = tmp_path / "clone"
-    subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True, timeout=120)
-    changed = subprocess.run(["git", "ls-files", "-m", "-o", "--exclude-standard"], cwd=REPO, check=True,
-                             capture_output=True, text=True).stdout.split()
-    for name in changed:
-        if (REPO / name).is_file():
-            (clone / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(REPO / name, clone / name)
-        elif (clone / name).exists():
-            (clone / name).unlink()
-    shutil.copy(REPO / "scenarios" / "traces" / "powertrain-2s.log", clone / "drive.log")
-    return clone
 
 
 def test_scenario_writing_block_in_compose(tmp_path):
@@ -49,8 +24,7 @@ def test_scenario_writing_block_in_compose(tmp_path):
             pytest.fail(f"{image} does not exist although make built the images")
         pytest.skip("bench images not built (make images; BENCH_TAG names them)")
     clone = fresh_clone(tmp_path)
-    path = os.pathsep.join(d for d in os.environ["PATH"].split(os.pathsep) if not (Path(d) / "canbench").exists())
-    env = {**os.environ, "PATH": path, "BENCH_TAG": tag}
+    env = {**os.environ, "PATH": path_without_canbench(), "BENCH_TAG": tag}
     env.pop("VENV", None)
     out = ""
     for line in readme_block("Writing a scenario"):
