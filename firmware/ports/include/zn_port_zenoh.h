@@ -37,10 +37,14 @@ typedef struct {
 	uint8_t priority; /* 1 (real time) .. 7 (background), Zenoh's scale */
 	zn_congestion_t congestion;
 	uint8_t express; /* 1 = send at once, never batched by Zenoh */
+	uint8_t best_effort; /* 1 = best effort, 0 = reliable (Zenoh's default) */
 } zn_qos_t;
 
+/* source_time_ns: the sample's Zenoh timestamp (its publisher's HLC, or the
+ * first router's when the publisher has none) in ns since the Unix epoch;
+ * 0 when the sample carries no timestamp. */
 typedef void (*zn_sample_cb)(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
-			     void *ctx);
+			     uint64_t source_time_ns, void *ctx);
 /* Writes the reply into buf (at most cap bytes) and returns its length. */
 typedef size_t (*zn_query_cb)(char *buf, size_t cap, void *ctx);
 

@@ -234,6 +234,12 @@ size_t mock_zenoh_wait_puts(size_t n, int timeout_ms)
 int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
 		       size_t attachment_len)
 {
+	return mock_zenoh_deliver_at(key, payload, len, attachment, attachment_len, 0);
+}
+
+int mock_zenoh_deliver_at(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
+			  size_t attachment_len, uint64_t source_time_ns)
+{
 	zn_sample_cb cb = NULL;
 	void *ctx = NULL;
 	pthread_mutex_lock(&lock);
@@ -245,7 +251,7 @@ int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, cons
 	pthread_mutex_unlock(&lock);
 	if (!cb)
 		return -1;
-	cb(payload, len, attachment, attachment_len, ctx);
+	cb(payload, len, attachment, attachment_len, source_time_ns, ctx);
 	return 0;
 }
 

@@ -59,6 +59,9 @@ const struct mock_put *mock_zenoh_put(size_t i);
 /* Waits until at least n puts were made; returns the count (explicit readiness, no sleeps). */
 size_t mock_zenoh_wait_puts(size_t n, int timeout_ms);
 /* Delivers a sample to the subscriber on key, as the network would. */
+/* As mock_zenoh_deliver, with the sample's Zenoh timestamp (ns since the epoch, 0 = none). */
+int mock_zenoh_deliver_at(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
+			  size_t attachment_len, uint64_t source_time_ns);
 int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
 		       size_t attachment_len);
 int mock_zenoh_has_token(const char *key);

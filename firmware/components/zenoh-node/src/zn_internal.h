@@ -109,7 +109,7 @@ void zn_rx_publisher_thread(void *bus);
  * whole for the transmitter thread. zn_tx_close undeclares the subscriber and
  * returns once no callback is inside the queue any more. */
 void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
-		      void *bus);
+		      uint64_t source_time_ns, void *bus);
 void zn_tx_transmitter_thread(void *bus);
 void zn_tx_close(struct bus *b);
 

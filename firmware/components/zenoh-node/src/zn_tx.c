@@ -70,7 +70,8 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 	zn_mutex_unlock(b->tx_lock);
 }
 
-void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len, void *ctx)
+void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
+		      uint64_t source_time_ns, void *ctx)
 {
 	struct bus *b = ctx;
 	/* the gate: b lives in static storage, the queue and its lock only until zn_tx_close returns */

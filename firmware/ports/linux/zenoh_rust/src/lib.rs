@@ -11,11 +11,13 @@ use std::slice;
 use zenoh::bytes::ZBytes;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
-use zenoh::qos::{CongestionControl, Priority};
+use zenoh::qos::{CongestionControl, Priority, Reliability};
 use zenoh::query::Queryable;
 use zenoh::{Config, Session, Wait};
 
 const ERR: c_int = -1;
+/// zn_open's result for a configuration that cannot work (ZN_PORT_ERR_CONFIG).
+const ERR_CONFIG: c_int = -2;
 
 pub struct ZnSession(Session);
 pub struct ZnPublisher(Publisher<'static>);
@@ -30,6 +32,7 @@ pub struct ZnSessionConfig {
     listen: *const c_char,
     config_file: *const c_char,
     compression: c_int,
+    rx_message_max: usize,
 }
 
 #[repr(C)]
@@ -37,9 +40,10 @@ pub struct ZnQos {
     priority: u8,
     congestion: c_int,
     express: u8,
+    best_effort: u8,
 }
 
-type SampleCb = extern "C" fn(*const u8, usize, *const u8, usize, *mut c_void);
+type SampleCb = extern "C" fn(*const u8, usize, *const u8, usize, u64, *mut c_void);
 type QueryCb = extern "C" fn(*mut c_char, usize, *mut c_void) -> usize;
 
 /// The C side's context pointer; the C code synchronises its own state.
@@ -97,6 +101,11 @@ fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
     if cfg.compression != 0 {
         set("transport/unicast/compression/enabled", "true".into())?;
     }
+    // A fragmented message larger than the bridge can use is dropped by Zenoh's
+    // defragmenter instead of being reassembled whole (its default allows 1 GiB).
+    if cfg.rx_message_max > 0 {
+        set("transport/link/rx/max_message_size", cfg.rx_message_max.to_string())?;
+    }
     // One connection attempt per open: zn_open retries with its own logged
     // backoff, so a bridge started before its router waits for it, never exits.
     set("connect/timeout_ms", "0".into())?;
@@ -106,7 +115,30 @@ fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
         "connect/retry",
         "{period_init_ms: 250, period_max_ms: 2000, period_increase_factor: 2}".into(),
     )?;
+    check_tls_files(&config)?;
     Ok(config)
+}
+
+/// Zenoh reads TLS files only when a link opens, and a client retries its
+/// connection forever: an unreadable file would look like an absent router.
+/// Read them here, so a wrong path is a configuration error at once.
+fn check_tls_files(config: &Config) -> Result<(), String> {
+    for field in [
+        "root_ca_certificate",
+        "listen_private_key",
+        "listen_certificate",
+        "connect_private_key",
+        "connect_certificate",
+    ] {
+        let key = format!("transport/link/tls/{field}");
+        let Ok(json) = config.get_json(&key) else { continue };
+        // a set field is a JSON string ("/path"), an unset one null
+        let Some(path) = json.strip_prefix('"').and_then(|j| j.strip_suffix('"')) else { continue };
+        if let Err(e) = std::fs::File::open(&path) {
+            return Err(format!("{key} = {path}: {e}"));
+        }
+    }
+    Ok(())
 }
 
 #[no_mangle]
@@ -119,7 +151,7 @@ pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession)
         Ok(c) => c,
         Err(e) => {
             eprintln!("zenoh-node: invalid Zenoh configuration: {e}");
-            return ERR;
+            return ERR_CONFIG;
         }
     };
     let mut backoff = OPEN_RETRY_MIN;
@@ -174,6 +206,7 @@ pub extern "C" fn zn_declare_publisher(
         .congestion_control(congestion)
         .priority(priority(qos.priority))
         .express(qos.express != 0)
+        .reliability(if qos.best_effort != 0 { Reliability::BestEffort } else { Reliability::Reliable })
         .wait()
     {
         Ok(p) => {
@@ -229,12 +262,13 @@ pub extern "C" fn zn_declare_subscriber(
         .callback(move |sample| {
             let ctx = ctx;
             let payload = sample.payload().to_bytes();
+            let source_time_ns = sample.timestamp().map_or(0, |t| t.get_time().as_nanos());
             match sample.attachment() {
                 Some(att) => {
                     let att = att.to_bytes();
-                    cb(payload.as_ptr(), payload.len(), att.as_ptr(), att.len(), ctx.0)
+                    cb(payload.as_ptr(), payload.len(), att.as_ptr(), att.len(), source_time_ns, ctx.0)
                 }
-                None => cb(payload.as_ptr(), payload.len(), ptr::null(), 0, ctx.0),
+                None => cb(payload.as_ptr(), payload.len(), ptr::null(), 0, source_time_ns, ctx.0),
             }
         })
         .wait();
