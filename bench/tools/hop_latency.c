@@ -1,12 +1,19 @@
 /* hop_latency - one-hop latency of a CAN bus: a sender thread writes frames
- * carrying their send time (CLOCK_REALTIME ns); the reader takes the receive
- * timestamp the kernel put on the socket (SO_TIMESTAMPNS). Mode "socketpair"
- * measures the same over a plain unix socketpair: the floor any userspace bus
- * starts from, measured in the same run as the baseline.
+ * carrying their send time (CLOCK_REALTIME ns); the reader takes its own
+ * receipt time (CLOCK_REALTIME, right after recvmsg) and the frame's stamp
+ * (SO_TIMESTAMPNS). The stamp is taken once per frame when the frame enters
+ * the bus (kernel vcan, and the userspace hub when it takes the frame from the
+ * sender; a unix socket when it is sent), so it no longer shows the delivery:
+ * the hop is receipt - stamp. receipt - the send time in the frame is printed
+ * beside it (it also counts the sender's write). Mode "socketpair" measures
+ * the same over a plain unix socketpair: the floor any userspace bus starts
+ * from, measured in the same run as the baseline.
  *
  * Usage: hop_latency can <iface> <count> <frames_per_s>
  *        hop_latency socketpair - <count> <frames_per_s>
- * Prints one JSON object: count, received, p50/p90/p99/max in microseconds. */
+ * Prints one JSON object: count, received, p50/p90/p99/max of receipt - stamp
+ * and send_p50/p99/max of receipt - send time, in microseconds; "stamped": the
+ * frames that carried a stamp (one without: its send time stands in). */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <poll.h>
@@ -88,6 +95,12 @@ int main(int argc, char **argv)
 	setsockopt(rx_fd, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
 	setsockopt(rx_fd, SOL_SOCKET, SO_RCVBUF, &rcvbuf, sizeof(rcvbuf));
 	int64_t *lat = calloc((size_t)count, sizeof(*lat));
+	int64_t *from_send = calloc((size_t)count, sizeof(*from_send));
+	if (!lat || !from_send) {
+		perror("calloc");
+		return 1;
+	}
+	long stamped_frames = 0;
 	pthread_t tid;
 	pthread_create(&tid, NULL, sender, NULL);
 	long got = 0;
@@ -102,21 +115,30 @@ int main(int argc, char **argv)
 				     .msg_controllen = sizeof(control) };
 		if (recvmsg(rx_fd, &mh, 0) != sizeof(f))
 			continue;
-		int64_t sent, stamped = now_ns(CLOCK_REALTIME);
+		int64_t receipt = now_ns(CLOCK_REALTIME); /* first: nothing between recvmsg and the clock */
+		int64_t sent, stamp;
 		memcpy(&sent, f.data, sizeof(sent));
+		stamp = sent;
 		for (struct cmsghdr *c = CMSG_FIRSTHDR(&mh); c; c = CMSG_NXTHDR(&mh, c))
 			if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
 				struct timespec ts;
 				memcpy(&ts, CMSG_DATA(c), sizeof(ts));
-				stamped = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+				stamp = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+				stamped_frames++;
 			}
-		lat[got++] = stamped - sent;
+		from_send[got] = receipt - sent;
+		lat[got++] = receipt - stamp;
 	}
 	pthread_join(tid, NULL);
 	qsort(lat, (size_t)got, sizeof(*lat), cmp);
-#define PCT(p) (got ? lat[(long)((got - 1) * (p))] / 1000.0 : -1.0)
-	printf("{\"count\": %ld, \"received\": %ld, \"p50_us\": %.2f, \"p90_us\": %.2f, \"p99_us\": %.2f, "
-	       "\"max_us\": %.2f}\n",
-	       count, got, PCT(0.50), PCT(0.90), PCT(0.99), PCT(1.0));
+	qsort(from_send, (size_t)got, sizeof(*from_send), cmp);
+#define PCT(a, p) (got ? (a)[(long)((got - 1) * (p))] / 1000.0 : -1.0)
+	printf("{\"count\": %ld, \"received\": %ld, \"stamped\": %ld, \"p50_us\": %.2f, \"p90_us\": %.2f, "
+	       "\"p99_us\": %.2f, \"max_us\": %.2f, \"send_p50_us\": %.2f, \"send_p99_us\": %.2f, "
+	       "\"send_max_us\": %.2f}\n",
+	       count, got, stamped_frames, PCT(lat, 0.50), PCT(lat, 0.90), PCT(lat, 0.99), PCT(lat, 1.0),
+	       PCT(from_send, 0.50), PCT(from_send, 0.99), PCT(from_send, 1.0));
+	free(lat);
+	free(from_send);
 	return got == count ? 0 : 1;
 }
