@@ -11,6 +11,8 @@
 //! so whoever sees the token knows the subscription is in place. Stops when
 //! stdin reaches end of file (the orchestrator closes it), prints the sample
 //! count on stderr. Multicast scouting is off; the endpoint is explicit.
+//! --zenoh-config FILE: a Zenoh JSON5 config applied first (TLS, authentication: the
+//! bench's capture identity, docs/access-control.md), as the bridge's --zenoh-config.
 use std::fmt::Write as _;
 use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
@@ -26,15 +28,16 @@ struct Args {
     key: String,
     ready_token: Option<String>,
     out: String,
+    zenoh_config: Option<String>,
 }
 
 fn usage() -> ! {
-    eprintln!("usage: zn-capture --connect ENDPOINT [--mode client|peer] --key KEYEXPR [--ready-token KEY] --out FILE");
+    eprintln!("usage: zn-capture --connect ENDPOINT [--mode client|peer] --key KEYEXPR [--ready-token KEY] --out FILE [--zenoh-config FILE]");
     std::process::exit(2);
 }
 
 fn parse_args() -> Args {
-    let mut args = Args { connect: String::new(), mode: "client".into(), key: String::new(), ready_token: None, out: String::new() };
+    let mut args = Args { connect: String::new(), mode: "client".into(), key: String::new(), ready_token: None, out: String::new(), zenoh_config: None };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         let value = it.next().unwrap_or_else(|| usage());
@@ -44,6 +47,7 @@ fn parse_args() -> Args {
             "--key" => args.key = value,
             "--ready-token" => args.ready_token = Some(value),
             "--out" => args.out = value,
+            "--zenoh-config" => args.zenoh_config = Some(value),
             _ => usage(),
         }
     }
@@ -61,7 +65,13 @@ fn hex(out: &mut String, bytes: &[u8]) {
 
 fn main() {
     let args = parse_args();
-    let mut config = Config::default();
+    let mut config = match args.zenoh_config.as_deref() {
+        Some(path) if !path.is_empty() => Config::from_file(path).unwrap_or_else(|e| {
+            eprintln!("zn-capture: --zenoh-config {path}: {e}");
+            std::process::exit(2)
+        }),
+        _ => Config::default(),
+    };
     let set = |config: &mut Config, key: &str, value: String| {
         config.insert_json5(key, &value).unwrap_or_else(|e| {
             eprintln!("zn-capture: {key} = {value}: {e}");
