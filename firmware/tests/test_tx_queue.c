@@ -3,7 +3,11 @@
  * is refused whole and counted, a failed frame abandons the rest of its
  * command (counted), stop during a stalled batch returns and frees nothing in
  * use (run under ASan); and a frame the wire format cannot carry is skipped
- * without costing the rest of its batch. */
+ * without costing the rest of its batch. Waiting commands leave in CAN
+ * priority order (lowest arbitration id first, FIFO among equals); a command
+ * older than tx_max_age_ms is refused on arrival or when the transmitter takes
+ * it, never written (tx_rejected.stale), one without a source time written
+ * and counted (tx_unstamped). */
 #include <pthread.h>
 #include <string.h>
 #include <time.h>
@@ -12,6 +16,9 @@
 #include "zn_mock.h"
 #include "zn_node.h"
 #include "zn_wire.h"
+
+/* zn_internal.h (the component's, not its API): the order waiting commands leave in */
+uint32_t zn_tx_arbitration_key(const can_message_t *msg);
 
 #define WAIT_MS 5000
 #define FAST_MS 50 /* a callback that queues takes microseconds; one CAN timeout is 100 ms */
@@ -171,6 +178,140 @@ static void test_bad_frame_does_not_cost_its_batch(void)
 	zn_node_stop();
 }
 
+static int64_t realtime_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+/* One frame, id (extended when ext), data byte 0 = tag. */
+static size_t one_frame(uint8_t *wire, uint32_t id, int ext, uint8_t tag)
+{
+	can_message_t m = { .identifier = id, .extd = ext ? 1 : 0, .data_length_code = 1, .data = { tag } };
+	zn_wire_encode(&m, wire, 16);
+	return 16;
+}
+
+/* Several commands wait behind a stalled bus: they leave in arbitration order, FIFO among equals. */
+static void test_priority_order(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_stall("vcan0", MOCK_HOLD);
+	uint8_t w[16];
+	/* the first is taken at once (or, if not yet, is first anyway) and holds the bus */
+	static const struct {
+		uint32_t id;
+		int ext;
+	} sent[] = { { 0x050, 0 }, { 0x500, 0 }, { 0x100 << 18, 1 }, { 0x100, 0 }, { 0x200, 0 },
+		     { 0x100, 0 }, { 0x0FF, 0 }, { 0x100 << 18, 1 } };
+	for (uint8_t i = 0; i < sizeof(sent) / sizeof(sent[0]); i++)
+		CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, sent[i].id, sent[i].ext, i), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 8"));
+	mock_can_stall("vcan0", 0);
+	/* 0x050; 0x0FF; std 0x100 twice in arrival order; ext 0x100<<18 (same base id, IDE recessive) twice; 0x200; 0x500 */
+	static const uint8_t order[] = { 0, 6, 3, 5, 2, 7, 4, 1 };
+	CHECK(mock_can_wait_tx("vcan0", 8, WAIT_MS) == 8);
+	for (size_t i = 0; i < 8; i++) {
+		can_message_t m = mock_can_tx("vcan0", i);
+		if (m.data[0] != order[i])
+			fprintf(stderr, "frame %zu on the bus: command %u (id 0x%X), expected command %u\n", i, m.data[0],
+				(unsigned)m.identifier, order[i]);
+		CHECK(m.data[0] == order[i]);
+	}
+	zn_node_stop();
+}
+
+/* Arbitration keys: the bus's order (11-bit base id, then standard before extended, data before remote). */
+static void test_arbitration_key(void)
+{
+	can_message_t std_data = { .identifier = 0x100 }, std_rtr = { .identifier = 0x100, .rtr = 1 },
+		      ext_data = { .identifier = 0x100 << 18, .extd = 1 },
+		      ext_rtr = { .identifier = 0x100 << 18, .extd = 1, .rtr = 1 },
+		      ext_low = { .identifier = 0x0FF << 18 | 0x3FFFF, .extd = 1 }, std_next = { .identifier = 0x101 };
+	CHECK(zn_tx_arbitration_key(&ext_low) < zn_tx_arbitration_key(&std_data));
+	CHECK(zn_tx_arbitration_key(&std_data) < zn_tx_arbitration_key(&std_rtr));
+	CHECK(zn_tx_arbitration_key(&std_rtr) < zn_tx_arbitration_key(&ext_data));
+	CHECK(zn_tx_arbitration_key(&ext_data) < zn_tx_arbitration_key(&ext_rtr));
+	CHECK(zn_tx_arbitration_key(&ext_rtr) < zn_tx_arbitration_key(&std_next));
+}
+
+/* An attachment for one frame received at t_ns. */
+static size_t attachment_at(uint8_t *att, int64_t t_ns)
+{
+	zn_attachment_header(att, 1, 0);
+	zn_attachment_set_time(att, 0, t_ns);
+	return ZN_ATTACHMENT_SIZE(1);
+}
+
+/* The source time: the attachment's when there is one, else the Zenoh timestamp, else none. */
+static void test_stale_refused_on_arrival(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	cfg.tx_max_age_ms = 100;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	uint8_t w[16], att[ZN_ATTACHMENT_SIZE(1)];
+	int64_t now = realtime_ns(), old = now - 500 * 1000000LL;
+	size_t n = one_frame(w, 0x10, 0, 1);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, NULL, 0, (uint64_t)old) == 0); /* stale Zenoh time */
+	n = one_frame(w, 0x10, 0, 2);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, old), (uint64_t)now) == 0);
+	n = one_frame(w, 0x10, 0, 3); /* the attachment's time wins over a stale Zenoh time */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, realtime_ns()), (uint64_t)old) == 0);
+	n = one_frame(w, 0x10, 0, 4); /* fresh Zenoh time, no attachment */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, NULL, 0, (uint64_t)realtime_ns()) == 0);
+	n = one_frame(w, 0x10, 0, 5); /* an attachment time of 0 is none: the Zenoh time decides */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, 0), (uint64_t)old) == 0);
+	n = one_frame(w, 0x10, 0, 6); /* no time at all: written, counted */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, NULL, 0, 0) == 0);
+	CHECK(mock_can_wait_tx("vcan0", 3, WAIT_MS) == 3);
+	CHECK(stats_soon_has("\"tx_frames\": 3"));
+	CHECK(stats_soon_has("\"tx_unstamped\": 1"));
+	CHECK(stats_soon_has("\"stale\": 3}"));
+	CHECK(mock_can_tx_count("vcan0") == 3);
+	CHECK(mock_can_tx("vcan0", 0).data[0] == 3 && mock_can_tx("vcan0", 1).data[0] == 4 &&
+	      mock_can_tx("vcan0", 2).data[0] == 6);
+	zn_node_stop();
+
+	mock_reset(); /* tx_max_age_ms 0: off, the stale one is written */
+	cfg.tx_max_age_ms = 0;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	n = one_frame(w, 0x10, 0, 7);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, old), (uint64_t)old) == 0);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1);
+	CHECK(stats_soon_has("\"stale\": 0}"));
+	zn_node_stop();
+}
+
+/* A command fresh on arrival that waits behind a stalled bus past its deadline is never written. */
+static void test_stale_in_queue(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	cfg.tx_max_age_ms = 100;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_stall("vcan0", MOCK_HOLD);
+	uint8_t w[16];
+	int64_t t0 = realtime_ns();
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, one_frame(w, 0x10, 0, 1), NULL, 0, (uint64_t)t0) == 0);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, one_frame(w, 0x20, 0, 2), NULL, 0, (uint64_t)t0) == 0);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, one_frame(w, 0x30, 0, 3), NULL, 0, 0) == 0); /* unstamped */
+	CHECK(stats_soon_has("\"tx_samples\": 3"));
+	CHECK(stats_soon_has("\"stale\": 0}")); /* all three fresh on arrival */
+	/* the bus stays stalled until the queued commands are past their deadline (the aging under test) */
+	while (realtime_ns() < t0 + 150 * 1000000LL)
+		nanosleep(&(struct timespec){ .tv_nsec = 5000000 }, NULL);
+	mock_can_stall("vcan0", 0);
+	CHECK(stats_soon_has("\"stale\": 1}"));
+	CHECK(stats_soon_has("\"tx_frames\": 2"));
+	CHECK(mock_can_tx_count("vcan0") == 2); /* the one held on the bus, and the unstamped one */
+	CHECK(mock_can_tx("vcan0", 0).data[0] == 1 && mock_can_tx("vcan0", 1).data[0] == 3);
+	zn_node_stop();
+}
+
 /* Runs every test, or the one named by argv[1] (to run one against other code). */
 int main(int argc, char **argv)
 {
@@ -182,6 +323,10 @@ int main(int argc, char **argv)
 		{ "abandon", test_failed_frame_abandons_its_command },
 		{ "stop", test_stop_during_stalled_batch },
 		{ "bad_frame", test_bad_frame_does_not_cost_its_batch },
+		{ "priority", test_priority_order },
+		{ "arbitration_key", test_arbitration_key },
+		{ "stale_arrival", test_stale_refused_on_arrival },
+		{ "stale_queue", test_stale_in_queue },
 	};
 	for (size_t i = 0; i < sizeof(tests) / sizeof(tests[0]); i++)
 		if (argc < 2 || strcmp(argv[1], tests[i].name) == 0)

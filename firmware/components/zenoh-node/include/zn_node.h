@@ -52,6 +52,7 @@ typedef struct {
 	zn_qos_t rx_qos;		       /* CAN -> Zenoh (telemetry) */
 	uint32_t rx_queue_frames;	       /* frames buffered between CAN reader and publisher */
 	uint32_t tx_queue_frames;	       /* CONFIG_ZENOH_TX_QUEUE_FRAMES: command frames waiting for CAN */
+	uint32_t tx_max_age_ms; /* CONFIG_ZENOH_TX_MAX_AGE_MS: refuse commands older than this (0 = off) */
 	char zenoh_config_file[ZN_ENDPOINTS_MAX]; /* optional JSON5 (TLS, auth) */
 	bool compression;			  /* CONFIG_ZENOH_COMPRESSION: compress the Zenoh transport */
 	char ros2_topic[ZN_NAME_MAX]; /* CONFIG_ZENOH_ROS2_TOPIC: also publish can_msgs/msg/Frame here ("" = off) */

@@ -36,6 +36,9 @@ void zn_node_default_config(zn_node_config_t *cfg)
 	cfg->rx_qos = (zn_qos_t){ .priority = 5, .congestion = ZN_CONGESTION_BLOCK, .express = 0 };
 	cfg->rx_queue_frames = CONFIG_ZENOH_RX_QUEUE_FRAMES;
 	cfg->tx_queue_frames = CONFIG_ZENOH_TX_QUEUE_FRAMES;
+#ifdef CONFIG_ZENOH_TX_MAX_AGE_MS
+	cfg->tx_max_age_ms = CONFIG_ZENOH_TX_MAX_AGE_MS;
+#endif
 #ifdef CONFIG_ZENOH_COMPRESSION
 	cfg->compression = CONFIG_ZENOH_COMPRESSION;
 #endif
@@ -135,6 +138,8 @@ esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t er
 	if (cfg->tx_queue_frames < ZN_BATCH_MAX_FRAMES || cfg->tx_queue_frames > 65536)
 		BAD("tx queue %" PRIu32 " frames is not %d..65536 (it holds at least one largest command)",
 		    cfg->tx_queue_frames, ZN_BATCH_MAX_FRAMES);
+	if (cfg->tx_max_age_ms > 60000)
+		BAD("tx max age %" PRIu32 " ms is over 60000 ms (0 = off)", cfg->tx_max_age_ms);
 	if (cfg->bus_count < 1 || cfg->bus_count > ZN_MAX_BUSES)
 		BAD("%zu CAN buses: 1..%d supported", cfg->bus_count, ZN_MAX_BUSES);
 	if (!valid_key_chunk(cfg->node_name))

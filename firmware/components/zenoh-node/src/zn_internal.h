@@ -28,10 +28,21 @@ struct rx_entry {
 	uint64_t seq;
 };
 
-/* A frame waiting for the transmitter, with the number of the command it came in. */
+/* A frame waiting for the transmitter: one slot of the transmit queue's pool,
+ * chained to the next frame of its command (or of the free list). */
+#define ZN_TX_NONE UINT32_MAX
 struct tx_entry {
 	can_message_t msg;
-	uint32_t cmd;
+	uint32_t next;
+};
+
+/* A command waiting for the transmitter, in a binary heap ordered by the CAN
+ * arbitration key of its first frame (lowest first, as the bus arbitrates),
+ * then by arrival (FIFO among equals). */
+struct tx_cmd {
+	uint32_t key, order; /* arbitration key (zn_tx_arbitration_key); arrival number */
+	uint32_t first, count; /* its first slot in txq; its frames */
+	int64_t source_ns;     /* source time (ns since the epoch), 0 = none */
 };
 
 struct bus_counters {
@@ -40,6 +51,7 @@ struct bus_counters {
 	uint64_t tx_samples, tx_frames, can_tx_errors, tx_queue_full, tx_abandoned;
 	uint64_t tx_rejected[ZN_WIRE_REASONS];
 	uint64_t can_reopens;
+	uint64_t tx_rejected_stale, tx_unstamped; /* freshness (tx_max_age_ms): refused as stale; no source time */
 };
 
 struct bus {
@@ -64,12 +76,15 @@ struct bus {
 	uint32_t cap, head, len;
 	uint64_t next_seq;
 	uint8_t *payload, *attachment; /* the publisher's sample being built (batch_max_frames) */
-	/* tx queue: ring of tx_entry filled by the subscriber callback, drained by the
-	 * transmitter thread; guarded by tx_lock */
+	/* tx queue: a pool of tx_cap frame slots (free list from tx_free) and a heap
+	 * of the commands waiting (tx_heap, tx_waiting), filled by the subscriber
+	 * callback, drained by the transmitter thread; guarded by tx_lock. tx_len:
+	 * slots in use (waiting, or being written) */
 	zn_mutex_t *tx_lock;
 	zn_cond_t *tx_ready, *tx_idle;
 	struct tx_entry *txq;
-	uint32_t tx_cap, tx_head, tx_len, tx_cmd;
+	struct tx_cmd *tx_heap;
+	uint32_t tx_cap, tx_len, tx_free, tx_waiting, tx_order;
 	int tx_stop;
 	zn_thread_t *transmitter;
 	int cb_inflight, cb_closed; /* atomics: callbacks inside the gate; gate closed (zn_tx_close) */
@@ -112,6 +127,11 @@ void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachm
 		      uint64_t source_time_ns, void *bus);
 void zn_tx_transmitter_thread(void *bus);
 void zn_tx_close(struct bus *b);
+/* Allocates the transmit queue (cfg.tx_queue_frames slots and as many command places). */
+esp_err_t zn_tx_queue_init(struct bus *b, uint32_t frames);
+/* The frame's place in CAN arbitration: lower wins the bus (11-bit base id, then
+ * SRR/RTR, IDE, the 18 extension bits, RTR). */
+uint32_t zn_tx_arbitration_key(const can_message_t *msg);
 
 /* zn_stats.c */
 void zn_stats_monitor_thread(void *arg);

@@ -45,9 +45,7 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 	size_t batch_max = cfg->publish_period_ms ? cfg->batch_max_frames : 1;
 	b->payload = malloc(batch_max * ZN_WIRE_FRAME_SIZE);
 	b->attachment = malloc(ZN_ATTACHMENT_SIZE(batch_max));
-	b->tx_cap = cfg->tx_queue_frames;
-	b->txq = calloc(b->tx_cap, sizeof(*b->txq));
-	if (!b->payload || !b->attachment || !b->txq)
+	if (!b->payload || !b->attachment || zn_tx_queue_init(b, cfg->tx_queue_frames) != ESP_OK)
 		return ESP_ERR_NO_MEM;
 	ZN_TRY(zn_mutex_new(&b->lock));
 	ZN_TRY(zn_mutex_new(&b->can_lock));
@@ -107,6 +105,7 @@ static void release(int final_stats)
 		zn_can_close(b->can);
 		free(b->queue);
 		free(b->txq);
+		free(b->tx_heap);
 		free(b->payload);
 		free(b->attachment);
 		zn_cond_free(b->nonempty);

@@ -1,11 +1,19 @@
 /* zn_tx.c - Zenoh -> CAN for one bus. The subscriber callback runs on
  * Zenoh's thread and must never wait for the bus: it validates a command
  * whole and queues all of its frames, or refuses it whole (an invalid frame or
- * attachment: tx_rejected.<reason>; no room for every frame: tx_queue_full).
- * The transmitter thread drains the bounded queue onto the CAN port. When a
- * frame cannot be written (bus stalled past CAN_TRANSMIT_TIMEOUT_MS) it counts
+ * attachment: tx_rejected.<reason>; older than tx_max_age_ms: tx_rejected.stale;
+ * no room for every frame: tx_queue_full). The transmitter thread takes the
+ * waiting command of highest CAN priority (lowest arbitration key of its first
+ * frame, FIFO among equals), checks its age again (it may have gone stale
+ * behind a stalled bus) and writes its frames onto the CAN port. When a frame
+ * cannot be written (bus stalled past CAN_TRANSMIT_TIMEOUT_MS) it counts
  * can_tx_errors and abandons the rest of that command (tx_abandoned), so one
  * stalled command costs one timeout, not one per frame.
+ *
+ * A command's source time: its attachment's first frame time when it carries
+ * an attachment (and that time is not 0), else the sample's Zenoh timestamp,
+ * else none (accepted, counted tx_unstamped). Ages are CLOCK_REALTIME now minus
+ * the source time (docs/bridge.md, Freshness); a time ahead of now is age 0.
  *
  * Shutdown: zn_tx_close shuts a gate the callback passes on entry, then
  * undeclares the subscriber and waits until no callback is inside; a callback
@@ -14,12 +22,14 @@
  * the rest at the first failure. */
 #include <assert.h>
 #include <inttypes.h>
+#include <stdlib.h>
 
 #include "zn_internal.h"
 
 /* buffers sized for the target (docs/bridge.md, Limits): 24 bytes a queued frame on a
  * 32-bit core, and the largest command within what the Zenoh port lets in */
 static_assert(sizeof(struct tx_entry) <= 24, "a queued command frame");
+static_assert(sizeof(struct tx_cmd) <= 24, "a queued command");
 static_assert(ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE + ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES) + 1024 <=
 		      ZN_RX_MESSAGE_MAX,
 	      "a largest command and its key fit the Zenoh message cap");
@@ -34,7 +44,113 @@ static void refuse(struct bus *b, uint64_t *counter, const char *why, size_t len
 		       b->name, b->tx_key, why, len, frames);
 }
 
-static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t att_len)
+uint32_t zn_tx_arbitration_key(const can_message_t *msg)
+{
+	if (!msg->extd) /* base id, RTR, IDE = 0 */
+		return (msg->identifier & CAN_STD_ID_MASK) << 21 | (uint32_t)msg->rtr << 20;
+	uint32_t id = msg->identifier & CAN_EXTD_ID_MASK; /* base id (its top 11 bits), SRR = 1, IDE = 1, 18 bits, RTR */
+	return (id >> 18) << 21 | 1u << 20 | 1u << 19 | (id & 0x3FFFF) << 1 | (uint32_t)msg->rtr;
+}
+
+esp_err_t zn_tx_queue_init(struct bus *b, uint32_t frames)
+{
+	b->tx_cap = frames;
+	b->txq = calloc(frames, sizeof(*b->txq));
+	b->tx_heap = calloc(frames, sizeof(*b->tx_heap)); /* a command has at least one frame */
+	if (!b->txq || !b->tx_heap)
+		return ESP_ERR_NO_MEM;
+	for (uint32_t i = 0; i < frames; i++)
+		b->txq[i].next = i + 1 < frames ? i + 1 : ZN_TX_NONE;
+	b->tx_free = 0;
+	b->tx_len = b->tx_waiting = b->tx_order = 0;
+	return ESP_OK;
+}
+
+/* Does a wait before b in the heap? Lower key first; among equals the earlier arrival
+ * (orders wrap: waiting commands are fewer than 2^31 apart). */
+static int before(const struct tx_cmd *a, const struct tx_cmd *c)
+{
+	return a->key != c->key ? a->key < c->key : (int32_t)(a->order - c->order) < 0;
+}
+
+static void heap_push(struct bus *b, struct tx_cmd c) /* tx_lock held, room checked */
+{
+	uint32_t i = b->tx_waiting++;
+	while (i > 0 && before(&c, &b->tx_heap[(i - 1) / 2])) {
+		b->tx_heap[i] = b->tx_heap[(i - 1) / 2];
+		i = (i - 1) / 2;
+	}
+	b->tx_heap[i] = c;
+}
+
+static struct tx_cmd heap_pop(struct bus *b) /* tx_lock held, tx_waiting > 0 */
+{
+	struct tx_cmd top = b->tx_heap[0], last = b->tx_heap[--b->tx_waiting];
+	uint32_t i = 0, n = b->tx_waiting;
+	for (;;) {
+		uint32_t child = 2 * i + 1;
+		if (child >= n)
+			break;
+		if (child + 1 < n && before(&b->tx_heap[child + 1], &b->tx_heap[child]))
+			child++;
+		if (!before(&b->tx_heap[child], &last))
+			break;
+		b->tx_heap[i] = b->tx_heap[child];
+		i = child;
+	}
+	if (n > 0)
+		b->tx_heap[i] = last;
+	return top;
+}
+
+/* Returns the slots of a chain of n frames from slot to the free list (tx_lock held). */
+static void release(struct bus *b, uint32_t slot, uint32_t n)
+{
+	while (n-- > 0 && slot != ZN_TX_NONE) {
+		uint32_t next = b->txq[slot].next;
+		b->txq[slot].next = b->tx_free;
+		b->tx_free = slot;
+		b->tx_len--;
+		slot = next;
+	}
+}
+
+/* The command's source time (ns since the epoch, 0 = none): the attachment's first frame time wins
+ * over the sample's Zenoh timestamp, which the first router sets when the sender set none. */
+static int64_t source_time(const uint8_t *attachment, size_t att_len, uint64_t zenoh_ns)
+{
+	if (attachment && att_len >= ZN_ATTACHMENT_SIZE(1)) {
+		uint64_t t = 0;
+		for (int i = 7; i >= 0; i--)
+			t = t << 8 | attachment[ZN_ATTACHMENT_HEADER + i];
+		if (t && t <= INT64_MAX)
+			return (int64_t)t;
+	}
+	return zenoh_ns <= INT64_MAX ? (int64_t)zenoh_ns : 0;
+}
+
+/* Is a command of this source time older than the deadline? (0 = freshness off, or no time) */
+static int stale(int64_t source_ns, int64_t *age_ms)
+{
+	uint32_t max_age_ms = zn_node.cfg.tx_max_age_ms;
+	if (!max_age_ms || !source_ns)
+		return 0;
+	int64_t age = zn_realtime_ns() - source_ns;
+	*age_ms = age / 1000000;
+	return age > (int64_t)max_age_ms * 1000000;
+}
+
+static void refuse_stale(struct bus *b, int64_t age_ms, uint32_t frames, const char *where)
+{
+	if (COUNT(b->n.tx_rejected_stale) == 0)
+		zn_log("W",
+		       "%s: refused a stale command on %s %s (%" PRId64 " ms old > tx_max_age_ms %" PRIu32
+		       ", %" PRIu32 " frames); further refusals only counted (tx_rejected.stale)",
+		       b->name, b->tx_key, where, age_ms, zn_node.cfg.tx_max_age_ms, frames);
+}
+
+static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t att_len,
+		   uint64_t zenoh_ns)
 {
 	size_t count = 0;
 	COUNT(b->n.tx_samples);
@@ -45,6 +161,13 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 		rc = zn_attachment_check(attachment, att_len, count);
 	if (rc != ZN_WIRE_OK) {
 		refuse(b, &b->n.tx_rejected[-rc], zn_wire_reason(rc), len, len / ZN_WIRE_FRAME_SIZE);
+		return;
+	}
+	int64_t source_ns = source_time(attachment, att_len, zenoh_ns), age_ms = 0;
+	if (!source_ns)
+		COUNT(b->n.tx_unstamped);
+	if (stale(source_ns, &age_ms)) {
+		refuse_stale(b, age_ms, (uint32_t)count, "on arrival");
 		return;
 	}
 	zn_mutex_lock(b->tx_lock);
@@ -58,14 +181,23 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 			       b->name, queued, b->tx_cap, count);
 		return;
 	}
-	uint32_t cmd = ++b->tx_cmd;
+	struct tx_cmd c = { .order = b->tx_order++, .first = b->tx_free, .count = (uint32_t)count,
+			    .source_ns = source_ns };
+	uint32_t slot = b->tx_free;
 	for (size_t i = 0; i < count; i++) {
-		struct tx_entry *e = &b->txq[(b->tx_head + b->tx_len + i) % b->tx_cap];
+		struct tx_entry *e = &b->txq[slot];
 		size_t one;
 		zn_wire_decode(payload + i * ZN_WIRE_FRAME_SIZE, ZN_WIRE_FRAME_SIZE, &e->msg, 1, &one); /* valid: above */
-		e->cmd = cmd;
+		if (i == 0)
+			c.key = zn_tx_arbitration_key(&e->msg);
+		if (i + 1 == count) { /* the command's chain ends here; the free list goes on after it */
+			b->tx_free = e->next;
+			e->next = ZN_TX_NONE;
+		}
+		slot = e->next;
 	}
 	b->tx_len += (uint32_t)count;
+	heap_push(b, c);
 	zn_cond_signal(b->tx_ready);
 	zn_mutex_unlock(b->tx_lock);
 }
@@ -81,7 +213,7 @@ void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachm
 		__atomic_sub_fetch(&b->cb_inflight, 1, __ATOMIC_SEQ_CST);
 		return;
 	}
-	accept(b, payload, len, attachment, attachment_len);
+	accept(b, payload, len, attachment, attachment_len, source_time_ns);
 	zn_mutex_lock(b->tx_lock);
 	__atomic_sub_fetch(&b->cb_inflight, 1, __ATOMIC_SEQ_CST);
 	zn_cond_signal(b->tx_idle);
@@ -104,42 +236,63 @@ void zn_tx_close(struct bus *b)
 	zn_mutex_unlock(b->tx_lock);
 }
 
-void zn_tx_transmitter_thread(void *arg)
+/* Writes one command's frames; returns whether the bus took them all. The slots
+ * are the transmitter's until released (the callback only fills free ones). */
+static int transmit_command(struct bus *b, const struct tx_cmd *c)
 {
-	struct bus *b = arg;
-	uint32_t failed_cmd = 0; /* 0: none (commands are numbered from 1) */
-	for (;;) {
-		zn_mutex_lock(b->tx_lock);
-		while (b->tx_len == 0 && !b->tx_stop)
-			zn_cond_wait(b->tx_ready, b->tx_lock, -1);
-		if (b->tx_len == 0 || (b->tx_stop && failed_cmd)) {
-			uint32_t left = b->tx_len; /* stopping: the bus does not take them */
-			b->tx_len = 0;
-			zn_mutex_unlock(b->tx_lock);
-			COUNT_N(b->n.tx_abandoned, left);
-			return;
-		}
-		struct tx_entry e = b->txq[b->tx_head];
-		b->tx_head = (b->tx_head + 1) % b->tx_cap;
-		b->tx_len--;
-		zn_mutex_unlock(b->tx_lock);
-		if (e.cmd == failed_cmd) {
-			COUNT(b->n.tx_abandoned);
-			continue;
-		}
+	uint32_t slot = c->first;
+	for (uint32_t i = 0; i < c->count; i++) {
 		zn_mutex_lock(b->can_lock);
-		esp_err_t rc = zn_can_transmit(b->can, &e.msg, CAN_TRANSMIT_TIMEOUT_MS);
+		esp_err_t rc = zn_can_transmit(b->can, &b->txq[slot].msg, CAN_TRANSMIT_TIMEOUT_MS);
 		zn_mutex_unlock(b->can_lock);
+		zn_mutex_lock(b->tx_lock);
+		uint32_t next = b->txq[slot].next;
+		release(b, slot, 1);
+		if (rc != ESP_OK)
+			release(b, next, c->count - i - 1);
+		zn_mutex_unlock(b->tx_lock);
 		if (rc == ESP_OK) {
 			COUNT(b->n.tx_frames);
-			failed_cmd = 0;
+			slot = next;
 			continue;
 		}
-		failed_cmd = e.cmd;
+		COUNT_N(b->n.tx_abandoned, c->count - i - 1);
 		if (COUNT(b->n.can_tx_errors) == 0)
 			zn_log("W",
 			       "%s: CAN transmit failed (bus stalled or gone): the rest of that command is abandoned "
 			       "(tx_abandoned); further failures only counted",
 			       b->name);
+		return 0;
+	}
+	return 1;
+}
+
+void zn_tx_transmitter_thread(void *arg)
+{
+	struct bus *b = arg;
+	int failed = 0; /* the last frame written failed */
+	for (;;) {
+		zn_mutex_lock(b->tx_lock);
+		while (b->tx_waiting == 0 && !b->tx_stop)
+			zn_cond_wait(b->tx_ready, b->tx_lock, -1);
+		if (b->tx_waiting == 0 || (b->tx_stop && failed)) {
+			uint32_t left = b->tx_len; /* stopping: the bus does not take them */
+			b->tx_waiting = 0;
+			b->tx_len = 0;
+			zn_mutex_unlock(b->tx_lock);
+			COUNT_N(b->n.tx_abandoned, left);
+			return;
+		}
+		struct tx_cmd c = heap_pop(b);
+		int64_t age_ms = 0;
+		int too_old = stale(c.source_ns, &age_ms);
+		if (too_old)
+			release(b, c.first, c.count);
+		zn_mutex_unlock(b->tx_lock);
+		if (too_old) {
+			refuse_stale(b, age_ms, c.count, "in the transmit queue");
+			continue;
+		}
+		failed = !transmit_command(b, &c);
 	}
 }
