@@ -3,6 +3,7 @@
  * and without ZN_FAULT the wrapped bridge behaves as the plain one. */
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "check.h"
 #include "zn_mock.h"
@@ -57,9 +58,38 @@ static void test_drop_every_second_sample(void)
 	zn_node_stop();
 }
 
-int main(void)
+/* no-freshness: a command older than the deadline is written (the plain bridge refuses it). */
+static void test_no_freshness(void)
 {
-	setenv("ZN_FAULT", "drop:2", 1);
-	test_drop_every_second_sample();
+	mock_reset();
+	zn_node_config_t cfg = immediate();
+	cfg.tx_max_age_ms = 100;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	struct timespec ts;
+	clock_gettime(CLOCK_REALTIME, &ts);
+	int64_t old = ((int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec) - 2000000000LL;
+	uint8_t wire[16], att[ZN_ATTACHMENT_SIZE(1)];
+	can_message_t c = { .identifier = 0x321, .data_length_code = 1, .data = { 0x42 } };
+	zn_wire_encode(&c, wire, sizeof(wire));
+	zn_attachment_header(att, 1, 7);
+	zn_attachment_set_time(att, 0, old);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", wire, 16, att, sizeof(att), (uint64_t)old) == 0);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1 && mock_can_tx("vcan0", 0).data[0] == 0x42);
+	/* CAN -> Zenoh untouched */
+	inject(2);
+	CHECK(mock_zenoh_wait_puts(2, WAIT_MS) == 2);
+	zn_node_stop();
+}
+
+/* One fault per process (as in the bridge): argv[1] names it, none = drop:2. */
+int main(int argc, char **argv)
+{
+	if (argc > 1 && strcmp(argv[1], "no-freshness") == 0) {
+		setenv("ZN_FAULT", "no-freshness", 1);
+		test_no_freshness();
+	} else {
+		setenv("ZN_FAULT", "drop:2", 1);
+		test_drop_every_second_sample();
+	}
 	CHECK_DONE("test_faults");
 }

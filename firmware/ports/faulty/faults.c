@@ -1,7 +1,7 @@
 /* faults.c - seeded faults: a broken bridge on purpose, so the bench can prove
  * each of its checks fails for the fault it exists for. A port that wraps the
  * real ones (linker --wrap of zn_declare_publisher, zn_put,
- * zn_undeclare_publisher and zn_can_transmit), linked only into the
+ * zn_undeclare_publisher, zn_can_transmit and zn_declare_subscriber), linked only into the
  * zenoh-node-faulty test executable: the component itself has no fault code.
  *
  * ZN_FAULT=<kind>[:<n>] selects one, on the CAN -> Zenoh samples (the
@@ -12,7 +12,10 @@
  *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted
  * and on the Zenoh -> CAN path:
  *   txdrop:N never write every Nth command (reported written)
- *   txflip:N flip the lowest bit of data byte 0 of every Nth */
+ *   txflip:N flip the lowest bit of data byte 0 of every Nth
+ *   no-freshness  ignore the deadline (tx_max_age_ms): every command reaches the
+ *            component without its source times (attachment times and Zenoh
+ *            timestamp 0), so it is never refused as stale (counted unstamped) */
 #define _GNU_SOURCE
 #include <pthread.h>
 #include <stdio.h>
@@ -31,15 +34,18 @@ int __real_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 		  size_t attachment_len);
 void __real_zn_undeclare_publisher(zn_publisher_t *pub);
 esp_err_t __real_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
+int __real_zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 
 int __wrap_zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
 int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
 		  size_t attachment_len);
 void __wrap_zn_undeclare_publisher(zn_publisher_t *pub);
 esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
+int __wrap_zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 
-enum kind { NONE, DROP, DUP, SWAP, FLIP, DELAY, WRONGKEY, TXDROP, TXFLIP, KINDS };
-static const char *const names[KINDS] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey", "txdrop", "txflip" };
+enum kind { NONE, DROP, DUP, SWAP, FLIP, DELAY, WRONGKEY, TXDROP, TXFLIP, NOFRESH, KINDS };
+static const char *const names[KINDS] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey", "txdrop", "txflip",
+					  "no-freshness" };
 
 static struct {
 	pthread_once_t once;
@@ -74,7 +80,8 @@ static void parse_fault(void)
 			return;
 		}
 	}
-	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N or wrongkey; no fault seeded", spec);
+	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N, wrongkey or no-freshness; no fault seeded",
+	       spec);
 }
 
 static int is_rx_key(const char *key)
@@ -135,7 +142,7 @@ static void delay_until_due(const uint8_t *att, size_t att_len)
 int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
 {
 	struct faulty_pub *p = (struct faulty_pub *)pub;
-	if (!p->faulted || fault.kind == NONE || fault.kind == TXDROP || fault.kind == TXFLIP ||
+	if (!p->faulted || fault.kind == NONE || fault.kind == TXDROP || fault.kind == TXFLIP || fault.kind == NOFRESH ||
 	    len > sizeof(p->copy) || att_len > sizeof(p->held_att))
 		return __real_zn_put(p->real, payload, len, att, att_len);
 	int nth = ++p->count % fault.n == 0;
@@ -174,6 +181,7 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 	case NONE:
 	case TXDROP:
 	case TXFLIP:
+	case NOFRESH:
 	case KINDS:
 		break;
 	}
@@ -191,4 +199,37 @@ esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int ti
 	if (flipped.data_length_code > 0 && !flipped.rtr)
 		flipped.data[0] ^= 0x01;
 	return __real_zn_can_transmit(can, &flipped, timeout_ms);
+}
+
+/* no-freshness: the component's callback sees every command without a source time. The
+ * wrappers live in static storage: Zenoh may still start a callback while undeclaring. */
+static struct sub_wrap {
+	zn_sample_cb cb;
+	void *ctx;
+} subs[ZN_MAX_BUSES];
+static unsigned sub_count;
+
+static void stripped(const uint8_t *payload, size_t len, const uint8_t *att, size_t att_len, uint64_t source_time_ns,
+		     void *ctx)
+{
+	(void)source_time_ns;
+	struct sub_wrap *w = ctx;
+	uint8_t copy[ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES)];
+	if (!att || att_len < ZN_ATTACHMENT_HEADER || att_len > sizeof(copy)) {
+		w->cb(payload, len, att, att_len, 0, w->ctx); /* none to strip, or the component refuses it */
+		return;
+	}
+	memcpy(copy, att, att_len);
+	memset(copy + ZN_ATTACHMENT_HEADER, 0, att_len - ZN_ATTACHMENT_HEADER); /* the frame times */
+	w->cb(payload, len, copy, att_len, 0, w->ctx);
+}
+
+int __wrap_zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out)
+{
+	pthread_once(&fault.once, parse_fault);
+	unsigned i = __atomic_fetch_add(&sub_count, 1, __ATOMIC_RELAXED) % ZN_MAX_BUSES; /* a node's buses, reused per init */
+	if (fault.kind != NOFRESH)
+		return __real_zn_declare_subscriber(s, key, cb, ctx, out);
+	subs[i] = (struct sub_wrap){ cb, ctx };
+	return __real_zn_declare_subscriber(s, key, stripped, &subs[i], out);
 }
