@@ -11,7 +11,7 @@
 enum opt_id {
 	OPT_ENABLED = 256, OPT_ROUTER, OPT_LISTEN, OPT_MODE, OPT_PERIOD, OPT_BATCH, OPT_PREFIX, OPT_NAME, OPT_CAN,
 	OPT_ALLOW, OPT_DENY, OPT_RX_PRIORITY, OPT_RX_CONGESTION, OPT_RX_EXPRESS, OPT_RX_QUEUE, OPT_TX_QUEUE, OPT_ZENOH_CONFIG,
-	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_TX_MAX_AGE, OPT_HELP,
+	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_TX_MAX_AGE, OPT_RX_QOS, OPT_HELP,
 };
 
 struct option_spec {
@@ -41,6 +41,7 @@ static const struct option_spec specs[] = {
 	{ OPT_ROS2_TOPIC, "ros2-topic", "ZENOH_ROS2_TOPIC", "TOPIC", "also publish can_msgs/msg/Frame on this ROS 2 topic (default off)" },
 	{ OPT_ROS2_DOMAIN, "ros2-domain", "ZENOH_ROS2_DOMAIN", "N", "ROS_DOMAIN_ID of that topic (default 0)" },
 	{ OPT_TX_MAX_AGE, "tx-max-age-ms", "ZENOH_TX_MAX_AGE_MS", "MS", "refuse commands older than MS (source time: attachment, else Zenoh timestamp); 0 = off (default 0)" },
+	{ OPT_RX_QOS, "rx-qos", "ZENOH_RX_QOS", "TABLE", "CAN -> Zenoh QoS per id range, e.g. 0x000-0x0FF:realtime,express;0x100-0x7FF:data,best-effort (default none)" },
 	{ OPT_HELP, "help", NULL, NULL, "this help" },
 };
 #define NSPECS (sizeof(specs) / sizeof(specs[0]))
@@ -248,6 +249,8 @@ static int apply(zn_node_config_t *cfg, enum opt_id id, const char *value, const
 		return -1;
 	case OPT_ROS2_TOPIC:
 		return set_string(cfg->ros2_topic, sizeof(cfg->ros2_topic), value, source, err, err_len);
+	case OPT_RX_QOS:
+		return set_string(cfg->rx_qos_table, sizeof(cfg->rx_qos_table), value, source, err, err_len);
 	case OPT_TX_MAX_AGE:
 		if (parse_u32(value, &cfg->tx_max_age_ms) == 0)
 			return 0;

@@ -15,6 +15,7 @@ struct zn_session {
 };
 struct zn_publisher {
 	char key[256];
+	int index; /* into pubs_log */
 };
 struct zn_subscriber {
 	char key[256];
@@ -34,6 +35,8 @@ static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t put_made = PTHREAD_COND_INITIALIZER;
 static struct mock_put *puts_log;
 static size_t nputs;
+static struct mock_publisher pubs_log[MOCK_DECLS];
+static size_t npubs;
 static struct zn_subscriber *subs[MOCK_DECLS];
 static struct zn_token *tokens[MOCK_DECLS];
 static struct zn_queryable *queryables[MOCK_DECLS];
@@ -46,6 +49,7 @@ void mock_reset(void)
 {
 	pthread_mutex_lock(&lock);
 	nputs = 0;
+	npubs = 0;
 	if (!puts_log)
 		puts_log = calloc(MOCK_MAX_PUTS, sizeof(*puts_log));
 	memset(subs, 0, sizeof(subs));
@@ -94,9 +98,15 @@ int zn_open(const zn_session_config_t *config, zn_session_t **out)
 int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out)
 {
 	(void)s;
-	(void)qos;
 	*out = calloc(1, sizeof(**out));
 	strncpy((*out)->key, key, sizeof((*out)->key) - 1);
+	pthread_mutex_lock(&lock);
+	(*out)->index = (int)npubs;
+	if (npubs < MOCK_DECLS) {
+		memcpy(pubs_log[npubs].key, (*out)->key, sizeof(pubs_log[npubs].key));
+		pubs_log[npubs++].qos = *qos;
+	}
+	pthread_mutex_unlock(&lock);
 	return 0;
 }
 
@@ -113,6 +123,7 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 		if (attachment)
 			memcpy(p->attachment, attachment, attachment_len);
 		p->attachment_len = attachment_len;
+		p->publisher = pub->index;
 	}
 	pthread_cond_broadcast(&put_made);
 	pthread_mutex_unlock(&lock);
@@ -277,4 +288,17 @@ size_t mock_zenoh_query(const char *key, char *buf, size_t cap)
 		}
 	pthread_mutex_unlock(&lock);
 	return cb ? cb(buf, cap, ctx) : 0;
+}
+
+size_t mock_zenoh_publisher_count(void)
+{
+	pthread_mutex_lock(&lock);
+	size_t n = npubs;
+	pthread_mutex_unlock(&lock);
+	return n;
+}
+
+const struct mock_publisher *mock_zenoh_publisher(size_t i)
+{
+	return i < mock_zenoh_publisher_count() ? &pubs_log[i] : NULL;
 }

@@ -20,6 +20,13 @@ struct mock_put {
 	size_t len;
 	uint8_t attachment[MOCK_ATTACHMENT_MAX];
 	size_t attachment_len;
+	int publisher; /* which declared publisher made it (mock_zenoh_publisher) */
+};
+
+/* A publisher as declared: its key and QoS, in declaration order since mock_reset. */
+struct mock_publisher {
+	char key[256];
+	zn_qos_t qos;
 };
 
 void mock_reset(void);
@@ -65,6 +72,8 @@ int mock_zenoh_deliver_at(const char *key, const uint8_t *payload, size_t len, c
 int mock_zenoh_deliver(const char *key, const uint8_t *payload, size_t len, const uint8_t *attachment,
 		       size_t attachment_len);
 int mock_zenoh_has_token(const char *key);
+size_t mock_zenoh_publisher_count(void);
+const struct mock_publisher *mock_zenoh_publisher(size_t i);
 /* What the next zn_open returns (0, -1, ZN_PORT_ERR_CONFIG); mock_reset sets 0. */
 void mock_zenoh_open_result(int rc);
 /* The session configuration of the last zn_open. */

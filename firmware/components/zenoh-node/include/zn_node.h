@@ -23,6 +23,7 @@
 #define ZN_KEY_MAX 256
 #define ZN_ENDPOINTS_MAX 512
 #define ZN_BATCH_MAX_FRAMES 1024 /* 16 KiB payload */
+#define ZN_QOS_TABLE_MAX 512	 /* the text of the CAN -> Zenoh QoS table */
 /* The largest Zenoh message the node needs to receive: a command of
  * ZN_BATCH_MAX_FRAMES frames with its attachment, plus room for Zenoh's own
  * framing and the key. The Zenoh port caps reassembly at this, so no
@@ -50,6 +51,7 @@ typedef struct {
 	zn_id_range_t deny[ZN_MAX_ID_RANGES]; /* ... never these (deny wins) */
 	size_t deny_count;
 	zn_qos_t rx_qos;		       /* CAN -> Zenoh (telemetry) */
+	char rx_qos_table[ZN_QOS_TABLE_MAX]; /* CONFIG_ZENOH_RX_QOS: QoS per CAN id range over rx_qos (zn_qos.h; "" = none) */
 	uint32_t rx_queue_frames;	       /* frames buffered between CAN reader and publisher */
 	uint32_t tx_queue_frames;	       /* CONFIG_ZENOH_TX_QUEUE_FRAMES: command frames waiting for CAN */
 	uint32_t tx_max_age_ms; /* CONFIG_ZENOH_TX_MAX_AGE_MS: refuse commands older than this (0 = off) */

@@ -7,6 +7,7 @@
 
 #include "sdkconfig.h"
 #include "zn_node.h"
+#include "zn_qos.h"
 
 static void copy_str(char *dst, size_t cap, const char *src)
 {
@@ -34,6 +35,9 @@ void zn_node_default_config(zn_node_config_t *cfg)
 	/* not express: Zenoh may then put several samples in one write under load. Measured
 	 * (docs/benchmark.md): 4x the sustained rate at a third of the CPU per frame, same latency. */
 	cfg->rx_qos = (zn_qos_t){ .priority = 5, .congestion = ZN_CONGESTION_BLOCK, .express = 0 };
+#ifdef CONFIG_ZENOH_RX_QOS
+	copy_str(cfg->rx_qos_table, sizeof(cfg->rx_qos_table), CONFIG_ZENOH_RX_QOS);
+#endif
 	cfg->rx_queue_frames = CONFIG_ZENOH_RX_QUEUE_FRAMES;
 	cfg->tx_queue_frames = CONFIG_ZENOH_TX_QUEUE_FRAMES;
 #ifdef CONFIG_ZENOH_TX_MAX_AGE_MS
@@ -167,6 +171,9 @@ esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t er
 		BAD("ROS 2 domain %" PRIu32 " is not 0..232", cfg->ros2_domain);
 	if (cfg->rx_qos.priority < 1 || cfg->rx_qos.priority > 7)
 		BAD("priority %u is not 1 (real time) .. 7 (background)", cfg->rx_qos.priority);
+	zn_qos_table_t qos;
+	if (zn_qos_parse(cfg->rx_qos_table, &cfg->rx_qos, &qos, err, err_len) != 0)
+		return ESP_ERR_INVALID_ARG;
 	const zn_id_range_t *lists[2] = { cfg->allow, cfg->deny };
 	size_t counts[2] = { cfg->allow_count, cfg->deny_count };
 	for (int l = 0; l < 2; l++)

@@ -8,6 +8,7 @@
 #include "zn_node.h"
 #include "zn_port_can.h"
 #include "zn_port_os.h"
+#include "zn_qos.h"
 #include "zn_wire.h"
 
 #define COUNT(field) __atomic_fetch_add(&(field), 1, __ATOMIC_RELAXED)
@@ -60,7 +61,7 @@ struct bus {
 	char rx_key[ZN_KEY_MAX], tx_key[ZN_KEY_MAX], token_key[ZN_KEY_MAX];
 	zn_can_t *can;
 	zn_mutex_t *can_lock; /* the reader reopens the port; the transmitter transmits on it */
-	zn_publisher_t *pub;
+	zn_publisher_t *pub[ZN_MAX_QOS_CLASSES]; /* CAN -> Zenoh, one per QoS class of qos, all on rx_key */
 	zn_subscriber_t *sub;
 	zn_token_t *token;
 	/* ROS 2 output (cfg.ros2_topic): can_msgs/msg/Frame on the rmw_zenoh data key */
@@ -69,11 +70,17 @@ struct bus {
 	zn_token_t *ros_token;
 	uint64_t ros_seq;
 	zn_thread_t *reader, *publisher;
-	/* rx queue: ring of rx_entry, guarded by lock */
+	/* rx queues (ring), guarded by lock */
 	zn_mutex_t *lock;
 	zn_cond_t *nonempty;
-	struct rx_entry *queue;
-	uint32_t cap, head, len;
+	/* one ring of rx_entry per QoS class (cap each); queued: frames in all of them */
+	struct rx_ring {
+		struct rx_entry *queue;
+		uint32_t cap, head, len;
+		uint64_t published_frames, drops; /* counters of this class */
+	} ring[ZN_MAX_QOS_CLASSES];
+	uint32_t queued;
+	zn_qos_table_t qos; /* cfg.rx_qos_table over cfg.rx_qos */
 	uint64_t next_seq;
 	uint8_t *payload, *attachment; /* the publisher's sample being built (batch_max_frames) */
 	/* tx queue: a pool of tx_cap frame slots (free list from tx_free) and a heap
@@ -119,6 +126,12 @@ int zn_stop_wait(int timeout_ms);
 /* zn_rx.c: the CAN reader and the publisher of one bus */
 void zn_rx_reader_thread(void *bus);
 void zn_rx_publisher_thread(void *bus);
+/* The QoS table parsed (validated before), a queue per class allocated; their publishers
+ * declared; undeclared; the queues freed (each safe on what init left NULL). */
+esp_err_t zn_rx_queue_init(struct bus *b);
+int zn_rx_declare(struct bus *b);
+void zn_rx_undeclare(struct bus *b);
+void zn_rx_queue_free(struct bus *b);
 
 /* zn_tx.c: the subscriber callback of one bus's tx key, queueing commands
  * whole for the transmitter thread. zn_tx_close undeclares the subscriber and

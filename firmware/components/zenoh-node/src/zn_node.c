@@ -8,7 +8,7 @@
 
 #include "zn_internal.h"
 
-#define STATS_JSON_MAX 8192
+#define STATS_JSON_MAX 16384 /* the stats queryable's reply (Linux port: 16 KiB): 8 buses of 8 QoS classes */
 
 struct node zn_node;
 const char *const zn_mode_names[3] = { "client", "peer", "router" };
@@ -37,10 +37,7 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 	}
 	snprintf(b->token_key, sizeof(b->token_key), "%s/bridges/%s/%s/%s", cfg->key_prefix, cfg->node_name, b->name,
 		 zn_mode_names[cfg->mode]);
-	b->cap = cfg->rx_queue_frames;
-	b->queue = calloc(b->cap, sizeof(*b->queue));
-	if (!b->queue)
-		return ESP_ERR_NO_MEM;
+	ZN_TRY(zn_rx_queue_init(b));
 	/* the sample the publisher builds: one frame in immediate mode, else a batch */
 	size_t batch_max = cfg->publish_period_ms ? cfg->batch_max_frames : 1;
 	b->payload = malloc(batch_max * ZN_WIRE_FRAME_SIZE);
@@ -57,7 +54,7 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 		zn_log("E", "cannot open CAN bus %s", b->name);
 		return ESP_FAIL;
 	}
-	if (zn_declare_publisher(zn_node.session, b->rx_key, &cfg->rx_qos, &b->pub) != 0 ||
+	if (zn_rx_declare(b) != 0 ||
 	    zn_declare_subscriber(zn_node.session, b->tx_key, zn_tx_on_command, b, &b->sub) != 0) {
 		zn_log("E", "cannot declare %s / %s", b->rx_key, b->tx_key);
 		return ESP_FAIL;
@@ -90,7 +87,7 @@ static void release(int final_stats)
 	withdraw();
 	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
-		zn_undeclare_publisher(b->pub);
+		zn_rx_undeclare(b);
 		if (b->ros_pub)
 			zn_undeclare_publisher(b->ros_pub);
 	}
@@ -103,7 +100,7 @@ static void release(int final_stats)
 	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
 		zn_can_close(b->can);
-		free(b->queue);
+		zn_rx_queue_free(b);
 		free(b->txq);
 		free(b->tx_heap);
 		free(b->payload);

@@ -46,7 +46,16 @@ size_t zn_node_stats_json(char *buf, size_t cap)
 			off = append(buf, cap, off, "%s\"%s\": %" PRIu64, r > 1 ? ", " : "",
 				     zn_wire_reason((zn_wire_result_t)-r), READ(b->n.tx_rejected[r]));
 		off = append(buf, cap, off, ", \"stale\": %" PRIu64, READ(b->n.tx_rejected_stale));
-		off = append(buf, cap, off, "}}");
+		off = append(buf, cap, off, "}");
+		/* a QoS table: each class's own count (the totals above hold all classes) */
+		for (size_t c = 0; b->qos.class_count > 1 && c < b->qos.class_count; c++) {
+			char qos[64];
+			zn_qos_describe(&b->qos.classes[c], qos, sizeof(qos));
+			off = append(buf, cap, off, "%s{\"qos\": \"%s\", \"published_frames\": %" PRIu64 ", \"rx_queue_drops\": %" PRIu64 "}%s",
+				     c ? ", " : ", \"rx_classes\": [", qos, READ(b->ring[c].published_frames),
+				     READ(b->ring[c].drops), c + 1 == b->qos.class_count ? "]" : "");
+		}
+		off = append(buf, cap, off, "}");
 	}
 	off = append(buf, cap, off, "]}");
 	if (off >= cap && cap) {
