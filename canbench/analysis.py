@@ -8,7 +8,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import oracle, wire
+from . import oracle, signals, wire
 from .capture import iter_zenoh_capture
 from .faults import disruptive
 from .runkeys import rx_key, tx_key
@@ -145,6 +145,8 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         "faults": faults,
         "verdicts": {},
     }
+    if scenario.signal_gates:  # per gated signal, side and bus: count, min, max, violations
+        result.metrics["signals"] = signals.evaluate(result).summary()
     write_metrics(result)
     return result
 

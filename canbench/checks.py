@@ -8,8 +8,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import wraps
 
-from . import validity
+from . import signals, validity, wire
 from .analysis import RunResult
+from .dbc import cycle_time_ms, load_dbc
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import describe
 
@@ -180,11 +181,23 @@ def cycle_time(result: RunResult) -> list[str] | None:
     explicit = {int(k, 16): v for k, v in gate.get("ids", {}).items()}
     problems = []
     for b in result.buses:
+        from_dbc = _dbc_cycles(result, b.bus) if gate.get("from_dbc") else None
         for ident, sides in b.cycle_times.items():
             can, zen = sides["can"], sides["zenoh"]
             if can["count"] < gate.get("min_frames", 5):
                 continue
-            expected = explicit.get(int(ident, 16), can["cycle_p50_ms"])
+            if from_dbc is not None:  # the database's cycle, judged on the bus too (a wrong sender)
+                if int(ident, 16) not in explicit and ident not in from_dbc:
+                    continue  # not a cyclic message of the DBC: no cycle to expect
+                cycle, message = from_dbc.get(ident, (None, ""))
+                expected = explicit.get(int(ident, 16), cycle)
+                name = f" ({message})" if message else ""
+                if tolerance is not None and can["cycle_p50_ms"] is not None and \
+                        abs(can["cycle_p50_ms"] - expected) > expected * tolerance / 100:
+                    problems.append(f"{b.bus} id {ident}{name}: median cycle {can['cycle_p50_ms']:.2f} ms on the bus, "
+                                    f"the DBC says {expected:.2f} ms +-{tolerance}%")
+            else:
+                expected = explicit.get(int(ident, 16), can["cycle_p50_ms"])
             if not zen:
                 continue  # nothing of this id arrived: integrity reports that
             if zen["count"] < 2:
@@ -197,6 +210,41 @@ def cycle_time(result: RunResult) -> list[str] | None:
                 problems.append(f"{b.bus} id {ident}: a gap of {zen['cycle_max_ms']:.2f} ms on Zenoh, more than "
                                 f"{factor} x {expected:.2f} ms")
     return problems
+
+
+def _dbc_cycles(result: RunResult, bus: str) -> dict:
+    """id -> (GenMsgCycleTime in ms, message name) of the bus's DBC's cyclic messages."""
+    path = result.scenario.bus_dbcs.get(bus)
+    out: dict[str, tuple[float, str]] = {}
+    for m in (load_dbc(path).messages if path else []):
+        cycle = cycle_time_ms(m)
+        if cycle is not None:
+            out[wire.id_hex(m.frame_id, m.is_extended_frame)] = (cycle, m.name)
+    return out
+
+
+def signals_can(result: RunResult) -> list[str] | None:
+    """Every gated signal (expect.signals) on the bus, decoded with the bus's DBC, met its
+    expectation: what the ECUs sent is what the scenario says they send."""
+    if not getattr(result.scenario, "signal_gates", ()):
+        return None
+    return signals.evaluate(result).problems("can")
+
+
+def signals_zenoh(result: RunResult) -> list[str] | None:
+    """Every gated signal decoded from the bridge's samples met its expectation: a bridge that
+    corrupts a signal fails here, naming the signal, the sample and the bus frame it was."""
+    if not getattr(result.scenario, "signal_gates", ()):
+        return None
+    return signals.evaluate(result).problems("zenoh")
+
+
+def responses(result: RunResult) -> list[str] | None:
+    """Each stimulus (expect.responses: a command put, or a bus signal meeting a condition) got
+    its response within within_ms, once where asked, as often as count says (canbench.responses)."""
+    if not _expect(result, "responses"):
+        return None
+    return [p for r in (result.metrics.get("responses") or {}).values() for p in r["problems"]]
 
 
 def latency_regression(result: RunResult) -> list[str] | None:
@@ -349,6 +397,9 @@ _BRIDGE_CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "round_trip": round_trip,
     "latency_round_trip": latency_round_trip,
     "cycle_time": cycle_time,
+    "signals_can": signals_can,
+    "signals_zenoh": signals_zenoh,
+    "responses": responses,
     "latency_regression": latency_regression,
     "faults_injected": faults_injected,
     "recovery": recovery,

@@ -1,26 +1,51 @@
-"""DBC files (cantools): loading one, and a frame's signals as numbers, for the recording's
-/signals channels and the viewer."""
+"""DBC files (cantools): loading one (cached per file and mtime, so a scenario's buses and its
+checks share one database), a frame's signals as numbers (the recording's /signals channels,
+the viewer, the signal expectations), and a message's database cycle time and send type."""
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 
 import cantools
 
 
+@lru_cache(maxsize=16)
+def _load(path: str, mtime_ns: int):
+    return cantools.database.load_file(path)
+
+
 def load_dbc(path: Path | None):
-    return cantools.database.load_file(str(path)) if path else None
+    """The cantools database of a DBC file (None for None); cantools' own error on a bad file."""
+    return _load(str(path), Path(path).stat().st_mtime_ns) if path else None
 
 
-def decode_signals(dbc, frame) -> tuple[str, dict] | None:
-    """(message name, numeric signals) of a frame the DBC describes, else None."""
+def message_of(dbc, frame):
+    """The DBC's message of a frame (id and 11/29-bit as the DBC has them), else None."""
     try:
         message = dbc.get_message_by_frame_id(frame.can_id)
     except KeyError:
         return None
-    if message.is_extended_frame != frame.extended:
+    return message if message.is_extended_frame == frame.extended else None
+
+
+def decode_signals(dbc, frame) -> tuple[str, dict] | None:
+    """(message name, numeric signals) of a frame the DBC describes, else None."""
+    message = message_of(dbc, frame)
+    if message is None:
         return None
     try:
         decoded = message.decode(frame.data, decode_choices=False)
     except Exception:  # a frame the DBC does not describe correctly is still recorded raw
         return None
     return message.name, {k: float(v) for k, v in decoded.items() if isinstance(v, int | float)}
+
+
+def cycle_time_ms(message) -> float | None:
+    """The message's GenMsgCycleTime (ms) when the DBC gives one above 0 and its send type
+    (GenMsgSendType, where the DBC has it) is a cyclic one; else None (event-driven, unknown)."""
+    if not message.cycle_time or message.cycle_time <= 0:
+        return None
+    send_type = message.send_type
+    if send_type is not None and "cyclic" not in str(send_type).lower():
+        return None
+    return float(message.cycle_time)

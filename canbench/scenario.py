@@ -131,6 +131,8 @@ class Scenario:
     consumer: str = "router"
     dbc: Path | None = None
     faults: list[Fault] = field(default_factory=list)
+    bus_dbcs: dict[str, Path] = field(default_factory=dict)  # bus -> its DBC (buses[].dbc, else dbc)
+    signal_gates: tuple = ()  # expect.signals, checked against the DBCs (canbench.signals.Gate)
 
     @property
     def bus_names(self) -> list[str]:
@@ -171,6 +173,8 @@ def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
             # point at the unknown key itself, not at the mapping that holds it
             allowed = set(error.schema.get("properties", {}))
             line_path += [k for k in error.instance if k not in allowed][:1]
+        if "propertyNames" in error.schema_path and isinstance(error.instance, str):
+            line_path.append(error.instance)  # the key whose name is wrong
         problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}"))
     return problems
 
@@ -303,7 +307,41 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
         if not shown.is_file():
             fail(["dbc"], f"no such file {shown}")
         dbc = shown.resolve()
+    bus_dbcs, gates = _signal_parts(path, doc, dbc, fail)
     if problems:
         return None
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
-                    bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc, faults)
+                    bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc, faults, bus_dbcs, gates)
+
+
+def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[str, Path], tuple]:
+    """Per bus its DBC (buses[].dbc, relative to the scenario, else the top-level dbc), each
+    loaded with cantools here so a DBC it cannot read is a problem at its line; then
+    expect.signals and cycle_time.from_dbc against them (canbench.signals)."""
+    from . import signals
+    from .dbc import load_dbc
+    bus_dbcs: dict[str, Path] = {}
+    where_of: dict[Path, list] = {}
+    if dbc is not None and dbc.is_file():
+        where_of[dbc] = ["dbc"]
+    for i, spec in enumerate(doc.get("buses", []) or []):
+        if not isinstance(spec, dict) or "name" not in spec:
+            continue
+        if isinstance(spec.get("dbc"), str):
+            shown = path.parent / spec["dbc"]
+            if not shown.is_file():
+                fail(["buses", i, "dbc"], f"no such file {shown}")
+                continue
+            bus_dbcs[spec["name"]] = shown.resolve()
+            where_of.setdefault(shown.resolve(), ["buses", i, "dbc"])
+        elif dbc is not None and dbc.is_file():
+            bus_dbcs[spec["name"]] = dbc
+    for file, where in where_of.items():
+        try:
+            load_dbc(file)
+        except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
+            fail(where, f"cannot load {file.name} as a DBC (cantools): {str(e).splitlines()[0]}")
+    cycle = (doc.get("expect") or {}).get("cycle_time") if isinstance(doc.get("expect"), dict) else None
+    if isinstance(cycle, dict) and cycle.get("from_dbc") and not bus_dbcs:
+        fail(["expect", "cycle_time", "from_dbc"], "needs a DBC: give the scenario a dbc, or a bus (buses[].dbc)")
+    return bus_dbcs, signals.gates(doc, bus_dbcs, fail)

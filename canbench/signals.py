@@ -1,0 +1,387 @@
+"""Signal expectations (`expect.signals` of a scenario): per `Message.Signal` of a bus's DBC,
+`range`, `equals`, `one_of` (numbers or the DBC's value-table names), `max_rate` (change per
+second), `present` (seen at least N times), judged on the CAN side (the bus capture) and on the
+Zenoh side (the frames of the bridge's samples), each decoded by cantools as the DBC says
+(multiplexed signals only where their multiplexer selects them; signed, float and scaled values
+as cantools returns them).
+
+The evaluator is one streaming pass per side and bus: frames are fed in order and each gated
+signal keeps running state only (count, min, max, the last value for the rate), at most
+MAX_VIOLATIONS described violations (the rest counted), and a series for the report thinned to
+at most PLOT_POINTS points (every other point dropped when full, so its step doubles), so an
+hour of traffic takes the memory of a second of it.
+
+Validation (gates): a name the bus's DBC lacks, a value-table name the signal lacks, or an
+expectation on a bus without a DBC is a scenario problem at its file:line."""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from . import wire
+from .dbc import load_dbc, message_of
+
+if TYPE_CHECKING:
+    from .analysis import RunResult
+    from .oracle import Observed
+
+MAX_VIOLATIONS = 20  # described per signal and side; the rest are counted
+PLOT_POINTS = 2000   # per signal and side, for report.html
+MARKS = 200          # violations marked in the report per signal and side
+SIDES = ("can", "zenoh")
+
+
+@dataclass(frozen=True)
+class Gate:
+    """One `Message.Signal` expectation, its values already scaled as cantools decodes them."""
+    key: str                      # Message.Signal
+    message: str
+    signal: str
+    buses: tuple[str, ...]        # the buses it is judged on
+    unit: str = ""
+    range: tuple[float, float] | None = None
+    equals: float | None = None
+    one_of: tuple[float, ...] | None = None
+    max_rate: float | None = None  # unit per second
+    present: int | None = None
+    names: dict[float, str] = field(default_factory=dict)  # value-table names of the values above
+
+    def show(self, value: float) -> str:
+        """A value as a user reads it: the number, its unit, and its value-table name."""
+        text = f"{_num(value)}{' ' + self.unit if self.unit else ''}"
+        name = self._name(value)
+        return f"{text} ({name})" if name else text
+
+    def _name(self, value: float) -> str | None:
+        return next((n for v, n in self.names.items() if math.isclose(v, value, rel_tol=1e-9, abs_tol=1e-9)), None)
+
+    def limits(self) -> str:
+        parts = []
+        if self.range:
+            parts.append(f"[{_num(self.range[0])}, {_num(self.range[1])}]")
+        if self.equals is not None:
+            parts.append(f"= {self._name(self.equals) or _num(self.equals)}")
+        if self.one_of is not None:
+            parts.append("one of [" + ", ".join(self._name(v) or _num(v) for v in self.one_of) + "]")
+        if self.max_rate is not None:
+            parts.append(f"rate <= {_num(self.max_rate)}{' ' + self.unit if self.unit else ''}/s")
+        if self.present is not None:
+            parts.append(f"seen >= {self.present}")
+        return ", ".join(parts)
+
+
+def _num(v: float) -> str:
+    return f"{v:.6g}"
+
+
+def _close(a: float, b: float) -> bool:
+    return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9)
+
+
+# ---- validation: the scenario's expect.signals against the buses' DBCs ----
+
+def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]) -> tuple[Gate, ...]:
+    """The scenario's signal gates; every problem passed to fail(where, message) (where: the
+    path into the document, so the caller can name its line). DBCs that did not load are
+    missing from bus_dbcs' loadable ones and reported by the caller."""
+    specs = ((doc.get("expect") or {}).get("signals") or {}) if isinstance(doc.get("expect"), dict) else {}
+    if not isinstance(specs, dict):
+        return ()
+    buses = [b["name"] for b in doc.get("buses", []) if isinstance(b, dict) and "name" in b]
+    dbs = {}
+    for bus in buses:
+        if bus in bus_dbcs:
+            try:
+                dbs[bus] = load_dbc(bus_dbcs[bus])
+            except Exception:  # noqa: BLE001 - the caller reports the DBC itself
+                continue
+    out = []
+    for key, spec in specs.items():
+        where = ["expect", "signals", key]
+        if not isinstance(spec, dict) or not isinstance(key, str) or key.count(".") != 1:
+            continue  # the schema refused it
+        message_name, signal_name = key.split(".")
+        wanted = spec.get("buses")
+        if isinstance(wanted, list):
+            for i, bus in enumerate(wanted):
+                if bus not in buses:
+                    fail([*where, "buses", i], f"'{bus}' is not one of the buses {sorted(buses)}")
+            candidates = [b for b in wanted if b in buses]
+        else:
+            candidates = buses
+        with_dbc = [b for b in candidates if b in bus_dbcs]
+        if not with_dbc:
+            fail(where, "needs a DBC: give the scenario a dbc, or the bus (buses[].dbc)")
+            continue
+        on = [b for b in with_dbc if b in dbs and _message(dbs[b], message_name) is not None]
+        if not on:
+            if all(b in dbs for b in with_dbc):  # else the DBC did not load: reported by the caller
+                names = sorted({m.name for b in with_dbc for m in dbs[b].messages})
+                fail(where, f"no message {message_name} in the DBC of {', '.join(with_dbc)} "
+                     f"({_listing(names)})")
+            continue
+        if isinstance(wanted, list):
+            for b in with_dbc:
+                if b not in on:
+                    fail([*where, "buses"], f"the DBC of {b} has no message {message_name}")
+        message = _message(dbs[on[0]], message_name)
+        assert message is not None
+        signal = next((s for s in message.signals if s.name == signal_name), None)
+        if signal is None:
+            fail(where, f"message {message_name} has no signal {signal_name} "
+                 f"({_listing([s.name for s in message.signals])})")
+            continue
+        gate = _gate(key, message_name, signal, tuple(on), spec, where, fail)
+        if gate is not None:
+            out.append(gate)
+    return tuple(out)
+
+
+def _message(db, name: str):
+    try:
+        return db.get_message_by_name(name)
+    except KeyError:
+        return None
+
+
+def _listing(names: list[str]) -> str:
+    shown = ", ".join(names[:12])
+    return f"it has {shown}" + (f", ... ({len(names) - 12} more)" if len(names) > 12 else "")
+
+
+def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where: list,
+          fail: Callable[[list, str], None]) -> Gate | None:
+    """The gate of one signal; a value-table name the signal lacks is a problem."""
+    choices = {str(name): raw for raw, name in (signal.choices or {}).items()}
+    names: dict[float, str] = {}
+    ok = True
+
+    def value(v, at: list) -> float | None:
+        nonlocal ok
+        if isinstance(v, bool) or not isinstance(v, int | float | str):
+            return None  # the schema refused it
+        if isinstance(v, str):
+            if v not in choices:
+                fail(at, f"{v!r} is not in {key}'s value table"
+                     + (f" ({', '.join(choices)})" if choices else " (it has none)"))
+                ok = False
+                return None
+            scaled = float(signal.conversion.raw_to_scaled(choices[v], decode_choices=False))
+            names[scaled] = v
+            return scaled
+        return float(v)
+
+    rng = spec.get("range")
+    equals = value(spec["equals"], [*where, "equals"]) if "equals" in spec else None
+    one_of = None
+    if isinstance(spec.get("one_of"), list):
+        values = [value(v, [*where, "one_of", i]) for i, v in enumerate(spec["one_of"])]
+        one_of = tuple(v for v in values if v is not None)
+    if isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, int | float) for x in rng) and rng[0] > rng[1]:
+        fail([*where, "range"], f"min {rng[0]} is above max {rng[1]}")
+        ok = False
+    for name, raw in choices.items():  # every value-table entry can be shown by name
+        names.setdefault(float(signal.conversion.raw_to_scaled(raw, decode_choices=False)), name)
+    if not ok:
+        return None
+    return Gate(key, message, signal.name, on, signal.unit or "",
+                (float(rng[0]), float(rng[1])) if isinstance(rng, list) and len(rng) == 2 else None,
+                equals, one_of, float(spec["max_rate"]) if "max_rate" in spec else None,
+                int(spec["present"]) if "present" in spec else None, names)
+
+
+# ---- evaluation: one streaming pass per side and bus ----
+
+@dataclass
+class Series:
+    """The running state of one gated signal on one side of one bus."""
+    gate: Gate
+    side: str
+    bus: str
+    count: int = 0
+    min: float | None = None
+    max: float | None = None
+    last_t_ns: int | None = None
+    last_value: float | None = None
+    violations: list[str] = field(default_factory=list)
+    more: int = 0  # violations beyond MAX_VIOLATIONS
+    points: list[tuple[float, float]] = field(default_factory=list)  # (s since t0, value), thinned
+    step: int = 1   # every step-th sample is kept in points
+    marks: list[tuple[float, float]] = field(default_factory=list)  # violations, first MARKS
+
+    @property
+    def violation_count(self) -> int:
+        return len(self.violations) + self.more
+
+    def violate(self, text: str, t_s: float, value: float | None) -> None:
+        if len(self.violations) < MAX_VIOLATIONS:
+            self.violations.append(text)
+        else:
+            self.more += 1
+        if value is not None and len(self.marks) < MARKS:
+            self.marks.append((t_s, value))
+
+    def add(self, t_ns: int, t0_ns: int, value: float, where: Callable[[], str]) -> None:
+        """One decoded value; where() names its frame (called only for a violation)."""
+        g = self.gate
+        t_s = (t_ns - t0_ns) / 1e9
+
+        def at() -> str:
+            return f"at t={t_s:.3f} s, {where()}"
+        if g.range and not g.range[0] <= value <= g.range[1]:
+            self.violate(f"{g.key} = {g.show(value)} outside [{_num(g.range[0])}, {_num(g.range[1])}] {at()}",
+                         t_s, value)
+        if g.equals is not None and not _close(value, g.equals):
+            self.violate(f"{g.key} = {g.show(value)}, expected {g.show(g.equals)} {at()}", t_s, value)
+        if g.one_of is not None and not any(_close(value, v) for v in g.one_of):
+            self.violate(f"{g.key} = {g.show(value)} not one of [{', '.join(g._name(v) or _num(v) for v in g.one_of)}]"
+                         f" {at()}", t_s, value)
+        if g.max_rate is not None and self.last_t_ns is not None and self.last_value is not None:
+            dt = (t_ns - self.last_t_ns) / 1e9
+            change = abs(value - self.last_value)
+            if change > 0 and (dt <= 0 or change / dt > g.max_rate):
+                rate = "no time" if dt <= 0 else f"{dt * 1000:.3f} ms ({_num(change / dt)}/s > {_num(g.max_rate)}/s)"
+                self.violate(f"{g.key} changed {g.show(self.last_value)} -> {g.show(value)} in {rate} {at()}",
+                             t_s, value)
+        self.count += 1
+        self.min = value if self.min is None else min(self.min, value)
+        self.max = value if self.max is None else max(self.max, value)
+        self.last_t_ns, self.last_value = t_ns, value
+        if (self.count - 1) % self.step == 0:
+            self.points.append((t_s, value))
+            if len(self.points) >= PLOT_POINTS:
+                self.points = self.points[::2]
+                self.step *= 2
+
+    def finish(self, side_name: str) -> None:
+        if self.gate.present is not None and self.count < self.gate.present:
+            self.violate(f"{self.gate.key} seen {self.count} times {side_name}, expected at least "
+                         f"{self.gate.present}", 0.0, None)
+
+    def summary(self) -> dict:
+        return {"count": self.count, "min": self.min, "max": self.max, "violations": self.violation_count,
+                "limits": self.gate.limits(), "unit": self.gate.unit}
+
+
+class Evaluator:
+    """Feeds frames of one side of one bus through every gate of that bus (one pass)."""
+
+    def __init__(self, gate_list: Iterable[Gate], db, side: str, bus: str, t0_ns: int):
+        self.db, self.side, self.bus, self.t0_ns = db, side, bus, t0_ns
+        self.series: dict[str, Series] = {}
+        self.by_message: dict[str, list[Series]] = {}
+        for g in gate_list:
+            if bus in g.buses:
+                s = Series(g, side, bus)
+                self.series[g.key] = s
+                self.by_message.setdefault(g.message, []).append(s)
+        self._messages: dict[tuple[int, bool], Any] = {}
+
+    def _message(self, frame: wire.Frame):
+        k = (frame.can_id, frame.extended)
+        if k not in self._messages:
+            m = message_of(self.db, frame)
+            self._messages[k] = m if m is not None and m.name in self.by_message else None
+        return self._messages[k]
+
+    def feed(self, frame: wire.Frame, t_ns: int, where: str | Callable[[], str]) -> None:
+        """One frame; where names it (file:line or the sample), or is a function giving that,
+        called only when something is wrong, so good frames build no strings."""
+        if frame.remote:
+            return
+        message = self._message(frame)
+        if message is None:
+            return
+        place: Callable[[], str] = where if callable(where) else (lambda: where)  # type: ignore[assignment,return-value]
+        series = self.by_message[message.name]
+        try:
+            decoded = message.decode(frame.data, decode_choices=False)
+        except Exception as e:  # noqa: BLE001 - cantools' errors name what does not fit
+            t_s = (t_ns - self.t0_ns) / 1e9
+            for s in series:
+                s.violate(f"{s.gate.key}: {message.name} frame {wire.id_hex(frame.can_id, frame.extended)}#"
+                          f"{frame.data.hex().upper()} does not decode ({e}) at t={t_s:.3f} s, {place()}", t_s, None)
+            return
+        for s in series:
+            value = decoded.get(s.gate.signal)
+            if isinstance(value, int | float):  # else a multiplexed signal not selected in this frame
+                s.add(t_ns, self.t0_ns, float(value), place)
+
+    def finish(self) -> list[Series]:
+        side_name = "on the bus" if self.side == "can" else "on Zenoh"
+        for s in self.series.values():
+            s.finish(f"{side_name} {self.bus}")
+        return list(self.series.values())
+
+
+@dataclass
+class SignalRun:
+    """Every gated signal's series, per side and bus."""
+    series: list[Series]
+    t0_ns: int
+
+    def of(self, side: str) -> list[Series]:
+        return [s for s in self.series if s.side == side]
+
+    def problems(self, side: str) -> list[str]:
+        out = []
+        for s in self.of(side):
+            if s.violation_count:
+                shown = "; ".join(s.violations)
+                out.append(f"{s.bus} {s.gate.key}: {s.violation_count} violation"
+                           f"{'s' if s.violation_count > 1 else ''}: {shown}"
+                           + (f"; ... ({s.more} more)" if s.more else ""))
+        return out
+
+    def summary(self) -> dict:
+        """metrics.json `signals`: side -> bus -> Message.Signal -> count, min, max, violations."""
+        out: dict[str, dict] = {}
+        for s in self.series:
+            out.setdefault(s.side, {}).setdefault(s.bus, {})[s.gate.key] = s.summary()
+        return out
+
+
+def _zenoh_place(b) -> Callable[[Observed], Callable[[], str]]:
+    """A Zenoh frame named by its sample and the bus frame the oracle paired it with."""
+    sent: dict[int, int] = {}
+    for s, r in b.comparison.matched:
+        sent[r.index] = s.line
+    for s, r, _ in b.comparison.corrupted:
+        sent[r.index] = s.line
+    return lambda o: lambda: (f"zenoh #{o.index} seq {o.seq}"
+                              + (f" (sent as can.log:{sent[o.index]})" if sent.get(o.index) else ""))
+
+
+def evaluate(result: RunResult) -> SignalRun:
+    """The scenario's signal gates over the run's captures, once per result (kept on it)."""
+    cached = getattr(result, "_signal_run", None)
+    if cached is not None:
+        return cached
+    sc = result.scenario
+    gate_list = getattr(sc, "signal_gates", ())
+    starts = [o.t_ns for b in result.buses for o in (b.bus_frames or b.can_frames)[:1]]
+    t0 = min(starts) if starts else 0
+    series: list[Series] = []
+    for b in result.buses:
+        path = sc.bus_dbcs.get(b.bus) if gate_list else None
+        if path is None or not any(b.bus in g.buses for g in gate_list):
+            continue
+        db = load_dbc(path)
+        can = Evaluator(gate_list, db, "can", b.bus, t0)
+        for o in b.bus_frames or b.can_frames:
+            can.feed(o.frame, o.t_ns, f"{o.origin}:{o.line}" if o.line else f"{o.origin} #{o.index}")
+        series += can.finish()
+        zen = Evaluator(gate_list, db, "zenoh", b.bus, t0)
+        place = _zenoh_place(b)
+        for o in b.zenoh_frames:
+            zen.feed(o.frame, o.t_ns, place(o))
+        series += zen.finish()
+    run = SignalRun(series, t0)
+    try:
+        object.__setattr__(result, "_signal_run", run)
+    except AttributeError:
+        pass
+    return run
