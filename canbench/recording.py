@@ -10,6 +10,10 @@ Channels (header.stamp = log time; header.frame_id = the bus):
   /latency/<bus>                 std_msgs/msg/Float64  CAN -> Zenoh latency of each matched frame, ms
   /signals/<bus>/<msg>/<signal>  std_msgs/msg/Float64  DBC-decoded signals of bus frames (Foxglove plots
                                                       `/signals/vcan0/EngineData/EngineSpeed.data`)
+  /signals_zenoh/<bus>/<msg>/<signal>  std_msgs/msg/Float64  the same decoded from the frames received on
+                                                      Zenoh (log time: receive), so a corrupted signal shows
+                                                      next to what the bus carried
+Signals are decoded with the bus's DBC (buses[].dbc, else the scenario's dbc).
 
 `canbench view recording.mcap` reads it back through the live viewer's decoders
 and loggers (view_mcap): the same entities as a live run."""
@@ -22,7 +26,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from . import ros2, ros2_msgs, wire
-from .dbc import decode_signals
+from .dbc import decode_signals, load_dbc
 
 if TYPE_CHECKING:  # the viewer's side needs rerun-sdk, writing a recording does not
     from .oracle import Observed
@@ -63,18 +67,26 @@ class Ros2McapWriter:
         self.write(topic, FRAME, o.t_ns, can_frame_msg(bus, o.t_ns, o.frame))
 
 
+def _signals(w: Ros2McapWriter, prefix: str, db, o: Observed) -> None:
+    if db is not None and not o.frame.remote and (signals := decode_signals(db, o.frame)):
+        for name, value in signals[1].items():
+            w.write(f"{prefix}/{signals[0]}/{name}", FLOAT64, o.t_ns, ros2_msgs.Float64(value))
+
+
 def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
+    """dbc: the DBC (cantools) of buses the scenario gives none of their own."""
+    bus_dbcs = getattr(result.scenario, "bus_dbcs", {})
     with open(path, "wb") as out:
         w = Ros2McapWriter(out)
         for b in result.buses:
+            db = load_dbc(bus_dbcs[b.bus]) if b.bus in bus_dbcs else dbc
             for o in b.bus_frames:
                 w.frame(f"/can/{b.bus}", b.bus, o)
-                if dbc is not None and not o.frame.remote and (signals := decode_signals(dbc, o.frame)):
-                    for name, value in signals[1].items():
-                        w.write(f"/signals/{b.bus}/{signals[0]}/{name}", FLOAT64, o.t_ns, ros2_msgs.Float64(value))
+                _signals(w, f"/signals/{b.bus}", db, o)
             latency_of = {r.index: (r.t_ns - s.t_ns) / 1e6 for s, r in b.comparison.matched}
             for o in b.zenoh_frames:
                 w.frame(f"/zenoh/{b.bus}", b.bus, o)
+                _signals(w, f"/signals_zenoh/{b.bus}", db, o)
                 if o.index in latency_of:
                     w.write(f"/latency/{b.bus}", FLOAT64, o.t_ns, ros2_msgs.Float64(latency_of[o.index]))
             for o in b.commands:

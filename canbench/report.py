@@ -1,7 +1,8 @@
 """report.html of a run, next to metrics.json in reports/<run-id>/: one
 self-contained page: verdicts, latency histogram + CDF per direction, per-id
-table, timeline, emulator fidelity, links to the run's files (recording.mcap,
-the ROS 2 recording, is canbench/recording.py's)."""
+table, timeline, every gated signal over time (limits shaded, violations
+marked), emulator fidelity, links to the run's files (recording.mcap, the ROS 2
+recording, is canbench/recording.py's)."""
 from __future__ import annotations
 
 import base64
@@ -105,6 +106,45 @@ def _bridge_resources(result: RunResult) -> str:
     return "<h2>Bridge resources</h2>" + _png(fig)
 
 
+def _signal_section(result: RunResult) -> str:
+    """Every gated signal (expect.signals) over time, bus and Zenoh side: its limits shaded, its
+    violations marked; the series are the evaluator's, thinned to a bound (canbench.signals)."""
+    if not getattr(result.scenario, "signal_gates", ()):
+        return ""
+    from . import signals
+    run = signals.evaluate(result)
+    rows = [[s.bus, s.gate.key, s.side, s.count, "" if s.min is None else f"{s.min:.6g}",
+             "" if s.max is None else f"{s.max:.6g}", s.violation_count, s.gate.limits()] for s in run.series]
+    table = _table(["bus", "signal", "side", "values", "min", "max", "violations", "expected"], rows)
+    plots: dict[tuple[str, str], list] = {}
+    for s in run.series:
+        plots.setdefault((s.bus, s.gate.key), []).append(s)
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(len(plots), 1, figsize=(11, 2.4 * len(plots)), squeeze=False)
+    for ax, ((bus, key), sides) in zip(axes[:, 0], plots.items(), strict=True):
+        gate = sides[0].gate
+        if gate.range:
+            ax.axhspan(gate.range[0], gate.range[1], color="green", alpha=0.08, label="range")
+            for limit in gate.range:
+                ax.axhline(limit, color="green", lw=0.8, ls="--")
+        for value in ([gate.equals] if gate.equals is not None else []) + list(gate.one_of or ()):
+            ax.axhline(value, color="green", lw=0.8, ls=":")
+        for s, colour in zip(sides, ("tab:blue", "tab:orange"), strict=False):
+            if s.points:
+                ax.plot([t for t, _ in s.points], [v for _, v in s.points], ".", ms=2, color=colour,
+                        label=f"{'bus' if s.side == 'can' else 'Zenoh'} ({s.count})")
+            if s.marks:
+                ax.plot([t for t, _ in s.marks], [v for _, v in s.marks], "x", color="red", ms=7,
+                        label=f"{'bus' if s.side == 'can' else 'Zenoh'} violations ({s.violation_count})")
+        ax.set_title(f"{bus} {key}{' (' + gate.unit + ')' if gate.unit else ''}: {gate.limits()}", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("s since the first bus frame")
+    return "<h2>Signals</h2>" + table + _png(fig)
+
+
 def _table(header: list[str], rows: list[list]) -> str:
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c if str(c).startswith('<') else html.escape(str(c))}</td>"
@@ -183,6 +223,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
 <h2>Per id</h2>
 {_table(["bus", "id", "on bus", "on Zenoh", "lost", "bus cycle p50 ms", "Zenoh cycle p50 ms", "Zenoh max gap ms"],
         id_rows)}
+{_signal_section(result)}
 <h2>Emulated ECUs</h2><p>Send-time error against the trace (echo: turnaround), so a verdict never blames the
 bridge for the emulator's jitter.</p>
 {_table(["ECU", "role", "bus", "sent", "p50 ms", "p99 ms", "max ms"], ecu_rows)}

@@ -233,7 +233,9 @@ def test_validate_exits_2_on_a_missing_signal(tmp_path):
 
 # ---- a seeded fault through the real analysis: one bit flipped inside one signal ----
 
-def test_one_flipped_bit_fails_exactly_that_signals_zenoh_check_and_integrity(tmp_path):
+def flipped_run(tmp_path: Path) -> tuple[analysis.RunResult, int]:
+    """A run through the real analysis: 2 s of EngineData, GearboxState and Diag frames, the Zenoh
+    side with one bit flipped inside EngineSpeed of one frame (its index returned)."""
     path = write_scenario(tmp_path, "  integrity: true\n  ordering: true\n  signals:\n"
                                     "    EngineData.EngineSpeed: {range: [0, 8000]}\n"
                                     "    EngineData.EngineTorque: {range: [-125, 130]}\n"
@@ -264,6 +266,11 @@ def test_one_flipped_bit_fails_exactly_that_signals_zenoh_check_and_integrity(tm
     result = analysis.analyse(sc, "flip", tmp_path, "vehicle/can", {"engine": {"sent": len(frames), "role": "replay",
                                                                                "bus": "vcan0"}},
                               {"buses": [{"bus": "vcan0", "published_frames": len(frames), "tx_frames": 0}]}, 2.0)
+    return result, flipped
+
+
+def test_one_flipped_bit_fails_exactly_that_signals_zenoh_check_and_integrity(tmp_path):
+    result, flipped = flipped_run(tmp_path)
     failing = checks.failing(result)
     assert set(failing) == {"integrity", "signals_zenoh"}, failing
     assert len(failing["signals_zenoh"]) == 1
