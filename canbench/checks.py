@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import wraps
 
-from . import signals, validity, wire
+from . import rxqos, signals, validity, wire
 from .analysis import RunResult
 from .dbc import cycle_time_ms, load_dbc
 from .faults import disruptive, last_bridge_restart_ns
@@ -82,16 +82,20 @@ def integrity(result: RunResult) -> list[str] | None:
 
 
 def ordering(result: RunResult) -> list[str] | None:
-    """Frames arrive in bus order, globally and per id."""
+    """Frames arrive in bus order, globally and per id; with a QoS table of several classes
+    (bridge.rx_qos) in bus order within each class (a higher class may overtake a lower one)."""
     if not _expect(result, "ordering", True):
         return None
+    table = rxqos.of_bridge(result.scenario.bridge)
     problems = []
     for b in result.buses:
         c = b.comparison
-        if c.reordered:
-            listed = "; ".join(f"{describe(s)} after {describe(p)}" for s, p in c.reordered[:SHOW])
-            problems.append(f"{b.bus}: {len(c.reordered)} frames out of order "
-                            f"({c.reordered_per_id} within the same id): {listed}")
+        reordered = c.reordered if table is None else rxqos.reordered_per_class(c.matched, table)
+        if reordered:
+            listed = "; ".join(f"{describe(s)} after {describe(p)}" for s, p in reordered[:SHOW])
+            within = f"{c.reordered_per_id} within the same id" + (
+                f"; judged per QoS class, {len(table.classes)} classes" if table else "")
+            problems.append(f"{b.bus}: {len(reordered)} frames out of order ({within}): {listed}")
     return problems
 
 

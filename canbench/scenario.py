@@ -11,6 +11,7 @@ from typing import Any
 import jsonschema
 import yaml
 
+from . import rxqos
 from .errors import ScenarioError
 
 SCHEMA_PATH = Path(__file__).with_name("scenario.schema.json")
@@ -264,6 +265,11 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
         except (KeyError, TypeError, ValueError, AttributeError):
             continue
     bridge = dict(doc.get("bridge", {}))
+    if isinstance(bridge.get("rx_qos"), str):  # what the schema cannot see: overlaps, id limits, classes
+        try:
+            rxqos.parse(bridge["rx_qos"], rxqos.base_of(bridge))
+        except (rxqos.QosTableError, TypeError, ValueError) as e:
+            fail(["bridge", "rx_qos"], str(e))
     consumer = doc.get("topology", {}).get("consumer", "router")
     if consumer == "bridge" and bridge.get("mode", "client") == "client":
         fail(["topology", "consumer"], "a consumer can connect to the bridge only in bridge.mode peer or router")
