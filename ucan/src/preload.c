@@ -1031,6 +1031,36 @@ static int recv_nothing(int fd, int flags)
 	return -1;
 }
 
+/* What a received frame tells the program besides its bytes, for recvmsg and
+ * recvmmsg alike: flags (MSG_DONTROUTE, MSG_CONFIRM for its own), the stamp as
+ * a control message after the used bytes of controllen (or kept for
+ * SIOCGSTAMP), the source interface as msg_name. hdr NULL: a bare frame. */
+static void frame_meta(struct csock *cs, struct msghdr *user, const struct ucan_rxhdr *hdr, size_t used,
+		       size_t controllen, int native_flags)
+{
+	uint32_t ifindex = cs->opts.ifindex;
+	int own = 0;
+	struct timespec stamp = { 0, 0 };
+	if (hdr) {
+		ifindex = hdr->ifindex;
+		own = hdr->flags & UCAN_RX_OWN;
+		stamp = (struct timespec){ (time_t)hdr->stamp_sec, (long)hdr->stamp_nsec };
+	}
+	uint8_t ts = cs->opts.timestamps;
+	if (ts != UCAN_TS_NONE && stamp.tv_sec == 0) /* queued before stamps were asked for */
+		clock_gettime(CLOCK_REALTIME, &stamp);
+	if (stamp.tv_sec && ts < UCAN_TS_USEC) /* as linux 6.1: a stamp sent as a control */
+		cs->last_stamp = stamp;		 /* message is not SIOCGSTAMP's any more */
+	user->msg_controllen = used;
+	user->msg_flags = native_flags | MSG_DONTROUTE | (own ? MSG_CONFIRM : 0);
+	if (ts >= UCAN_TS_USEC)
+		put_stamp_cmsg(user, used, controllen, ts, &stamp);
+	if (user->msg_name)
+		fill_can_addr(user->msg_name, &user->msg_namelen, ifindex);
+	else
+		user->msg_namelen = 0;
+}
+
 static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int flags)
 {
 	if (!cs->bound && !cs->connected)
@@ -1081,29 +1111,10 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 				atomic_store(&cs->header_mode, 1);
 			continue;
 		}
-		uint32_t ifindex = cs->opts.ifindex;
-		int own = 0;
-		struct timespec stamp = { 0, 0 };
-		if (header_mode) {
+		if (header_mode)
 			n -= (ssize_t)sizeof(hdr);
-			ifindex = hdr.ifindex;
-			own = hdr.flags & UCAN_RX_OWN;
-			stamp = (struct timespec){ (time_t)hdr.stamp_sec, (long)hdr.stamp_nsec };
-		}
-		uint8_t ts = cs->opts.timestamps;
-		if (ts != UCAN_TS_NONE && stamp.tv_sec == 0) /* queued before stamps were asked for */
-			clock_gettime(CLOCK_REALTIME, &stamp);
-		if (stamp.tv_sec && ts < UCAN_TS_USEC) /* as linux 6.1: a stamp sent as a control */
-			cs->last_stamp = stamp;		 /* message is not SIOCGSTAMP's any more */
 		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
-		user->msg_controllen = msg.msg_controllen;
-		user->msg_flags = msg.msg_flags | MSG_DONTROUTE | (own ? MSG_CONFIRM : 0);
-		if (ts >= UCAN_TS_USEC)
-			put_stamp_cmsg(user, msg.msg_controllen, controllen, ts, &stamp);
-		if (user->msg_name)
-			fill_can_addr(user->msg_name, &user->msg_namelen, ifindex);
-		else
-			user->msg_namelen = 0;
+		frame_meta(cs, user, header_mode ? &hdr : NULL, msg.msg_controllen, controllen, msg.msg_flags);
 		/* MSG_TRUNC in flags asks for the real length, as on any datagram socket */
 		if ((user->msg_flags & MSG_TRUNC) && !(flags & MSG_TRUNC) && (size_t)n > room)
 			n = (ssize_t)room;
@@ -1175,21 +1186,127 @@ PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
 	return n < 0 && forget_if_stale(fd, cs) ? get_readv()(fd, iov, iovcnt) : n;
 }
 
+/* recvmmsg: up to MMSG_CHUNK hub messages per real recvmmsg on the unix
+ * socket, which gives the kernel's semantics for free (MSG_WAITFORONE,
+ * MSG_DONTWAIT, O_NONBLOCK, SO_RCVTIMEO, the timeout checked after each
+ * message and written back). Messages land in the library's buffers, are
+ * stripped of their header and copied to the program's, control replies
+ * skipped. The unix socket's own control data is not passed on: the library
+ * asks for none (stamps come from the hub's header). */
+#define MMSG_CHUNK 64
+#define RX_MSG_MAX (sizeof(struct ucan_rxhdr) + CANFD_MTU)
+
+static void iov_scatter(const struct iovec *iov, size_t n, const void *in, size_t len)
+{
+	for (size_t i = 0; i < n && len; i++) {
+		size_t k = iov[i].iov_len < len ? iov[i].iov_len : len;
+		memcpy(iov[i].iov_base, in, k);
+		in = (const uint8_t *)in + k;
+		len -= k;
+	}
+}
+
+/* One hub message into the program's mmsghdr; 0 if it was a control reply (skipped). */
+static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *data, size_t len, int native_flags,
+			int flags)
+{
+	if (len == sizeof(struct ucan_ctl)) {
+		struct ucan_ctl ctl;
+		memcpy(&ctl, data, sizeof(ctl));
+		if (ctl.type == UCAN_MSG_HEADER_MODE)
+			atomic_store(&cs->header_mode, 1);
+		return 0;
+	}
+	struct ucan_rxhdr hdr;
+	int header_mode = atomic_load(&cs->header_mode);
+	if (header_mode) {
+		if (len < sizeof(hdr))
+			return 0; /* not a frame the hub sends */
+		memcpy(&hdr, data, sizeof(hdr));
+		data += sizeof(hdr);
+		len -= sizeof(hdr);
+	}
+	struct msghdr *user = &out->msg_hdr;
+	size_t room = iov_total(user->msg_iov, user->msg_iovlen);
+	iov_scatter(user->msg_iov, user->msg_iovlen, data, len < room ? len : room);
+	if (len > room)
+		native_flags |= MSG_TRUNC;
+	frame_meta(cs, user, header_mode ? &hdr : NULL, 0, user->msg_controllen, native_flags);
+	/* as raw_recvmsg: the copied length, the frame's own with MSG_TRUNC in flags */
+	out->msg_len = (unsigned)(len > room && !(flags & MSG_TRUNC) ? room : len);
+	return 1;
+}
+
+static int can_recvmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned vlen, int flags,
+			struct timespec *timeout)
+{
+	if (timeout && (timeout->tv_sec < 0 || timeout->tv_nsec < 0 || timeout->tv_nsec >= 1000000000)) {
+		errno = EINVAL; /* poll_select_set_timeout */
+		return -1;
+	}
+	if (vlen > UIO_MAXIOV)
+		vlen = UIO_MAXIOV;
+	if (vlen == 0)
+		return 0;
+	if (!cs->bound && !cs->connected)
+		return recv_nothing(fd, flags);
+	if (flags & MSG_PEEK) { /* every message is the same first frame: one at a time */
+		unsigned i;
+		for (i = 0; i < vlen; i++) {
+			ssize_t n = can_recvmsg(cs, fd, &vec[i].msg_hdr, flags & ~MSG_WAITFORONE);
+			if (n < 0)
+				return i ? (int)i : -1;
+			vec[i].msg_len = (unsigned)n;
+		}
+		return (int)i;
+	}
+	uint8_t buf[MMSG_CHUNK][RX_MSG_MAX];
+	struct iovec iov[MMSG_CHUNK];
+	struct mmsghdr raw[MMSG_CHUNK];
+	unsigned got = 0;
+	while (got < vlen) {
+		unsigned ask = vlen - got < MMSG_CHUNK ? vlen - got : MMSG_CHUNK;
+		memset(raw, 0, ask * sizeof(raw[0]));
+		for (unsigned k = 0; k < ask; k++) {
+			iov[k] = (struct iovec){ .iov_base = buf[k], .iov_len = sizeof(buf[k]) };
+			raw[k].msg_hdr.msg_iov = &iov[k];
+			raw[k].msg_hdr.msg_iovlen = 1;
+		}
+		int rflags = flags & ~MSG_TRUNC;
+		if (got && (flags & MSG_WAITFORONE))
+			rflags |= MSG_DONTWAIT;
+		int r = get_recvmmsg()(fd, raw, ask, rflags, timeout);
+		if (r < 0) {
+			if (got)
+				break; /* the kernel returns what it has; the error shows on the next call */
+			if (errno == ECONNRESET || errno == EPIPE || errno == ENOTCONN)
+				errno = ENETDOWN;
+			return -1;
+		}
+		for (int k = 0; k < r; k++) {
+			if (raw[k].msg_len == 0) { /* hub went away: like an interface going down */
+				if (got)
+					return (int)got;
+				errno = ENETDOWN;
+				return -1;
+			}
+			got += (unsigned)mmsg_deliver(cs, &vec[got], buf[k], raw[k].msg_len, raw[k].msg_hdr.msg_flags, flags);
+		}
+		if (got == 0)
+			continue; /* only control replies: still waiting for the first frame */
+		if ((unsigned)r < ask || (timeout && timeout->tv_sec == 0 && timeout->tv_nsec == 0))
+			break; /* the kernel stopped early: nothing more now, or the timeout ran out */
+	}
+	return (int)got;
+}
+
 PUBLIC int recvmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags, struct timespec *timeout)
 {
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_recvmmsg()(fd, vec, vlen, flags, timeout);
-	unsigned i;
-	for (i = 0; i < vlen; i++) {
-		ssize_t n = can_recvmsg(cs, fd, &vec[i].msg_hdr, i == 0 ? flags & ~MSG_WAITFORONE : flags | MSG_DONTWAIT);
-		if (n < 0 && i == 0 && forget_if_stale(fd, cs))
-			return get_recvmmsg()(fd, vec, vlen, flags, timeout);
-		if (n < 0)
-			return i ? (int)i : -1;
-		vec[i].msg_len = (unsigned)n;
-	}
-	return (int)i;
+	int n = can_recvmmsg(cs, fd, vec, vlen, flags, timeout);
+	return n < 0 && forget_if_stale(fd, cs) ? get_recvmmsg()(fd, vec, vlen, flags, timeout) : n;
 }
 
 /* fortified variants used by programs built with _FORTIFY_SOURCE */
@@ -1217,8 +1334,10 @@ PUBLIC ssize_t __recvfrom_chk(int fd, void *buf, size_t len, size_t buflen, int 
 
 /* ---- sending ---- */
 
-static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_t iovlen, int flags,
-			const struct sockaddr *addr, socklen_t addrlen)
+/* Validates one frame the program sends and builds its hub message in msg
+ * (ucan_txhdr + frame); returns the frame's size, or -1 with the kernel's errno. */
+static ssize_t tx_build(struct csock *cs, const struct iovec *iov, size_t iovlen, const struct sockaddr *addr,
+			socklen_t addrlen, uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU])
 {
 	uint32_t ifindex = cs->opts.ifindex;
 	if (addr) {
@@ -1239,7 +1358,6 @@ static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_
 		errno = ENXIO;
 		return -1;
 	}
-	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU];
 	struct ucan_txhdr hdr = { .type = UCAN_MSG_FRAME, .ifindex = ifindex };
 	memcpy(msg, &hdr, sizeof(hdr));
 	iov_gather(iov, iovlen, msg + sizeof(hdr), size);
@@ -1250,22 +1368,89 @@ static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_
 		errno = EINVAL;
 		return -1;
 	}
-	if (!cs->connected) {
-		pthread_mutex_lock(&cs->lock);
-		int rc = ensure_connected(cs, fd);
-		pthread_mutex_unlock(&cs->lock);
-		if (rc < 0)
-			return -1;
-	}
-	ssize_t n = get_send()(fd, msg, sizeof(hdr) + size, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+	return (ssize_t)size;
+}
+
+static int tx_connect(struct csock *cs, int fd)
+{
+	if (cs->connected)
+		return 0;
+	pthread_mutex_lock(&cs->lock);
+	int rc = ensure_connected(cs, fd);
+	pthread_mutex_unlock(&cs->lock);
+	return rc;
+}
+
+static void tx_errno(void)
+{
+	if (errno == EAGAIN)
+		errno = ENOBUFS; /* what a full CAN tx queue reports */
+	else if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)
+		errno = ENETDOWN;
+}
+
+static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_t iovlen, int flags,
+			const struct sockaddr *addr, socklen_t addrlen)
+{
+	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU];
+	ssize_t size = tx_build(cs, iov, iovlen, addr, addrlen, msg);
+	if (size < 0 || tx_connect(cs, fd) < 0)
+		return -1;
+	ssize_t n = get_send()(fd, msg, sizeof(struct ucan_txhdr) + (size_t)size, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
 	if (n < 0) {
-		if (errno == EAGAIN)
-			errno = ENOBUFS; /* what a full CAN tx queue reports */
-		else if (errno == EPIPE || errno == ECONNRESET || errno == ENOTCONN)
-			errno = ENETDOWN;
+		tx_errno();
 		return -1;
 	}
-	return (ssize_t)size;
+	return size;
+}
+
+/* sendmmsg: up to MMSG_CHUNK frames per real sendmmsg to the hub. As the
+ * kernel's: frames go in order; the first that fails (invalid: EINVAL/ENXIO
+ * before anything of it is sent; the hub's queue full with MSG_DONTWAIT:
+ * ENOBUFS) ends the call, which returns how many went, or -1 if none did. */
+static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned vlen, int flags)
+{
+	if (vlen > UIO_MAXIOV)
+		vlen = UIO_MAXIOV;
+	uint8_t msgs[MMSG_CHUNK][sizeof(struct ucan_txhdr) + CANFD_MTU];
+	struct iovec iov[MMSG_CHUNK];
+	struct mmsghdr raw[MMSG_CHUNK];
+	unsigned sent = 0;
+	while (sent < vlen) {
+		unsigned k = 0;
+		int bad = 0;
+		for (; k < MMSG_CHUNK && sent + k < vlen; k++) {
+			const struct msghdr *m = &vec[sent + k].msg_hdr;
+			ssize_t size = tx_build(cs, m->msg_iov, m->msg_iovlen, m->msg_name, m->msg_namelen, msgs[k]);
+			if (size < 0) {
+				bad = errno;
+				break;
+			}
+			iov[k] = (struct iovec){ .iov_base = msgs[k], .iov_len = sizeof(struct ucan_txhdr) + (size_t)size };
+			memset(&raw[k], 0, sizeof(raw[k]));
+			raw[k].msg_hdr.msg_iov = &iov[k];
+			raw[k].msg_hdr.msg_iovlen = 1;
+		}
+		if (k) {
+			if (tx_connect(cs, fd) < 0)
+				return sent ? (int)sent : -1;
+			int r = get_sendmmsg()(fd, raw, k, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+			if (r < 0) {
+				tx_errno();
+				return sent ? (int)sent : -1;
+			}
+			for (int i = 0; i < r; i++)
+				vec[sent + (unsigned)i].msg_len = (unsigned)(iov[i].iov_len - sizeof(struct ucan_txhdr));
+			sent += (unsigned)r;
+			if ((unsigned)r < k)
+				return (int)sent;
+		}
+		if (bad) {
+			errno = bad;
+			return sent ? (int)sent : -1;
+		}
+	}
+	return (int)sent;
 }
 
 PUBLIC ssize_t sendmsg(int fd, const struct msghdr *msg, int flags)
@@ -1325,17 +1510,8 @@ PUBLIC int sendmmsg(int fd, struct mmsghdr *vec, unsigned vlen, int flags)
 	struct csock *cs = lookup(fd);
 	if (!cs)
 		return get_sendmmsg()(fd, vec, vlen, flags);
-	unsigned i;
-	for (i = 0; i < vlen; i++) {
-		const struct msghdr *m = &vec[i].msg_hdr;
-		ssize_t n = can_send(cs, fd, m->msg_iov, m->msg_iovlen, flags, m->msg_name, m->msg_namelen);
-		if (n < 0 && i == 0 && forget_if_stale(fd, cs))
-			return get_sendmmsg()(fd, vec, vlen, flags);
-		if (n < 0)
-			return i ? (int)i : -1;
-		vec[i].msg_len = (unsigned)n;
-	}
-	return (int)i;
+	int n = can_sendmmsg(cs, fd, vec, vlen, flags);
+	return n < 0 && forget_if_stale(fd, cs) ? get_sendmmsg()(fd, vec, vlen, flags) : n;
 }
 
 /* ---- inherited sockets ---- */

@@ -1,0 +1,63 @@
+"""recvmmsg and sendmmsg on CAN_RAW sockets (ucan/tests/mmsg_probe.c): the kernel's
+semantics (MSG_WAITFORONE, MSG_DONTWAIT, the timeout checked after each message and
+written back, msg_len, MSG_TRUNC, one SCM_TIMESTAMP(NS) per message, msg_name, sendmmsg
+stopping at an invalid frame) on kernel vcan where it exists and on the userspace hub,
+and the hub's frames moved several per syscall, as the kernel moves them."""
+from __future__ import annotations
+
+import math
+import re
+import shutil
+
+import pytest
+
+pytestmark = pytest.mark.bus
+WAIT_S = 30
+BURST = 160
+HUB_MMSG_CHUNK = 64  # ucan/src/preload.c MMSG_CHUNK: hub messages per real syscall
+
+
+def probe_lines(bus, *args: str) -> list[str]:
+    rc = bus.run([bus.tool("mmsg_probe"), *args], check=False, timeout=WAIT_S)
+    lines = rc.stdout.splitlines()
+    assert rc.returncode == 0 and lines and not [line for line in lines if not line.startswith("ok:")], (
+        lines, rc.stderr)
+    return lines
+
+
+def test_recvmmsg_and_sendmmsg_as_the_kernel_defines_them(bus):
+    """Before the preload batched them, recvmmsg ignored its timeout (never EINVAL, nothing
+    written back, a zero timeout returned all that was queued) and without MSG_WAITFORONE
+    returned what was queued instead of waiting for vlen messages."""
+    lines = probe_lines(bus, "checks", "vcan0")
+    assert len(lines) == 15, lines
+
+
+def syscalls_in_burst(trace: str) -> dict[str, int]:
+    """Syscall names and counts between the probe's burst-start and burst-end markers."""
+    counts: dict[str, int] = {}
+    inside = False
+    for line in trace.splitlines():
+        if '"burst-start"' in line:
+            inside = True
+        elif '"burst-end"' in line:
+            break
+        elif inside and (m := re.match(r"(?:\d+\s+)?(\w+)\(", line)):
+            counts[m.group(1)] = counts.get(m.group(1), 0) + 1
+    assert inside, trace[-2000:]
+    return counts
+
+
+@pytest.mark.skipif(shutil.which("strace") is None, reason="needs strace to count syscalls")
+def test_a_burst_takes_a_syscall_per_chunk_not_per_frame(bus, tmp_path):
+    """160 frames out with one sendmmsg and back with one blocking recvmmsg: the kernel takes
+    one syscall each; over the hub at most one real syscall per 64 frames each way. Before,
+    the preload looped: 160 sendto and 160 recvmsg."""
+    trace = tmp_path / "strace.txt"
+    bus.run(["strace", "-f", "-o", str(trace), "-e", "trace=%network,read,write,readv,writev",
+             bus.tool("mmsg_probe"), "burst", "vcan0", str(BURST)], timeout=WAIT_S)
+    counts = syscalls_in_burst(trace.read_text())
+    chunks = math.ceil(BURST / HUB_MMSG_CHUNK)
+    sends = sum(counts.get(name, 0) for name in ("sendmmsg", "sendmsg", "sendto", "write", "writev"))
+    receives = sum(counts.get(name, 0) for name in ("recvmmsg", "recvmsg", "recvfrom", "read", "readv"))
+    assert sends <= chunks and receives <= chunks, counts
