@@ -1,6 +1,7 @@
 """Help for writing scenarios from a recorded trace: a per-id summary (count,
 rate, inferred cycle time, jitter, bus load) and a scenario scaffold that
-replays the trace with gates derived from it."""
+replays the trace with gates derived from it; with a DBC, per-message signal
+statistics and proposed signal ranges and DBC cycle times, marked for review."""
 from __future__ import annotations
 
 import os
@@ -86,12 +87,184 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
                         100 * bits / bitrate / span if span > 0 else 0.0, bitrate)
 
 
-def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000) -> str:
+# ---- signals of a trace, with a DBC (canbench summarise --dbc, canbench scaffold --dbc) ----
+
+SIGNAL_MARGIN_PCT = 10  # a proposed range: the observed min/max widened by this % of the span
+CHOICES_SEEN_MAX = 32   # value-table names kept per signal (a proposal lists what it saw)
+
+
+@dataclass
+class SignalStats:
+    name: str
+    unit: str
+    count: int = 0
+    min: float | None = None
+    max: float | None = None
+    total: float = 0.0
+    names: set[str] | None = None  # value-table names seen (None: the signal has no value table)
+    unnamed: bool = False  # a value its value table has no name for was seen
+
+    def add(self, value: float, name: str | None) -> None:
+        self.count += 1
+        self.total += value
+        self.min = value if self.min is None else min(self.min, value)
+        self.max = value if self.max is None else max(self.max, value)
+        if self.names is not None:
+            if name is None:
+                self.unnamed = True
+            elif len(self.names) < CHOICES_SEEN_MAX:
+                self.names.add(name)
+
+
+@dataclass
+class MessageStats:
+    name: str
+    ident: str
+    frames: int = 0
+    undecodable: int = 0
+    cycle_ms: float | None = None  # the DBC's GenMsgCycleTime of a cyclic message
+    signals: dict[str, SignalStats] | None = None
+
+
+@dataclass
+class SignalSummary:
+    path: Path
+    dbc: Path
+    messages: list[MessageStats]
+    unknown_ids: dict[str, int]  # frames of ids the DBC lacks
+
+    def table(self) -> str:
+        lines = [f"{self.path}: signals decoded with {self.dbc} (cantools): {len(self.messages)} messages of the DBC "
+                 f"seen, {sum(self.unknown_ids.values())} frames of {len(self.unknown_ids)} ids it lacks"
+                 + (f" ({', '.join(sorted(self.unknown_ids)[:10])}{', ...' if len(self.unknown_ids) > 10 else ''})"
+                    if self.unknown_ids else "")]
+        for m in self.messages:
+            cycle = f", DBC cycle {m.cycle_ms:g} ms" if m.cycle_ms else ""
+            bad = f", {m.undecodable} undecodable" if m.undecodable else ""
+            lines.append(f"  {m.name} ({m.ident}): {m.frames} frames{cycle}{bad}")
+            lines.append(f"    {'signal':<28}  {'values':>7}  {'min':>12}  {'max':>12}  {'mean':>12}  "
+                         "unit / names seen")
+            for sig in (m.signals or {}).values():
+                if not sig.count:
+                    lines.append(f"    {sig.name:<28}  {0:>7}  {'-':>12}  {'-':>12}  {'-':>12}  {sig.unit}")
+                    continue
+                names = f" {sorted(sig.names)}" if sig.names else ""
+                lines.append(f"    {sig.name:<28}  {sig.count:>7}  {sig.min:>12.6g}  {sig.max:>12.6g}  "
+                             f"{sig.total / sig.count:>12.6g}  {sig.unit}{names}")
+        return "\n".join(lines)
+
+
+def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
+    """Per message of the DBC seen in the trace: frames, and per signal count, min, max, mean
+    (physical values, as cantools decodes them) and the value-table names seen. One pass, state
+    per signal only."""
+    from .dbc import cycle_time_ms, load_dbc, message_of
+    from .wire import Frame
+    db = load_dbc(dbc_path)
+    stats: dict[str, MessageStats] = {}
+    unknown: dict[str, int] = defaultdict(int)
+    for tf in read_trace(path):
+        m = tf.message
+        frame = Frame(m.arbitration_id, m.dlc, bytes(m.data), m.is_extended_id, m.is_remote_frame)
+        message = message_of(db, frame)
+        if message is None:
+            unknown[id_hex(frame.can_id, frame.extended)] += 1
+            continue
+        if m.is_remote_frame:
+            continue
+        ms = stats.get(message.name)
+        if ms is None:
+            ms = stats[message.name] = MessageStats(
+                message.name, id_hex(message.frame_id, message.is_extended_frame), cycle_ms=cycle_time_ms(message),
+                signals={s.name: SignalStats(s.name, s.unit or "", names=set() if s.choices else None)
+                         for s in message.signals})
+        ms.frames += 1
+        try:
+            values = message.decode(frame.data, decode_choices=False)
+        except Exception:  # noqa: BLE001 - counted: a frame the DBC does not describe
+            ms.undecodable += 1
+            continue
+        signals = {s.name: s for s in message.signals}
+        for name, value in values.items():
+            if isinstance(value, int | float) and ms.signals is not None and name in ms.signals:
+                choice = None
+                if signals[name].choices:
+                    raw = signals[name].conversion.scaled_to_raw(value)
+                    choice = signals[name].choices.get(raw)
+                ms.signals[name].add(float(value), None if choice is None else str(choice))
+    return SignalSummary(path, dbc_path, sorted(stats.values(), key=lambda x: x.ident), dict(unknown))
+
+
+def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list], str]]:
+    """(Message.Signal, expectation, why) proposed from what the trace showed: value-table
+    signals whose every value had a name as one_of those names, others a range of the observed
+    min/max widened by SIGNAL_MARGIN_PCT of the span (of the value when constant), within the
+    signal's DBC limits."""
+    from .dbc import load_dbc
+    db = load_dbc(summary.dbc)
+    out: list[tuple[str, dict[str, list], str]] = []
+    for m in summary.messages:
+        message = db.get_message_by_name(m.name)
+        for sig in (m.signals or {}).values():
+            if not sig.count or sig.min is None or sig.max is None:
+                continue
+            key = f"{m.name}.{sig.name}"
+            seen = f"seen {sig.min:.6g}..{sig.max:.6g}{' ' + sig.unit if sig.unit else ''} in {sig.count} values"
+            if sig.names and not sig.unnamed and len(sig.names) < CHOICES_SEEN_MAX:
+                out.append((key, {"one_of": sorted(sig.names)}, f"value-table names seen in {sig.count} values"))
+                continue
+            span = sig.max - sig.min
+            margin = span * SIGNAL_MARGIN_PCT / 100 if span else (abs(sig.max) * SIGNAL_MARGIN_PCT / 100 or 1.0)
+            low, high = sig.min - margin, sig.max + margin
+            dbc_signal = message.get_signal_by_name(sig.name)
+            if dbc_signal.minimum is not None and sig.min >= dbc_signal.minimum:
+                low = max(low, float(dbc_signal.minimum))
+            if dbc_signal.maximum is not None and sig.max <= dbc_signal.maximum:
+                high = min(high, float(dbc_signal.maximum))
+            beyond = [f"{word} the DBC's {limit:g}" for word, limit, out_of in (
+                ("below", dbc_signal.minimum, dbc_signal.minimum is not None and sig.min < dbc_signal.minimum),
+                ("above", dbc_signal.maximum, dbc_signal.maximum is not None and sig.max > dbc_signal.maximum))
+                if out_of]
+            out.append((key, {"range": [_round(low), _round(high)]},
+                        seen + (f" ({' and '.join(beyond)}: is the DBC right?)" if beyond else "")))
+    return out
+
+
+def _round(v: float) -> float | int:
+    r = float(f"{v:.6g}")
+    return int(r) if r.is_integer() and abs(r) < 1e15 else r
+
+
+def _signals_yaml(summary: SignalSummary) -> str:
+    """expect.signals proposed from the trace, as YAML text under expect (indented by 2), each
+    entry marked for review."""
+    proposals = proposed_signals(summary)
+    if not proposals:
+        return ""
+    lines = [f"  # PROPOSED, REVIEW EACH: from what {summary.path.name} showed, decoded with {summary.dbc.name}:",
+             f"  # observed min/max widened by {SIGNAL_MARGIN_PCT}% of the span (within the DBC's limits), value-table",
+             "  # signals as one_of the names seen. A trace is not a specification: set what the ECU must do,",
+             "  # drop what is not a requirement (counters, checksums).",
+             "  signals:"]
+    for key, spec, why in proposals:
+        body = yaml.safe_dump(spec, default_flow_style=True, width=1000).strip()
+        lines.append(f"    {key}: {body}  # review: {why}")
+    return "\n".join(lines) + "\n"
+
+
+def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000, dbc: Path | None = None) -> str:
     """A scenario replaying the trace, with gates a first run should pass; YAML text.
     The bench mounts only the scenario's directory into its containers, so a trace from
-    elsewhere is copied to <scenario dir>/traces/."""
+    elsewhere is copied to <scenario dir>/traces/ (and a DBC to <scenario dir>/dbc/). With a
+    DBC: cycle times from it (from_dbc) and proposed signal ranges, marked for review."""
     s = summarise(trace, bitrate)
+    signal_summary = summarise_signals(trace, dbc) if dbc is not None else None
     home = scenario_path.resolve().parent
+    if dbc is not None and not dbc.resolve().is_relative_to(home):
+        dbc_copy = home / "dbc" / dbc.name
+        dbc_copy.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(dbc, dbc_copy)
+        dbc = dbc_copy
     if not trace.resolve().is_relative_to(home):
         copy = home / "traces" / trace.name
         copy.parent.mkdir(parents=True, exist_ok=True)
@@ -125,5 +298,18 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
               f"{merged}"
               f"# Periodic ids (cycle inferred from the trace, >= {PERIODIC_STEADY_PCT}% of the gaps within "
               f"+-{STEADY_PCT}% of it) are gated in cycle_time.ids.\n")
+    if dbc is not None and signal_summary is not None:
+        doc = {k: v for key, value in doc.items()
+               for k, v in ([(key, value), ("dbc", os.path.relpath(dbc.resolve(), home))]
+                            if key == "duration_s" else [(key, value)])}
+        from_dbc = {m.ident for m in signal_summary.messages if m.cycle_ms}
+        if from_dbc:  # the database's cycles; ids: keeps only the periodic ids it has no cycle for
+            expect: dict = doc["expect"]  # type: ignore[assignment]
+            ids = {k: v for k, v in expect["cycle_time"]["ids"].items() if k not in from_dbc}
+            expect["cycle_time"] = {"from_dbc": True, "tolerance_pct": expect["cycle_time"]["tolerance_pct"]} \
+                | ({"ids": ids} if ids else {})
+            header += (f"# cycle_time.from_dbc: the DBC's GenMsgCycleTime for its {len(from_dbc)} cyclic messages in "
+                       "the trace (REVIEW: the trace's own cycles are in `canbench summarise`).\n")
+        return header + yaml.safe_dump(doc, sort_keys=False) + _signals_yaml(signal_summary)
     return header + yaml.safe_dump(doc, sort_keys=False)
 

@@ -138,10 +138,16 @@ def _signal_section(result: RunResult) -> str:
             if s.marks:
                 ax.plot([t for t, _ in s.marks], [v for _, v in s.marks], "x", color="red", ms=7,
                         label=f"{'bus' if s.side == 'can' else 'Zenoh'} violations ({s.violation_count})")
+        if gate.one_of is not None or (gate.equals is not None and gate.names):
+            values = sorted(set(gate.names) | set(gate.one_of or ())
+                            | ({gate.equals} if gate.equals is not None else set()))
+            ax.set_yticks(values, [f"{gate.names[v]} ({v:g})" if v in gate.names else f"{v:g}" for v in values],
+                          fontsize=7)
         ax.set_title(f"{bus} {key}{' (' + gate.unit + ')' if gate.unit else ''}: {gate.limits()}", fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("s since the first bus frame")
+    fig.tight_layout()
     return "<h2>Signals</h2>" + table + _png(fig)
 
 

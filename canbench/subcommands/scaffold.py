@@ -1,4 +1,5 @@
-"""canbench scaffold TRACE --name N: a scenario replaying a trace, gates derived from it."""
+"""canbench scaffold TRACE --name N [--dbc F]: a scenario replaying a trace, gates derived from it;
+with a DBC, cycle times from it (from_dbc) and proposed signal ranges, marked for review."""
 from __future__ import annotations
 
 import argparse
@@ -12,7 +13,7 @@ def cmd_scaffold(args) -> int:
     out = args.out or Path("scenarios") / f"{args.name}.yaml"
     if out.exists() and not args.force:
         raise InputError(str(out), None, "exists already (--force to overwrite)")
-    text = authoring.scaffold(args.trace, args.name, out, args.bitrate)
+    text = authoring.scaffold(args.trace, args.name, out, args.bitrate, args.dbc)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     scenario.load(out)  # what we write must be valid
@@ -26,5 +27,6 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", required=True, help="scenario name (lowercase, digits, - and _)")
     p.add_argument("--out", type=Path, help="default scenarios/<name>.yaml")
     p.add_argument("--bitrate", type=int, default=500_000)
+    p.add_argument("--dbc", type=Path, help="propose signal ranges and DBC cycle times from this DBC (review them)")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_scaffold)

@@ -1,4 +1,5 @@
-"""canbench summarise TRACE: per-id counts, cycle times, jitter and bus load of a trace."""
+"""canbench summarise TRACE [--dbc F]: per-id counts, cycle times, jitter and bus load of a trace;
+with a DBC, per message of it the statistics of each signal (count, min, max, mean, names seen)."""
 from __future__ import annotations
 
 import argparse
@@ -10,6 +11,8 @@ from .. import authoring
 def cmd_summarise(args) -> int:
     for trace in args.traces:
         print(authoring.summarise(trace, args.bitrate).table())
+        if args.dbc:
+            print(authoring.summarise_signals(trace, args.dbc).table())
     return 0
 
 
@@ -17,4 +20,5 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("summarise", aliases=["summarize"], help="per-id summary of traces")
     p.add_argument("traces", nargs="+", type=Path)
     p.add_argument("--bitrate", type=int, default=500_000, help="for the bus load (default 500000)")
+    p.add_argument("--dbc", type=Path, help="also per-message signal statistics, decoded with this DBC (cantools)")
     p.set_defaults(func=cmd_summarise)
