@@ -19,10 +19,20 @@
 #include "zn_port_os.h"
 
 #define CAN_RCVBUF_BYTES (4 << 20)
+/* What one queued frame costs a socket's receive buffer at most (skb truesize: a CAN
+ * frame's skb is under 1 KiB on x86-64 and arm64; the userspace hub's unix messages
+ * are smaller still and the hub queues more behind them): capacity = buffer / this. */
+#define CAN_FRAME_RCVBUF_COST 2048
 
 struct zn_can {
 	int fd;
 	char name[IFNAMSIZ];
+	size_t rx_capacity;
+	/* zn_can_receive_burst's vectors: one reader per port */
+	struct mmsghdr mm[ZN_CAN_BURST_MAX];
+	struct iovec iov[ZN_CAN_BURST_MAX];
+	struct can_frame frames[ZN_CAN_BURST_MAX];
+	char control[ZN_CAN_BURST_MAX][CMSG_SPACE(sizeof(struct timespec))];
 };
 
 esp_err_t zn_can_open(const char *name, zn_can_t **out)
@@ -60,6 +70,13 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 		zn_log("E", "%s: bind: %s", name, strerror(errno));
 		goto fail;
 	}
+	int granted = 0;
+	socklen_t len = sizeof(granted);
+	if (getsockopt(can->fd, SOL_SOCKET, SO_RCVBUF, &granted, &len) < 0 || granted <= 0)
+		granted = 0;
+	can->rx_capacity = (size_t)granted / CAN_FRAME_RCVBUF_COST;
+	if (can->rx_capacity < 1)
+		can->rx_capacity = 1;
 	*out = can;
 	return ESP_OK;
 fail:
@@ -113,6 +130,121 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 			memcpy(msg->data, frame.data, msg->data_length_code);
 		return ESP_OK;
 	}
+}
+
+static void from_frame(const struct can_frame *frame, can_message_t *msg)
+{
+	memset(msg, 0, sizeof(*msg));
+	msg->extd = !!(frame->can_id & CAN_EFF_FLAG);
+	msg->rtr = !!(frame->can_id & CAN_RTR_FLAG);
+	msg->identifier = frame->can_id & (msg->extd ? CAN_EFF_MASK : CAN_SFF_MASK);
+	msg->data_length_code = frame->len > CAN_MAX_DLEN ? CAN_MAX_DLEN : frame->len;
+	if (!msg->rtr)
+		memcpy(msg->data, frame->data, msg->data_length_code);
+}
+
+static void to_frame(const can_message_t *msg, struct can_frame *frame)
+{
+	memset(frame, 0, sizeof(*frame));
+	frame->can_id = msg->identifier | (msg->extd ? CAN_EFF_FLAG : 0) | (msg->rtr ? CAN_RTR_FLAG : 0);
+	frame->len = msg->data_length_code;
+	if (!msg->rtr)
+		memcpy(frame->data, msg->data, msg->data_length_code);
+}
+
+static int64_t stamp_of(struct msghdr *mh, int64_t fallback)
+{
+	for (struct cmsghdr *c = CMSG_FIRSTHDR(mh); c; c = CMSG_NXTHDR(mh, c))
+		if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+			struct timespec ts;
+			memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+			return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+		}
+	return fallback;
+}
+
+esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size_t *count, int timeout_ms)
+{
+	*count = 0;
+	if (max == 0)
+		return ESP_ERR_INVALID_ARG;
+	if (max > ZN_CAN_BURST_MAX)
+		max = ZN_CAN_BURST_MAX;
+	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
+	for (int polled = 0;;) {
+		for (size_t i = 0; i < max; i++) {
+			can->iov[i] = (struct iovec){ .iov_base = &can->frames[i], .iov_len = sizeof(can->frames[i]) };
+			can->mm[i].msg_hdr = (struct msghdr){ .msg_iov = &can->iov[i], .msg_iovlen = 1,
+							      .msg_control = can->control[i],
+							      .msg_controllen = sizeof(can->control[i]) };
+		}
+		/* read first, poll only when nothing is queued: under load a burst costs one syscall */
+		int n = recvmmsg(can->fd, can->mm, (unsigned)max, MSG_DONTWAIT, NULL);
+		if (n < 0) {
+			if (errno != EAGAIN && errno != EINTR)
+				return ESP_FAIL;
+			if (polled || timeout_ms == 0)
+				return ESP_ERR_TIMEOUT;
+			int rc = poll(&pfd, 1, timeout_ms);
+			if (rc == 0)
+				return ESP_ERR_TIMEOUT;
+			if (rc < 0)
+				return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+			polled = 1;
+			continue;
+		}
+		int64_t now = 0;
+		for (int i = 0; i < n; i++) {
+			if (can->mm[i].msg_len == 0)
+				return *count ? ESP_OK : ESP_FAIL; /* end of file: not a CAN socket any more */
+			const struct can_frame *frame = &can->frames[i];
+			if (can->mm[i].msg_len != sizeof(*frame) || (frame->can_id & CAN_ERR_FLAG))
+				continue; /* error frames and anything unexpected are not bridged */
+			if (!now)
+				now = zn_realtime_ns(); /* a frame without a stamp: its read time */
+			out[*count].rx_time_ns = stamp_of(&can->mm[i].msg_hdr, now);
+			from_frame(frame, &out[*count].msg);
+			(*count)++;
+		}
+		if (*count)
+			return ESP_OK;
+	}
+}
+
+size_t zn_can_rx_capacity(zn_can_t *can)
+{
+	return can->rx_capacity;
+}
+
+esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *sent, int timeout_ms)
+{
+	struct can_frame frames[ZN_CAN_BURST_MAX];
+	struct iovec iov[ZN_CAN_BURST_MAX];
+	struct mmsghdr mm[ZN_CAN_BURST_MAX];
+	int64_t deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000;
+	*sent = 0;
+	while (*sent < n) {
+		size_t k = n - *sent < ZN_CAN_BURST_MAX ? n - *sent : ZN_CAN_BURST_MAX;
+		for (size_t i = 0; i < k; i++) {
+			to_frame(&msgs[*sent + i], &frames[i]);
+			iov[i] = (struct iovec){ .iov_base = &frames[i], .iov_len = sizeof(frames[i]) };
+			mm[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iov[i], .msg_iovlen = 1 } };
+		}
+		int r = sendmmsg(can->fd, mm, (unsigned)k, MSG_DONTWAIT);
+		if (r > 0) {
+			*sent += (size_t)r;
+			continue;
+		}
+		if (r < 0 && errno != ENOBUFS && errno != EAGAIN)
+			return ESP_FAIL;
+		/* tx queue full: wait for room, bounded */
+		int left_ms = (int)((deadline - zn_monotonic_ns()) / 1000000);
+		if (left_ms <= 0)
+			return ESP_ERR_TIMEOUT;
+		struct pollfd pfd = { .fd = can->fd, .events = POLLOUT };
+		poll(&pfd, 1, left_ms);
+	}
+	return ESP_OK;
 }
 
 esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)

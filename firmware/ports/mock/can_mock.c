@@ -1,6 +1,7 @@
 /* can_mock.c - in-memory CAN port: frames injected by tests are received,
  * transmitted frames are recorded per bus. */
 #include <pthread.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -20,6 +21,8 @@ struct mock_bus {
 	size_t tx_len;
 	int stalled;
 	unsigned generation; /* handles of an older generation are of a bus that went away */
+	size_t capacity;     /* frames held before injected ones are dropped (0: MOCK_FRAMES) */
+	size_t rx_drops, reads, tx_calls; /* frames dropped; receive and transmit calls that moved frames */
 };
 
 struct zn_can {
@@ -57,17 +60,65 @@ void mock_can_reset(void)
 	pthread_mutex_unlock(&lock);
 }
 
-void mock_can_inject(const char *bus, const can_message_t *msg, int64_t rx_time_ns)
+static void inject_locked(struct mock_bus *b, const can_message_t *msg, int64_t rx_time_ns)
 {
-	pthread_mutex_lock(&lock);
-	struct mock_bus *b = find_bus(bus, 1);
-	if (b->rx_len < MOCK_FRAMES) {
+	size_t cap = b->capacity ? b->capacity : MOCK_FRAMES;
+	if (b->rx_len < cap) {
 		size_t at = (b->rx_head + b->rx_len++) % MOCK_FRAMES;
 		b->rx[at] = *msg;
 		b->rx_time[at] = rx_time_ns;
+	} else {
+		b->rx_drops++;
 	}
+}
+
+void mock_can_inject(const char *bus, const can_message_t *msg, int64_t rx_time_ns)
+{
+	pthread_mutex_lock(&lock);
+	inject_locked(find_bus(bus, 1), msg, rx_time_ns);
 	pthread_cond_broadcast(&arrived);
 	pthread_mutex_unlock(&lock);
+}
+
+void mock_can_inject_burst(const char *bus, const can_message_t *msgs, size_t n, int64_t first_rx_time_ns)
+{
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 1);
+	for (size_t i = 0; i < n; i++)
+		inject_locked(b, &msgs[i], first_rx_time_ns + (int64_t)i);
+	pthread_cond_broadcast(&arrived);
+	pthread_mutex_unlock(&lock);
+}
+
+void mock_can_set_capacity(const char *bus, size_t frames)
+{
+	pthread_mutex_lock(&lock);
+	find_bus(bus, 1)->capacity = frames < MOCK_FRAMES ? frames : MOCK_FRAMES;
+	pthread_mutex_unlock(&lock);
+}
+
+static size_t read_counter(const char *bus, size_t offset)
+{
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 0);
+	size_t n = b ? *(size_t *)((char *)b + offset) : 0;
+	pthread_mutex_unlock(&lock);
+	return n;
+}
+
+size_t mock_can_rx_drops(const char *bus)
+{
+	return read_counter(bus, offsetof(struct mock_bus, rx_drops));
+}
+
+size_t mock_can_reads(const char *bus)
+{
+	return read_counter(bus, offsetof(struct mock_bus, reads));
+}
+
+size_t mock_can_tx_calls(const char *bus)
+{
+	return read_counter(bus, offsetof(struct mock_bus, tx_calls));
 }
 
 size_t mock_can_tx_count(const char *bus)
@@ -150,8 +201,49 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 	*rx_time_ns = b->rx_time[b->rx_head];
 	b->rx_head = (b->rx_head + 1) % MOCK_FRAMES;
 	b->rx_len--;
+	b->reads++;
 	pthread_mutex_unlock(&lock);
 	return ESP_OK;
+}
+
+esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size_t *count, int timeout_ms)
+{
+	*count = 0;
+	if (max == 0)
+		return ESP_ERR_INVALID_ARG;
+	if (max > ZN_CAN_BURST_MAX)
+		max = ZN_CAN_BURST_MAX;
+	struct timespec ts = mock_deadline(timeout_ms);
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = can->bus;
+	while (b->rx_len == 0 || can->generation != b->generation) {
+		if (can->generation != b->generation) {
+			pthread_mutex_unlock(&lock);
+			return ESP_FAIL;
+		}
+		if (timeout_ms == 0 || pthread_cond_timedwait(&arrived, &lock, &ts) != 0) {
+			pthread_mutex_unlock(&lock);
+			return ESP_ERR_TIMEOUT;
+		}
+	}
+	while (*count < max && b->rx_len) {
+		out[*count].msg = b->rx[b->rx_head];
+		out[*count].rx_time_ns = b->rx_time[b->rx_head];
+		(*count)++;
+		b->rx_head = (b->rx_head + 1) % MOCK_FRAMES;
+		b->rx_len--;
+	}
+	b->reads++;
+	pthread_mutex_unlock(&lock);
+	return ESP_OK;
+}
+
+size_t zn_can_rx_capacity(zn_can_t *can)
+{
+	pthread_mutex_lock(&lock);
+	size_t cap = can->bus->capacity ? can->bus->capacity : MOCK_FRAMES;
+	pthread_mutex_unlock(&lock);
+	return cap;
 }
 
 esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
@@ -171,6 +263,36 @@ esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_m
 		}
 	if (can->bus->tx_len < MOCK_FRAMES)
 		can->bus->tx[can->bus->tx_len++] = *msg;
+	can->bus->tx_calls++;
+	pthread_cond_broadcast(&sent);
+	pthread_mutex_unlock(&lock);
+	return ESP_OK;
+}
+
+esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *done, int timeout_ms)
+{
+	struct timespec ts = mock_deadline(timeout_ms);
+	*done = 0;
+	pthread_mutex_lock(&lock);
+	for (;;) {
+		if (can->generation != can->bus->generation) {
+			pthread_mutex_unlock(&lock);
+			return ESP_FAIL;
+		}
+		if (!can->bus->stalled)
+			break;
+		if (can->bus->stalled == MOCK_HOLD)
+			pthread_cond_wait(&sent, &lock);
+		else if (pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
+			pthread_mutex_unlock(&lock);
+			return ESP_ERR_TIMEOUT;
+		}
+	}
+	for (; *done < n; (*done)++)
+		if (can->bus->tx_len < MOCK_FRAMES)
+			can->bus->tx[can->bus->tx_len++] = msgs[*done];
+	if (n)
+		can->bus->tx_calls++;
 	pthread_cond_broadcast(&sent);
 	pthread_mutex_unlock(&lock);
 	return ESP_OK;

@@ -59,6 +59,14 @@ void mock_can_stall(const char *bus, int stalled);
  * now on; a zn_can_open after this gets a working handle again. */
 void mock_can_lose(const char *bus);
 can_message_t mock_can_tx(const char *bus, size_t i);
+/* n frames arriving at once (stamps first_rx_time_ns + i): a reader wakes once for them. */
+void mock_can_inject_burst(const char *bus, const can_message_t *msgs, size_t n, int64_t first_rx_time_ns);
+/* The port holds at most this many received frames; injected ones beyond are dropped. */
+void mock_can_set_capacity(const char *bus, size_t frames);
+size_t mock_can_rx_drops(const char *bus);
+/* Receive calls that returned frames (zn_can_receive or _burst); transmit calls that sent. */
+size_t mock_can_reads(const char *bus);
+size_t mock_can_tx_calls(const char *bus);
 
 /* Zenoh */
 size_t mock_zenoh_put_count(void);

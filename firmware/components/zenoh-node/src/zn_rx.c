@@ -28,6 +28,10 @@ static_assert(sizeof(struct rx_entry) <= 40, "a queued CAN frame (rx_queue_frame
 /* ... with several classes: a lower class's chunk is what a higher class's frame may wait for */
 #define CLASS_CHUNK 4
 
+#define HOLD_FIRST_NS 1000000 /* batching: the first sleep of a stretch, before its rate is known */
+
+static int flush_due[ZN_MAX_BUSES]; /* batching: the reader's drain at a period's end is queued (b->lock) */
+
 esp_err_t zn_rx_queue_init(struct bus *b)
 {
 	char err[160];
@@ -75,11 +79,9 @@ void zn_rx_queue_free(struct bus *b)
 	}
 }
 
-esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_time_ns)
+/* Counts a received frame and says whether it goes to a queue (invalid and filtered ones are counted). */
+static esp_err_t admit(struct bus *b, const can_message_t *msg)
 {
-	if (bus_index >= zn_node.cfg.bus_count || !zn_node.running)
-		return ESP_ERR_INVALID_STATE;
-	struct bus *b = &zn_node.buses[bus_index];
 	COUNT(b->n.can_rx_frames);
 	uint8_t wire[ZN_WIRE_FRAME_SIZE];
 	if (zn_wire_encode(msg, wire, sizeof(wire)) < 0) {
@@ -91,13 +93,17 @@ esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_
 	}
 	if (!zn_node_id_allowed(&zn_node.cfg, msg)) {
 		COUNT(b->n.filtered);
-		return ESP_OK;
+		return ESP_ERR_NOT_FOUND;
 	}
+	return ESP_OK;
+}
+
+/* Numbers an admitted frame and queues it in its class (b->lock held). */
+static esp_err_t enqueue_locked(struct bus *b, const can_message_t *msg, int64_t rx_time_ns)
+{
 	struct rx_ring *r = &b->ring[zn_qos_class_of(&b->qos, msg)];
-	zn_mutex_lock(b->lock);
 	uint64_t seq = b->next_seq++;
 	if (r->len == r->cap) {
-		zn_mutex_unlock(b->lock);
 		COUNT(b->n.rx_queue_drops);
 		COUNT(r->drops);
 		return ESP_ERR_NO_MEM;
@@ -107,14 +113,27 @@ esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_
 	e->msg = *msg;
 	e->rx_time_ns = rx_time_ns;
 	e->seq = seq;
+	return ESP_OK;
+}
+
+esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_time_ns)
+{
+	if (bus_index >= zn_node.cfg.bus_count || !zn_node.running)
+		return ESP_ERR_INVALID_STATE;
+	struct bus *b = &zn_node.buses[bus_index];
+	esp_err_t rc = admit(b, msg);
+	if (rc != ESP_OK)
+		return rc == ESP_ERR_NOT_FOUND ? ESP_OK : rc;
+	zn_mutex_lock(b->lock);
+	rc = enqueue_locked(b, msg, rx_time_ns);
 	/* Wake the publisher only when it has something to do: it sleeps on an empty queue
 	 * (immediate mode) or until its period ends or a batch is full (batching mode).
 	 * A wakeup per frame would cost two context switches per frame for nothing. */
 	size_t wake_at = zn_node.cfg.publish_period_ms ? zn_node.cfg.batch_max_frames : 1;
-	if (b->queued == wake_at)
+	if (rc == ESP_OK && b->queued == wake_at)
 		zn_cond_signal(b->nonempty);
 	zn_mutex_unlock(b->lock);
-	return ESP_OK;
+	return rc;
 }
 
 static void publish(struct bus *b, size_t cls, const struct rx_entry *frames, size_t n)
@@ -182,13 +201,19 @@ void zn_rx_publisher_thread(void *arg)
 				zn_cond_wait(b->nonempty, b->lock, -1);
 		} else {
 			/* wait for the period to end, unless a full batch is already there */
-			while (!zn_node.stopping && b->queued < batch_max) {
+			while (!zn_node.stopping && b->queued < batch_max && !flush_due[b->index]) {
 				int64_t left_ms = (next_flush - zn_monotonic_ns()) / 1000000;
 				if (left_ms <= 0)
 					break;
 				zn_cond_wait(b->nonempty, b->lock, (int)left_ms);
 			}
-			if (zn_monotonic_ns() >= next_flush)
+			if (flush_due[b->index]) {
+				/* the reader ends the periods while frames come: this timer only catches
+				 * frames submitted otherwise (zn_node_submit); cleared once all is taken */
+				if (b->queued <= take_max)
+					flush_due[b->index] = 0;
+				next_flush = zn_monotonic_ns() + 2 * (int64_t)period_ms * 1000000;
+			} else if (zn_monotonic_ns() >= next_flush)
 				next_flush += (int64_t)period_ms * 1000000 *
 					      (1 + (zn_monotonic_ns() - next_flush) / ((int64_t)period_ms * 1000000));
 		}
@@ -213,22 +238,120 @@ void zn_rx_publisher_thread(void *arg)
 	free(taken);
 }
 
+/* ---- the reader: bursts from the CAN port ----
+ *
+ * Immediate mode: each wakeup reads everything queued (one zn_can_receive_burst
+ * per ZN_CAN_BURST_MAX frames) and queues it under one lock, waking the
+ * publisher once if it was idle. Batching mode (publish_period_ms > 0): the
+ * port keeps the frames and their stamps; after the first frame of an active
+ * stretch the reader sleeps until the period ends, reads all, and asks the
+ * publisher to flush: one reader and one publisher wakeup per period. It wakes
+ * sooner when the port would otherwise fill: the rate measured over the last
+ * sleep and zn_can_rx_capacity bound the next sleep to half the capacity's
+ * worth of frames; a stretch starts with a 1 ms sleep, each next one at most
+ * twice the last, so a rate is known before a sleep is long. A period without
+ * frames ends the stretch (the reader then blocks until the next frame). The
+ * reader never waits for Zenoh. */
+
+
+/* Queues one burst: one lock; the publisher woken once at most. */
+static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, int flush)
+{
+	size_t wake_at = zn_node.cfg.publish_period_ms ? zn_node.cfg.batch_max_frames : 1;
+	zn_mutex_lock(b->lock);
+	size_t before = b->queued;
+	for (size_t i = 0; i < n; i++)
+		if (admit(b, &rx[i].msg) == ESP_OK)
+			enqueue_locked(b, &rx[i].msg, rx[i].rx_time_ns);
+	if (flush)
+		flush_due[b->index] = 1;
+	if (flush || (before < wake_at && b->queued >= wake_at))
+		zn_cond_signal(b->nonempty);
+	zn_mutex_unlock(b->lock);
+}
+
+/* Reads what the port holds, a burst at a time until one comes back short; queues each. */
+static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, int timeout_ms, size_t *total)
+{
+	*total = 0;
+	for (;;) {
+		size_t n = 0;
+		esp_err_t rc = zn_can_receive_burst(b->can, rx, ZN_CAN_BURST_MAX, &n, timeout_ms);
+		if (rc != ESP_OK)
+			return *total ? ESP_OK : rc; /* a lost bus shows on the next call */
+		submit_burst(b, rx, n, 0);
+		*total += n;
+		if (n < ZN_CAN_BURST_MAX)
+			return ESP_OK;
+		timeout_ms = 0;
+	}
+}
+
+static void request_flush(struct bus *b)
+{
+	submit_burst(b, NULL, 0, 1);
+}
+
 void zn_rx_reader_thread(void *arg)
 {
 	struct bus *b = arg;
 	int backoff_ms = CAN_REOPEN_MIN_MS;
+	int64_t period_ns = (int64_t)zn_node.cfg.publish_period_ms * 1000000;
+	zn_can_rx_t *rx = malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* off the stack: a small task's budget */
+	if (!rx) {
+		zn_log("E", "%s: out of memory for the reader", b->name);
+		return;
+	}
+	int64_t flush_at = 0;	       /* batching: end of the current period; 0 = idle */
+	int64_t last_drain = 0, hold = 0; /* when the port was last drained; how long it may keep frames now */
+	size_t period_frames = 0;
 	while (!zn_node.stopping) {
-		can_message_t msg;
-		int64_t rx_time_ns;
-		esp_err_t rc = zn_can_receive(b->can, &msg, &rx_time_ns, CAN_RECEIVE_TIMEOUT_MS);
-		if (rc == ESP_OK) {
-			zn_node_submit(b->index, &msg, rx_time_ns);
+		int timeout_ms = CAN_RECEIVE_TIMEOUT_MS;
+		if (flush_at) {
+			int64_t now = zn_monotonic_ns();
+			int64_t wake = flush_at < last_drain + hold ? flush_at : last_drain + hold;
+			if (wake > now && zn_stop_wait((int)((wake - now + 999999) / 1000000)))
+				break;
+			timeout_ms = 0;
+		}
+		size_t n = 0;
+		esp_err_t rc = drain(b, rx, timeout_ms, &n);
+		if (rc == ESP_OK || rc == ESP_ERR_TIMEOUT) {
 			backoff_ms = CAN_REOPEN_MIN_MS;
+			if (!period_ns)
+				continue;
+			int64_t now = zn_monotonic_ns();
+			if (!flush_at) {
+				if (n) { /* a stretch starts: the period's clock runs from its first frame */
+					flush_at = now + period_ns;
+					hold = HOLD_FIRST_NS < period_ns ? HOLD_FIRST_NS : period_ns;
+					period_frames = n;
+					last_drain = now;
+				}
+				continue;
+			}
+			/* half the port's capacity at the rate of the last sleep, at most twice the
+			 * last hold (the rate is only known for sleeps that short) and the period */
+			int64_t half = (int64_t)zn_can_rx_capacity(b->can) / 2;
+			int64_t fits = n ? half * (now - last_drain) / (int64_t)n : period_ns;
+			hold = fits < 2 * hold ? fits : 2 * hold;
+			if (hold > period_ns)
+				hold = period_ns;
+			last_drain = now;
+			period_frames += n;
+			if (now >= flush_at) {
+				request_flush(b);
+				flush_at = period_frames ? flush_at + period_ns : 0;
+				if (flush_at && flush_at <= now)
+					flush_at = now + period_ns; /* behind (a stall): a full period from now */
+				period_frames = 0;
+			}
 			continue;
 		}
-		if (rc == ESP_ERR_TIMEOUT)
-			continue;
 		/* bus gone (interface down, userspace hub restarted): reopen with backoff */
+		if (flush_at)
+			request_flush(b); /* what was read before it went goes out now */
+		flush_at = 0;
 		zn_log("W", "%s: CAN bus lost, reopening in %d ms", b->name, backoff_ms);
 		if (zn_stop_wait(backoff_ms))
 			break;
@@ -245,4 +368,8 @@ void zn_rx_reader_thread(void *arg)
 			backoff_ms *= 2;
 		}
 	}
+	/* stopping: what the port still holds goes out with the publisher's last flush */
+	size_t n = 0;
+	drain(b, rx, 0, &n);
+	free(rx);
 }
