@@ -63,7 +63,7 @@ FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
 .PHONY: setup venv summarise scaffold validate open bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-host bench-tools zn-flood test clean preflight base images \
+        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -275,10 +275,16 @@ bench-paths: ucan firmware zenohd bench-tools zn-flood
 bench-callgrind: ucan firmware zenohd bench-tools zn-flood
 	ZENOHD=$(ZENOHD) $(PYTHON) -m bench.callgrind $(BENCH_TOOLS) $(if $(BENCH_RECORD),--record)
 
+# What the CAN -> Zenoh QoS table (--rx-qos) buys: a high-priority id's latency under a flood with
+# and without it, loss per reliability and congestion control while zenohd is stopped
+# (BENCH_QUICK=1: a smoke run).
+bench-qos: ucan firmware zenohd bench-tools
+	ZENOHD=$(ZENOHD) $(PYTHON) -m bench.qos $(BENCH_TOOLS) $(if $(BENCH_QUICK),--quick)
+
 # Benchmarks for nightly runs, never part of check (docs/benchmark.md, docs/userspace-bus.md):
 # in compose, with the binaries of the images `make test` runs (compose.bench.yaml, no network);
 # BENCHMARKS= picks some of them. bench-host runs the same scripts with the host's builds.
-BENCHMARKS ?= bus bridge capture paths callgrind viewer
+BENCHMARKS ?= bus bridge capture paths callgrind qos viewer
 bench: images
 	@scripts/build-images $(BENCH_TAG) $(BENCH_BASE) bench
 	@mkdir -p $(BENCH_OUT)
@@ -290,7 +296,7 @@ bench: images
 bench-viewer:
 	$(PYTHON) -m bench.viewer --out $(BENCH_OUT)
 
-bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-viewer
+bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-viewer
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }
