@@ -10,6 +10,7 @@ from pathlib import Path
 
 from . import oracle, signals, wire
 from .capture import iter_zenoh_capture
+from .commands import stale_at_put
 from .faults import disruptive
 from .runkeys import rx_key, tx_key
 from .scenario import Scenario
@@ -125,6 +126,11 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             for c in (comparison, tx, round_trip):
                 if c is not None:
                     oracle.apply_fault_windows(c, windows)
+        stale = stale_at_put(scenario)
+        if tx is not None and stale:
+            # stamped older than the deadline when put: the bridge must refuse them, no loss of zenoh_to_can's
+            # (checks.no_stale_commands judges them)
+            tx.lost = [o for o in tx.lost if (bus, o.frame.can_id, o.frame.extended) not in stale]
         not_captured = sum((sent_by_ecus - Counter(oracle.frame_key(o.frame) for o in can_frames)).values())
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
                                _cycle_times(from_ecus, comparison.matched), can_frames, not_captured))

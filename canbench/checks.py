@@ -10,9 +10,10 @@ from functools import wraps
 
 from . import rxqos, signals, validity, wire
 from .analysis import RunResult
+from .commands import stale_at_put, stamp_ages_ns
 from .dbc import cycle_time_ms, load_dbc
 from .faults import disruptive, last_bridge_restart_ns
-from .oracle import describe
+from .oracle import FAULT_LEAD_NS, describe
 
 SHOW = 10  # frames listed per problem
 
@@ -392,6 +393,71 @@ def bridge_stats_agree(result: RunResult) -> list[str] | None:
     return problems
 
 
+def freshness(result: RunResult) -> dict:
+    """Per bus, what no_stale_commands judges (kept in metrics.json as `freshness`): the deadline;
+    how many commands reached the bus and how many of them later than the deadline after their
+    source time (put time, less stamp_age_ms), the largest such age; the bridge's tx_rejected.stale;
+    the commands stamped too old when put and refused; the commands lost inside fault windows, per
+    window (what the bridge's stale refusals are attributed to)."""
+    if "freshness" in result.metrics:
+        return result.metrics["freshness"]
+    deadline_ms = result.scenario.tx_max_age_ms
+    ages, aged_out = stamp_ages_ns(result.scenario), stale_at_put(result.scenario)
+    windows = disruptive((result.metrics.get("faults") or {}).get("windows", []))
+    out = {}
+    for b in result.buses:
+        c = b.zenoh_to_can
+        if c is None or not b.commands:
+            continue
+        def key(o, bus=b.bus):
+            return (bus, o.frame.can_id, o.frame.extended)
+        pairs = list(c.matched) + [(s, r) for s, r, _ in c.corrupted]
+        aged = [(s, r, (r.t_ns - s.t_ns + ages.get(key(s), 0)) / 1e6) for s, r in pairs]
+        late = sorted((a for a in aged if a[2] > deadline_ms), key=lambda a: -a[2])
+        reached = {id(s) for s, _ in pairs}
+        per_window = [{"action": w["action"], "start_s": w.get("start_s"), "lost": 0} for w in windows]
+        for o in c.lost_in_faults:
+            at = [i for i, w in enumerate(windows) if w["start_ns"] - FAULT_LEAD_NS <= o.t_ns]
+            if at:
+                per_window[at[-1]]["lost"] += 1
+        stats = next((s for s in (result.bridge_stats or {}).get("buses", []) if s["bus"] == b.bus), None)
+        out[b.bus] = {
+            "deadline_ms": deadline_ms,
+            "reached_bus": len(pairs),
+            "late": len(late),
+            "max_age_ms": round(max((a[2] for a in aged), default=0.0), 3),
+            "late_examples": [f"{describe(s)} reached the bus {age:.1f} ms after its source time ({describe(r)})"
+                              for s, r, age in late[:10]],
+            "refused_stale": (stats or {}).get("tx_rejected", {}).get("stale"),
+            "stamped_stale": sum(1 for s in b.commands if key(s) in aged_out),
+            "stamped_stale_refused": sum(1 for s in b.commands if key(s) in aged_out and id(s) not in reached),
+            "lost_in_faults": len(c.lost_in_faults),
+            "lost_per_window": per_window,
+        }
+    result.metrics["freshness"] = out
+    return out
+
+
+def no_stale_commands(result: RunResult) -> list[str] | None:
+    """Every command that reached the bus did so within the bridge's deadline (bridge.tx_max_age_ms)
+    of its source time, and what the bridge refused as stale (tx_rejected.stale) is explained: commands
+    stamped too old when put, or lost inside a fault window (a stalled link delivers them late)."""
+    if not result.scenario.commands or not result.scenario.tx_max_age_ms:
+        return None
+    problems = []
+    for bus, f in freshness(result).items():
+        if f["late"]:
+            problems.append(f"{bus}: {f['late']} of {f['reached_bus']} commands reached the bus older than the "
+                            f"deadline {f['deadline_ms']} ms (oldest {f['max_age_ms']:.1f} ms): "
+                            + "; ".join(f["late_examples"]) + (" ..." if f["late"] > len(f["late_examples"]) else ""))
+        explained = f["stamped_stale_refused"] + f["lost_in_faults"]
+        if f["refused_stale"] is not None and f["refused_stale"] > explained:
+            problems.append(f"{bus}: the bridge refused {f['refused_stale']} commands as stale; only {explained} are "
+                            f"explained ({f['stamped_stale_refused']} stamped too old when put, {f['lost_in_faults']} "
+                            "lost inside fault windows): commands refused without a stalled link")
+    return problems
+
+
 _BRIDGE_CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "integrity": integrity,
     "ordering": ordering,
@@ -412,6 +478,7 @@ _BRIDGE_CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "only_expected_keys": only_expected_keys,
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,
+    "no_stale_commands": no_stale_commands,
 }
 CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "valid_run": valid_run, **{name: _on_the_bridge(check) for name, check in _BRIDGE_CHECKS.items()}}

@@ -1,14 +1,16 @@
 """The consumer's side of Zenoh -> CAN: puts the scenario's commands (a trace or
 generated messages) on the bridge's tx key with their timing, one frame per
 sample as a vehicle application would, and logs each put (commands.tsv, the
-send-log format of the ECUs) for the oracle."""
+send-log format of the ECUs) for the oracle. Each command carries the bridge's
+attachment (docs/bridge.md): its sequence number on the bus and its source
+time, the put time (less the entry's stamp_age_ms), which the bridge's deadline
+(tx_max_age_ms) is judged on."""
 from __future__ import annotations
 
 import threading
 import time
 from pathlib import Path
-
-import zenoh
+from typing import TYPE_CHECKING
 
 from . import periodic, wire
 from .plans import SENT_LOG_HEADER, frame_of, sent_line, timed_plan
@@ -16,14 +18,37 @@ from .runkeys import tx_key
 from .scenario import Commands, Scenario
 from .trace import read_trace
 
+if TYPE_CHECKING:  # the analysis uses this module's plan without a Zenoh session
+    import zenoh
+
 
 def plan(scenario: Scenario) -> list[tuple[float, str, int, wire.Frame]]:
     """(offset s, bus, source line, frame) of every command, in time order."""
+    return [item[:4] for item in _aged_plan(scenario)]
+
+
+def _aged_plan(scenario: Scenario) -> list[tuple[float, str, int, wire.Frame, int]]:
+    """plan(), each with how long before its put its source time is (ns, the entry's stamp_age_ms)."""
     out = []
-    for c in scenario.commands:
-        out += [(m.timestamp, c.bus, line, frame_of(m)) for line, m in _messages(c)]
+    ages = scenario.stamp_ages_ms() if hasattr(scenario, "stamp_ages_ms") else []  # a plain plan: none
+    for i, c in enumerate(scenario.commands):
+        age_ns = int(ages[i] * 1e6) if i < len(ages) else 0
+        out += [(m.timestamp, c.bus, line, frame_of(m), age_ns) for line, m in _messages(c)]
     out.sort(key=lambda item: item[0])
     return out
+
+
+def stamp_ages_ns(scenario: Scenario) -> dict[tuple[str, int, bool], int]:
+    """(bus, id, extended) -> how long before its put a command's source time is (ns), for the commands
+    of entries with a stamp_age_ms (their ids are theirs alone, the schema says)."""
+    return {(bus, f.can_id, f.extended): age_ns for _, bus, _, f, age_ns in _aged_plan(scenario) if age_ns}
+
+
+def stale_at_put(scenario: Scenario) -> set[tuple[str, int, bool]]:
+    """(bus, id, extended) of the commands stamped older than the bridge's deadline when put (an
+    entry's stamp_age_ms over tx_max_age_ms): the bridge must refuse every one; none with the deadline off."""
+    deadline_ns = scenario.tx_max_age_ms * 1_000_000
+    return {k for k, age_ns in stamp_ages_ns(scenario).items() if age_ns > deadline_ns} if deadline_ns else set()
 
 
 def _messages(c: Commands):
@@ -37,7 +62,7 @@ class Commander(threading.Thread):
 
     def __init__(self, session: zenoh.Session, scenario: Scenario, log_path: Path, prefix: str = "vehicle/can"):
         super().__init__(name="commander", daemon=True)
-        self.items = plan(scenario)
+        self.items = _aged_plan(scenario)
         self.log_path = log_path
         buses = scenario.bus_names
         self.publishers = {b: session.declare_publisher(tx_key(prefix, b, len(buses))) for b in buses}
@@ -49,12 +74,16 @@ class Commander(threading.Thread):
             with open(self.log_path, "w") as log:
                 log.write(SENT_LOG_HEADER)
                 start = time.monotonic()
-                for offset, bus, line, frame in self.items:
+                seq = dict.fromkeys(self.publishers, 0)
+                for offset, bus, line, frame, age_ns in self.items:
                     delay = start + offset - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)  # pacing to the scenario's timing, not synchronisation
                     now_ns = time.time_ns()
-                    self.publishers[bus].put(wire.encode(frame))
+                    # the source time the bridge's deadline judges: the put time, as a sender stamps its command
+                    attachment = wire.encode_attachment(seq[bus], [now_ns - age_ns])
+                    seq[bus] += 1
+                    self.publishers[bus].put(wire.encode(frame), attachment=attachment)
                     self.sent += 1
                     log.write(sent_line(line, now_ns, frame, bus))
         except BaseException as e:  # reported by the orchestrator, never lost in a thread

@@ -143,6 +143,16 @@ class Scenario:
     def echoes(self) -> list[Ecu]:
         return [e for e in self.ecus if e.role == "echo"]
 
+    @property
+    def tx_max_age_ms(self) -> int:
+        """The bridge's command deadline (bridge.tx_max_age_ms, the schema's default when absent; 0 = off)."""
+        return int(self.bridge.get("tx_max_age_ms", schema()["properties"]["bridge"]["properties"]["tx_max_age_ms"]
+                                   ["default"]))
+
+    def stamp_ages_ms(self) -> list[float]:
+        """Per commands entry (in order): how long before its put its source time is (stamp_age_ms)."""
+        return [float(spec.get("stamp_age_ms", 0)) for spec in (self.raw.get("commands") or [])]
+
 
 def schema() -> dict:
     return json.loads(SCHEMA_PATH.read_text())

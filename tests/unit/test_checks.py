@@ -59,3 +59,76 @@ def test_too_few_samples_cannot_pass_a_soak_gate():
     few = soak_result([20.0] * 5, [12] * 3, {"bridge_rss_slope_mib_per_h": 2, "bridge_fd_growth": 0})
     assert "too few memory samples" in checks.bridge_memory(few)[0]
     assert "too few descriptor samples" in checks.bridge_fds(few)[0]
+
+
+STALE_SCENARIO = """name: stale
+description: commands, one entry stamped too old when put
+duration_s: 5
+buses: [{name: vcan0}]
+ecus:
+  - {name: engine, bus: vcan0, role: periodic, run_s: 1, messages: [{id: "0C0", cycle_ms: 10}]}
+commands:
+  - {bus: vcan0, run_s: 1, messages: [{id: "6A0", cycle_ms: 20}]}
+  - {bus: vcan0, run_s: 1, stamp_age_ms: 500, messages: [{id: "6B0", cycle_ms: 200}]}
+bridge: {tx_max_age_ms: %s}
+expect: {integrity: true}
+"""
+
+
+def stale_result(tmp_path, sent: list[tuple[int, int, int | None]], stale: int | None, lost_in_faults: int = 0,
+                 windows: list[dict] | None = None, deadline: int = 100) -> SimpleNamespace:
+    """sent: (id, put ms, bus ms or None = never reached the bus); stale: the bridge's tx_rejected.stale."""
+    from canbench import oracle, scenario, wire
+    path = tmp_path / "stale.yaml"
+    path.write_text(STALE_SCENARIO % deadline)
+    sc = scenario.load(path)
+    ms = 1_000_000
+    cmds, matched = [], []
+    for i, (can_id, put, bus) in enumerate(sent):
+        s = oracle.Observed(wire.Frame(can_id, 1, bytes([i])), 10**18 + put * ms, i, line=i + 2, origin="commands.tsv")
+        cmds.append(s)
+        if bus is not None:
+            matched.append((s, oracle.Observed(s.frame, 10**18 + bus * ms, i, line=100 + i)))
+    lost = [oracle.Observed(wire.Frame(0x6A0, 1, b"\xff"), 10**18 + w, 0) for w in range(lost_in_faults)]
+    tx = SimpleNamespace(matched=matched, corrupted=[], lost_in_faults=lost)
+    stats = {"buses": [{"bus": "vcan0", "tx_rejected": {"stale": stale}}]} if stale is not None else None
+    faults = {"windows": windows or []}
+    return SimpleNamespace(scenario=sc, buses=[SimpleNamespace(bus="vcan0", zenoh_to_can=tx, commands=cmds)],
+                           bridge_stats=stats, metrics={"faults": faults})
+
+
+def test_commands_within_the_deadline_pass(tmp_path):
+    r = stale_result(tmp_path, [(0x6A0, 0, 1), (0x6A0, 20, 21), (0x6A0, 40, 140)], stale=0)
+    assert checks.no_stale_commands(r) == []
+    assert r.metrics["freshness"]["vcan0"]["max_age_ms"] == 100.0
+
+
+def test_a_command_reaching_the_bus_after_the_deadline_fails_naming_it(tmp_path):
+    problems = checks.no_stale_commands(stale_result(tmp_path, [(0x6A0, 0, 1), (0x6A0, 20, 2020)], stale=0))
+    assert problems and "1 of 2 commands reached the bus older than the deadline 100 ms (oldest 2000.0 ms)" in \
+        problems[0] and "commands.tsv:3" in problems[0] and "can.log:101" in problems[0]
+
+
+def test_a_command_stamped_too_old_must_be_refused(tmp_path):
+    # 6B0 is stamped 500 ms before its put: on the bus 1 ms after the put it is 501 ms old
+    written = checks.no_stale_commands(stale_result(tmp_path, [(0x6A0, 0, 1), (0x6B0, 0, 1)], stale=0))
+    assert written and "501.0 ms" in written[0]
+    refused = stale_result(tmp_path, [(0x6A0, 0, 1), (0x6B0, 0, None)], stale=1)
+    assert checks.no_stale_commands(refused) == []
+    assert refused.metrics["freshness"]["vcan0"]["stamped_stale_refused"] == 1
+
+
+def test_stale_refusals_are_attributed_to_fault_windows(tmp_path):
+    s = 10**18
+    windows = [{"action": "router_pause", "start_s": 1.0, "start_ns": s, "end_ns": s + 2 * 10**9},
+               {"action": "partition", "start_s": 5.0, "start_ns": s + 5 * 10**9, "end_ns": s + 8 * 10**9}]
+    r = stale_result(tmp_path, [(0x6A0, 0, 1)], stale=3, lost_in_faults=3, windows=windows)
+    assert checks.no_stale_commands(r) == []
+    assert [w["lost"] for w in r.metrics["freshness"]["vcan0"]["lost_per_window"]] == [3, 0]
+    # refused as stale with no stalled link to explain it: a bridge throwing fresh commands away
+    unexplained = checks.no_stale_commands(stale_result(tmp_path, [(0x6A0, 0, 1)], stale=5, lost_in_faults=3))
+    assert unexplained and "refused 5 commands as stale; only 3 are explained" in unexplained[0]
+
+
+def test_no_deadline_is_not_judged(tmp_path):
+    assert checks.no_stale_commands(stale_result(tmp_path, [(0x6A0, 0, 5000)], stale=0, deadline=0)) is None
