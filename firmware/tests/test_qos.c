@@ -79,6 +79,75 @@ static void test_parse(void)
 	CHECK(strcmp(words, "interactive-low,block,reliable") == 0);
 }
 
+/* tests/data/rx_qos_vectors.txt, beside the wire vectors: the bench's parser holds to the same lines. */
+static void test_vectors(void)
+{
+	char path[512];
+	snprintf(path, sizeof(path), "%s", WIRE_VECTORS);
+	char *slash = strrchr(path, '/');
+	snprintf(slash ? slash + 1 : path, sizeof(path) - (size_t)(slash ? slash + 1 - path : 0), "rx_qos_vectors.txt");
+	FILE *f = fopen(path, "r");
+	CHECK(f != NULL);
+	if (!f)
+		return;
+	char line[1024];
+	int lines = 0;
+	while (fgets(line, sizeof(line), f)) {
+		line[strcspn(line, "\n")] = '\0';
+		if (line[0] == '#' || !line[0])
+			continue;
+		char *field[4] = { line, NULL, NULL, NULL };
+		for (int i = 1; i < 4 && field[i - 1]; i++) { /* empty fields count: no strtok */
+			char *tab = strchr(field[i - 1], '\t');
+			if (tab) {
+				*tab = '\0';
+				field[i] = tab + 1;
+			}
+		}
+		zn_qos_table_t t;
+		char err[256] = "";
+		int rc = field[1] ? zn_qos_parse(field[1], &base, &t, err, sizeof(err)) : -2;
+		lines++;
+		if (!strcmp(field[0], "err")) {
+			if (rc != -1 || !field[2] || !strstr(err, field[2]) || strncmp(err, "rx QoS table: ", 14) != 0) {
+				fprintf(stderr, "%s: '%s' gave '%s', expected an error with '%s'\n", path, field[1], err,
+					field[2] ? field[2] : "?");
+				check_failures++;
+			}
+			continue;
+		}
+		if (rc != 0 || !field[2] || !field[3]) {
+			fprintf(stderr, "%s: '%s' refused: %s\n", path, field[1] ? field[1] : "", err);
+			check_failures++;
+			continue;
+		}
+		char classes[512] = "";
+		for (size_t c = 0; c < t.class_count; c++) {
+			char one[64];
+			zn_qos_describe(&t.classes[c], one, sizeof(one));
+			snprintf(classes + strlen(classes), sizeof(classes) - strlen(classes), "%s%s", c ? ";" : "", one);
+		}
+		if (strcmp(classes, field[2]) != 0) {
+			fprintf(stderr, "%s: '%s' has classes '%s', expected '%s'\n", path, field[1], classes, field[2]);
+			check_failures++;
+		}
+		for (char *probe = strtok(field[3], ";"); probe; probe = strtok(NULL, ";")) {
+			int extd = !strncmp(probe, "e:", 2);
+			char *eq = strchr(probe, '=');
+			CHECK(eq != NULL);
+			if (!eq)
+				break;
+			can_message_t m = frame((uint32_t)strtoul(probe + (extd ? 2 : 0), NULL, 16), extd, 0);
+			if (zn_qos_class_of(&t, &m) != (uint8_t)atoi(eq + 1)) {
+				fprintf(stderr, "%s: '%s': %s is in class %u\n", path, field[1], probe, zn_qos_class_of(&t, &m));
+				check_failures++;
+			}
+		}
+	}
+	fclose(f);
+	CHECK(lines >= 20);
+}
+
 static int parse_args(zn_node_config_t *cfg, char *err, const char *const *args)
 {
 	char *argv[16];
@@ -306,6 +375,7 @@ static void test_init_refuses(void)
 int main(void)
 {
 	test_parse();
+	test_vectors();
 	test_option_and_errors();
 	test_default_one_publisher();
 	test_routing();

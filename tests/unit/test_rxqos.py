@@ -27,28 +27,32 @@ def test_classes_as_the_bridge_orders_them():
     assert rxqos.parse("e:0-1FFFFFFF:reliable,block,interactive-low", rxqos.Qos(drop=True)).classes[1].drop
 
 
-# the bridge's refusals (firmware/tests/test_qos.c), word for word where they matter
-@pytest.mark.parametrize("table,fragment", [
-    ("0x000-0x0FF:realtime;0x080-0x100:data", "0x80-0x100 overlaps 0x0-0xFF"),
-    ("e:100-200:realtime;e:1FF:data", "e:0x1FF-0x1FF overlaps e:0x100-0x200"),
-    ("0-FF:fast", "'fast' is not a priority (realtime, interactive-high"),
-    ("0x800:realtime", "id range '0x800' is beyond 0x7FF (11 bits; prefix e: for 29-bit ids)"),
-    ("e:0-0x20000000:background", "id range 'e:0-0x20000000' is beyond 0x1FFFFFFF (29 bits)"),
-    ("e:100000000:data", "is not HEX or HEX-HEX"),
-    ("200-100:data", "id range '200-100' is empty"),
-    ("0-FF:drop,block", "'block' names the congestion control (drop or block) a second time"),
-    ("0-FF", "rule '0-FF' is not RANGE:QOS"),
-    ("0-FF:", "rule '0-FF:' names no QoS"),
-    ("0-FF:realtime;", "an empty rule after the last ';'"),
-    ("0-FF:realtime,,express", "an empty QoS item"),
-    ("0-F:realtime;10-1F:interactive-high;20-2F:interactive-low;30-3F:data-high;40-4F:data-low;"
-     "50-5F:background;60-6F:realtime,express;70-7F:realtime,drop", "more than 8 distinct QoS classes"),
-    (";".join(f"{i:X}:data" for i in range(17)), "more than 16 rules"),
-])
-def test_refusals_name_the_reason(table, fragment):
+def vectors(kind: str) -> list[list[str]]:
+    """tests/data/rx_qos_vectors.txt: the bridge's parser (firmware/tests/test_qos.c) holds to the same lines."""
+    rows = [line.split("\t") for line in (REPO / "tests" / "data" / "rx_qos_vectors.txt").read_text().splitlines()
+            if line and not line.startswith("#")]
+    return [row[1:] for row in rows if row[0] == kind]
+
+
+@pytest.mark.parametrize("table,classes,probes", vectors("ok"))
+def test_vectors_classes_and_probes(table, classes, probes):
+    t = rxqos.parse(table)
+    assert ";".join(map(str, t.classes)) == classes
+    for probe in probes.split(";"):
+        ident, index = probe.split("=")
+        extended = ident.startswith("e:")
+        assert t.class_of(int(ident.removeprefix("e:"), 16), extended) == t.classes[int(index)], probe
+
+
+@pytest.mark.parametrize("table,fragment", vectors("err"))
+def test_vectors_refusals_name_the_reason(table, fragment):
     with pytest.raises(rxqos.QosTableError) as e:
         rxqos.parse(table)
     assert str(e.value).startswith("rx QoS table: ") and fragment in str(e.value)
+
+
+def test_there_are_vectors_of_both_kinds():
+    assert len(vectors("ok")) >= 4 and len(vectors("err")) >= 20
 
 
 def scenario_with(tmp_path: Path, table: str) -> Path:
