@@ -81,12 +81,34 @@ static void test_no_freshness(void)
 	zn_node_stop();
 }
 
+/* txflip:2 on a 4-frame command: frames 2 and 4 flipped, counted per frame although the
+ * transmitter writes the command as one burst. */
+static void test_txflip_counts_frames_in_a_burst(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = immediate();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	uint8_t wire[4 * 16];
+	for (int i = 0; i < 4; i++) {
+		can_message_t c = { .identifier = 0x321, .data_length_code = 1, .data = { (uint8_t)(0x40 + i) } };
+		zn_wire_encode(&c, wire + 16 * i, 16);
+	}
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", wire, sizeof(wire), NULL, 0) == 0);
+	CHECK(mock_can_wait_tx("vcan0", 4, WAIT_MS) == 4);
+	for (int i = 0; i < 4; i++)
+		CHECK(mock_can_tx("vcan0", (size_t)i).data[0] == (uint8_t)((0x40 + i) ^ (i % 2)));
+	zn_node_stop();
+}
+
 /* One fault per process (as in the bridge): argv[1] names it, none = drop:2. */
 int main(int argc, char **argv)
 {
 	if (argc > 1 && strcmp(argv[1], "no-freshness") == 0) {
 		setenv("ZN_FAULT", "no-freshness", 1);
 		test_no_freshness();
+	} else if (argc > 1 && strcmp(argv[1], "txflip") == 0) {
+		setenv("ZN_FAULT", "txflip:2", 1);
+		test_txflip_counts_frames_in_a_burst();
 	} else {
 		setenv("ZN_FAULT", "drop:2", 1);
 		test_drop_every_second_sample();

@@ -7,7 +7,7 @@
  * priority order (lowest arbitration id first, FIFO among equals); a command
  * older than tx_max_age_ms is refused on arrival or when the transmitter takes
  * it, never written (tx_rejected.stale), one without a source time written
- * and counted (tx_unstamped). */
+ * and counted (tx_unstamped). A command's frames are written in bursts. */
 #include <pthread.h>
 #include <string.h>
 #include <time.h>
@@ -123,6 +123,26 @@ static void test_failed_frame_abandons_its_command(void)
 	deliver_ms(big, len);
 	CHECK(mock_can_wait_tx("vcan0", 2, WAIT_MS) == 2);
 	CHECK(mock_can_tx("vcan0", 0).identifier == 0x300);
+	zn_node_stop();
+}
+
+/* A command's frames go to the bus in bursts: 100 frames in two port calls (64 + 36),
+ * in order (one call per frame before zn_can_send_burst). */
+static void test_command_written_in_bursts(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	size_t len = command(big, 100, 0x100);
+	CHECK(deliver_ms(big, len) < FAST_MS);
+	CHECK(mock_can_wait_tx("vcan0", 100, WAIT_MS) == 100);
+	for (size_t k = 0; k < 100; k++)
+		CHECK(mock_can_tx("vcan0", k).identifier == 0x100 + k && mock_can_tx("vcan0", k).data[0] == (uint8_t)k);
+	CHECK(mock_can_tx_calls("vcan0") == 2);
+	if (mock_can_tx_calls("vcan0") != 2)
+		fprintf(stderr, "test_command_written_in_bursts: %zu transmit calls for 100 frames\n",
+			mock_can_tx_calls("vcan0"));
+	CHECK(stats_soon_has("\"tx_frames\": 100"));
 	zn_node_stop();
 }
 
@@ -321,6 +341,7 @@ int main(int argc, char **argv)
 	} tests[] = {
 		{ "full_queue", test_callback_never_waits_and_full_queue_refuses },
 		{ "abandon", test_failed_frame_abandons_its_command },
+		{ "bursts", test_command_written_in_bursts },
 		{ "stop", test_stop_during_stalled_batch },
 		{ "bad_frame", test_bad_frame_does_not_cost_its_batch },
 		{ "priority", test_priority_order },

@@ -1,7 +1,7 @@
 /* faults.c - seeded faults: a broken bridge on purpose, so the bench can prove
  * each of its checks fails for the fault it exists for. A port that wraps the
  * real ones (linker --wrap of zn_declare_publisher, zn_put,
- * zn_undeclare_publisher, zn_can_transmit and zn_declare_subscriber), linked only into the
+ * zn_undeclare_publisher, zn_can_transmit, zn_can_send_burst and zn_declare_subscriber), linked only into the
  * zenoh-node-faulty test executable: the component itself has no fault code.
  *
  * ZN_FAULT=<kind>[:<n>] selects one, on the CAN -> Zenoh samples (the
@@ -199,6 +199,22 @@ esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int ti
 	if (flipped.data_length_code > 0 && !flipped.rtr)
 		flipped.data[0] ^= 0x01;
 	return __real_zn_can_transmit(can, &flipped, timeout_ms);
+}
+
+/* Bursts go frame by frame through the wrap above while a Zenoh -> CAN fault is
+ * seeded, so "every Nth" counts frames as it did before bursts. */
+esp_err_t __real_zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *sent, int timeout_ms);
+esp_err_t __wrap_zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *sent, int timeout_ms);
+esp_err_t __wrap_zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *sent, int timeout_ms)
+{
+	if (fault.kind != TXDROP && fault.kind != TXFLIP)
+		return __real_zn_can_send_burst(can, msgs, n, sent, timeout_ms);
+	for (*sent = 0; *sent < n; (*sent)++) {
+		esp_err_t rc = __wrap_zn_can_transmit(can, &msgs[*sent], timeout_ms);
+		if (rc != ESP_OK)
+			return rc;
+	}
+	return ESP_OK;
 }
 
 /* no-freshness: the component's callback sees every command without a source time. The

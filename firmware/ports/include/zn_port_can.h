@@ -44,9 +44,9 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
  * a reader that drains only now and then must come back before this many arrive. */
 size_t zn_can_rx_capacity(zn_can_t *can);
 
-/* Transmits validated frames in order, waiting up to timeout_ms in all for
- * room. *sent: how many went (msgs[0..*sent)). ESP_OK when all did; else as
- * zn_can_transmit for msgs[*sent] (ESP_ERR_TIMEOUT: no room in time, ESP_FAIL). */
+/* Transmits validated frames in order, waiting up to timeout_ms for room for
+ * each (as zn_can_transmit). *sent: how many went (msgs[0..*sent)). ESP_OK when
+ * all did; else as zn_can_transmit for msgs[*sent] (ESP_ERR_TIMEOUT, ESP_FAIL). */
 esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *sent, int timeout_ms);
 
 /* Makes a blocked zn_can_receive return (shutdown), then frees the port. */

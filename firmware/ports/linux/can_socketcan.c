@@ -233,6 +233,7 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 		int r = sendmmsg(can->fd, mm, (unsigned)k, MSG_DONTWAIT);
 		if (r > 0) {
 			*sent += (size_t)r;
+			deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000; /* per frame, as zn_can_transmit */
 			continue;
 		}
 		if (r < 0 && errno != ENOBUFS && errno != EAGAIN)

@@ -236,27 +236,36 @@ void zn_tx_close(struct bus *b)
 	zn_mutex_unlock(b->tx_lock);
 }
 
-/* Writes one command's frames; returns whether the bus took them all. The slots
- * are the transmitter's until released (the callback only fills free ones). */
-static int transmit_command(struct bus *b, const struct tx_cmd *c)
+/* Writes one command's frames, up to ZN_CAN_BURST_MAX per zn_can_send_burst (Linux: one
+ * sendmmsg), copied to burst; returns whether the bus took them all. The slots are the
+ * transmitter's until released (the callback only fills free ones). */
+static int transmit_command(struct bus *b, const struct tx_cmd *c, can_message_t *burst)
 {
-	uint32_t slot = c->first;
-	for (uint32_t i = 0; i < c->count; i++) {
+	uint32_t slot = c->first, done = 0;
+	while (done < c->count) {
+		uint32_t k = 0, after = slot;
+		for (; k < ZN_CAN_BURST_MAX && done + k < c->count; k++) {
+			burst[k] = b->txq[after].msg;
+			after = b->txq[after].next;
+		}
+		size_t sent = 0;
 		zn_mutex_lock(b->can_lock);
-		esp_err_t rc = zn_can_transmit(b->can, &b->txq[slot].msg, CAN_TRANSMIT_TIMEOUT_MS);
+		esp_err_t rc = zn_can_send_burst(b->can, burst, k, &sent, CAN_TRANSMIT_TIMEOUT_MS);
 		zn_mutex_unlock(b->can_lock);
 		zn_mutex_lock(b->tx_lock);
-		uint32_t next = b->txq[slot].next;
-		release(b, slot, 1);
-		if (rc != ESP_OK)
-			release(b, next, c->count - i - 1);
-		zn_mutex_unlock(b->tx_lock);
-		if (rc == ESP_OK) {
-			COUNT(b->n.tx_frames);
+		for (size_t i = 0; i < sent; i++) { /* the slots written, in chain order */
+			uint32_t next = b->txq[slot].next;
+			release(b, slot, 1);
 			slot = next;
-			continue;
 		}
-		COUNT_N(b->n.tx_abandoned, c->count - i - 1);
+		if (rc != ESP_OK)
+			release(b, slot, c->count - done - (uint32_t)sent);
+		zn_mutex_unlock(b->tx_lock);
+		COUNT_N(b->n.tx_frames, sent);
+		done += (uint32_t)sent;
+		if (rc == ESP_OK)
+			continue;
+		COUNT_N(b->n.tx_abandoned, c->count - done - 1);
 		if (COUNT(b->n.can_tx_errors) == 0)
 			zn_log("W",
 			       "%s: CAN transmit failed (bus stalled or gone): the rest of that command is abandoned "
@@ -271,6 +280,11 @@ void zn_tx_transmitter_thread(void *arg)
 {
 	struct bus *b = arg;
 	int failed = 0; /* the last frame written failed */
+	can_message_t *burst = malloc(ZN_CAN_BURST_MAX * sizeof(*burst)); /* off the stack: a small task's budget */
+	if (!burst) {
+		zn_log("E", "%s: out of memory for the transmitter", b->name);
+		return;
+	}
 	for (;;) {
 		zn_mutex_lock(b->tx_lock);
 		while (b->tx_waiting == 0 && !b->tx_stop)
@@ -281,6 +295,7 @@ void zn_tx_transmitter_thread(void *arg)
 			b->tx_len = 0;
 			zn_mutex_unlock(b->tx_lock);
 			COUNT_N(b->n.tx_abandoned, left);
+			free(burst);
 			return;
 		}
 		struct tx_cmd c = heap_pop(b);
@@ -293,6 +308,6 @@ void zn_tx_transmitter_thread(void *arg)
 			refuse_stale(b, age_ms, c.count, "in the transmit queue");
 			continue;
 		}
-		failed = !transmit_command(b, &c);
+		failed = !transmit_command(b, &c, burst);
 	}
 }
