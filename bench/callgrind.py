@@ -38,12 +38,13 @@ from .stamps import candump_stamps, zenoh_stamps
 FRAMES = 5000
 RATE = 1000  # frames/s: slow enough for the bridge under valgrind (about 50x slower) to keep up
 HISTORY = REPO / "docs" / "callgrind-history.csv"
-# stage -> (function whose inclusive count it is, the run it is divided over)
+# stage -> (function whose inclusive count it is, the run it is divided over); the port's burst
+# calls since they replaced the per-frame ones (ecfab0d), the per-frame names for older builds
 STAGES = {
-    "can_read": ("zn_can_receive", "rx"),
+    "can_read": ("zn_can_receive_burst|zn_can_receive", "rx"),
     "put": ("zn_put", "rx"),
     "command": ("zn_tx_on_command", "tx"),
-    "can_write": ("zn_can_transmit", "tx"),
+    "can_write": ("zn_can_send_burst|zn_can_transmit", "tx"),
 }
 # the component's own code: self counts of the functions in these files (inlined code stays in its file)
 COMPONENT_DIR = "components/zenoh-node/src/"  # every source file of the component, whatever its name
@@ -129,10 +130,11 @@ def measure(args) -> dict:
         with tempfile.TemporaryDirectory(prefix="bench-callgrind-") as tmp:
             runs[name] = run(args, Path(tmp), rx, tx)
     per_frame = {}
-    for stage, (fn, direction) in STAGES.items():
+    for stage, (names, direction) in STAGES.items():
         counts = runs[direction][0]
-        if fn not in counts:
-            sys.exit(f"bench-callgrind: no callgrind count for {fn} (symbols stripped?)")
+        fn = next((name for name in names.split("|") if name in counts), None)
+        if fn is None:
+            sys.exit(f"bench-callgrind: no callgrind count for {names} (symbols stripped?)")
         per_frame[stage] = round(counts[fn] / FRAMES)
     if not runs["rx"][0]["<component>"]:
         sys.exit(f"bench-callgrind: no instructions attributed to {COMPONENT_DIR}: {args.bridge} lacks debug info")
