@@ -153,8 +153,19 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
     }
     if scenario.signal_gates:  # per gated signal, side and bus: count, min, max, violations
         result.metrics["signals"] = signals.evaluate(result).summary()
+    if scenario.expect.get("responses"):  # stimulus-response checks: counts, latencies, problems
+        result.metrics["responses"] = _responses(scenario, commands, buses)
     write_metrics(result)
     return result
+
+
+def _responses(scenario: Scenario, commands: Located, buses: list[BusResult]) -> dict:
+    from . import responses
+    from .dbc import load_dbc
+
+    def refused(where: list, message: str) -> None:  # canbench.scenario refused these already
+        raise ValueError(f"{'.'.join(map(str, where))}: {message}")
+    return responses.evaluate_all(responses.rules(scenario.raw, scenario.bus_dbcs, load_dbc, refused), commands, buses)
 
 
 def write_metrics(result: RunResult) -> None:

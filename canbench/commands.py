@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from . import periodic, wire
+from . import periodic, restbus, wire
 from .plans import SENT_LOG_HEADER, frame_of, sent_line, timed_plan
 from .runkeys import tx_key
 from .scenario import Commands, Scenario
@@ -52,6 +52,8 @@ def stale_at_put(scenario: Scenario) -> set[tuple[str, int, bool]]:
 
 
 def _messages(c: Commands):
+    if c.signal_plan is not None:  # commands in signals, encoded with cantools
+        return restbus.command_frames(c)
     if c.trace is not None:
         return timed_plan(read_trace(c.trace, None), c.speed, 1, c.start_offset_s, c.bus, {}).frames()
     return ((0, m) for m in periodic.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))

@@ -1,8 +1,12 @@
-"""An emulated ECU, one of three roles:
+"""An emulated ECU, one of five roles:
   replay    its trace with the recorded timing (python-can MessageSync)
   periodic  generated messages (counter + checksum) for run_s
+  restbus   every cyclic message of a DBC node, encoded from signals (canbench.restbus), for
+            run_s: paced and reported like a replay
   echo      answers frames with ids in echo_ids, canfdtest style (id + offset,
             every data byte + 1), until the orchestrator says stop
+  responder answers DBC messages by its rules (on X send Y with Y.signal = f(X.signal)), until
+            the orchestrator says stop
 Each logs what it sent and when (ecu-<name>.sent.tsv, frames in candump form)
 and reports its own timing fidelity so a verdict never blames the bridge for
 emulator jitter.
@@ -133,6 +137,49 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
             "turnaround_ms": fidelity(turnaround_ms)}
 
 
+def responder(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
+    """Answers each frame of a rule's request message with the rule's answer (canbench.restbus.Rule),
+    until stop is set and the socket holds nothing more. Bound before it says ready, as echo."""
+    sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
+    rules = {(r.on.frame_id, r.on.is_extended_frame): r for r in ecu.rules}
+    filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if ext else 0x7FF, "extended": ext} for i, ext in sorted(rules)]
+    received = answered = undecodable = 0
+    answers: dict[tuple[int, bool], int] = {}
+    turnaround_ms: list[float] = []
+    with can.Bus(interface="socketcan", channel=ecu.bus, can_filters=filters) as bus, \
+            open(sent_log, "w", buffering=1) as log:
+        log.write(SENT_LOG_HEADER)
+        ready = session.liveliness().declare_token(runkeys.ecu_ready(run_id, ecu.name))
+        runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
+        while True:
+            msg = bus.recv(timeout=ECHO_POLL_S)
+            if msg is None:
+                if stop.is_set():
+                    break
+                continue
+            rule = rules.get((msg.arbitration_id, msg.is_extended_id))
+            if msg.is_remote_frame or msg.is_error_frame or rule is None:
+                continue
+            received += 1
+            try:
+                message, data = rule.answer(bytes(msg.data), answers.get((msg.arbitration_id, msg.is_extended_id), 0))
+            except Exception:  # noqa: BLE001 - a request the DBC cannot decode is counted, not answered
+                undecodable += 1
+                continue
+            answers[(msg.arbitration_id, msg.is_extended_id)] = answers.get((msg.arbitration_id,
+                                                                             msg.is_extended_id), 0) + 1
+            answer = can.Message(arbitration_id=message.frame_id, is_extended_id=message.is_extended_frame,
+                                 data=data, dlc=message.length, channel=ecu.bus)
+            now_ns = time.time_ns()
+            log.write(sent_line(0, now_ns, frame_of(answer), ecu.bus))
+            bus.send(answer, timeout=SEND_TIMEOUT_S)
+            answered += 1
+            turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)
+        ready.undeclare()
+    return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
+            "undecodable": undecodable, "turnaround_ms": fidelity(turnaround_ms)}
+
+
 def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, timeout_s: float) -> dict:
     ecu = next((e for e in scenario.ecus if e.name == name), None)
     if ecu is None:
@@ -143,6 +190,8 @@ def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, 
         stop_sub = session.declare_subscriber(runkeys.ecu_stop(run_id), lambda _sample: stop.set())
         if ecu.role == "echo":
             summary = echo(ecu, run_dir, stop, session, run_id, timeout_s)
+        elif ecu.role == "responder":
+            summary = responder(ecu, run_dir, stop, session, run_id, timeout_s)
         else:
             runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
             summary = replay(ecu, scenario, run_dir)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import can
 
-from . import periodic
+from . import periodic, restbus
 from .scenario import Ecu, Scenario
 from .trace import read_trace
 from .wire import Frame
@@ -27,6 +27,8 @@ class Plan:
 
 def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
     """The ECU's plan with speed, loops, offset and id remap applied."""
+    if ecu.role == "restbus":
+        return restbus.restbus_plan(ecu)
     if ecu.role == "periodic":
         msgs, run_s, start, bus = ecu.messages, ecu.run_s, ecu.start_offset_s, ecu.bus
         last = periodic.periodic_last(msgs, run_s, start, bus)

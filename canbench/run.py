@@ -66,7 +66,7 @@ class Execution:
         self.session = runkeys.open_session(router)
         self.data = self.session if consumer in (None, router) else runkeys.open_session(consumer)
         self.done: dict[str, dict] = {}
-        self.senders = {e.name for e in scenario.ecus if e.role != "echo"}
+        self.senders = {e.name for e in scenario.ecus} - {e.name for e in scenario.echoes}
         self.echo_names = {e.name for e in scenario.echoes}
         self.senders_done, self.echoes_done = threading.Event(), threading.Event()
         self.rx_keys = {rx_key(prefix, b, len(scenario.bus_names)) for b in scenario.bus_names}

@@ -88,6 +88,9 @@ class Ecu:
     answer_id_offset: int = 1
     messages: tuple[Message, ...] = ()
     run_s: float = 0.0
+    dbc_node: str = ""     # restbus: the DBC node it stands in for
+    restbus: tuple = ()    # restbus: its messages (canbench.restbus.MessagePlan), from the bus's DBC
+    rules: tuple = ()      # responder: canbench.restbus.Rule
 
     def answer(self, can_id: int, data: bytes) -> tuple[int, bytes]:
         """The echo role's answer to a request (canfdtest style)."""
@@ -103,6 +106,9 @@ class Commands:
     messages: tuple[Message, ...] = ()
     run_s: float = 0.0
     start_offset_s: float = 0.0
+    message: str = ""  # commands in signals: the DBC message
+    signal_plan: Any = None  # canbench.restbus.MessagePlan of message
+    schedule: tuple = ()  # (at_s, signal values, line) per entry; empty: every cycle for run_s
 
 
 @dataclass(frozen=True)
@@ -141,7 +147,7 @@ class Scenario:
 
     @property
     def echoes(self) -> list[Ecu]:
-        return [e for e in self.ecus if e.role == "echo"]
+        return [e for e in self.ecus if e.role in ("echo", "responder")]  # answer until told to stop
 
     @property
     def tx_max_age_ms(self) -> int:
@@ -247,7 +253,8 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
                 fail(["ecus", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
             role = spec.get("role", "replay")
             trace = trace_of(spec, ["ecus", i])
-            needs = {"replay": ["trace"], "echo": ["echo_ids"], "periodic": ["messages", "run_s"]}[role]
+            needs = {"replay": ["trace"], "echo": ["echo_ids"], "periodic": ["messages", "run_s"],
+                     "restbus": ["dbc_node", "run_s"], "responder": ["rules"]}[role]
             for key in needs:
                 if key not in spec:
                     fail(["ecus", i], f"role {role} needs {key}")
@@ -266,8 +273,10 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
         try:
             if spec["bus"] not in buses:
                 fail(["commands", i, "bus"], f"'{spec['bus']}' is not one of the buses {sorted(buses)}")
-            if ("trace" in spec) == ("messages" in spec):
-                fail(["commands", i], "give either trace or messages (with run_s)")
+            if sum(k in spec for k in ("trace", "messages", "message")) != 1:
+                fail(["commands", i], "give either trace or messages (with run_s), or message (signals or schedule)")
+            elif "message" in spec and ("schedule" in spec) == ("run_s" in spec):
+                fail(["commands", i], "a message is put every cycle for run_s or at its schedule's times: give one")
             elif "messages" in spec and "run_s" not in spec:
                 fail(["commands", i], "messages need run_s")
             commands.append(Commands(spec["bus"], trace_of(spec, ["commands", i]), spec.get("speed", 1.0),
@@ -324,6 +333,7 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
             fail(["dbc"], f"no such file {shown}")
         dbc = shown.resolve()
     bus_dbcs, gates = _signal_parts(path, doc, dbc, fail)
+    ecus, commands = _restbus_parts(path, doc, bus_dbcs, ecus, commands, problems, fail)
     if problems:
         return None
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
@@ -361,3 +371,56 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
     if isinstance(cycle, dict) and cycle.get("from_dbc") and not bus_dbcs:
         fail(["expect", "cycle_time", "from_dbc"], "needs a DBC: give the scenario a dbc, or a bus (buses[].dbc)")
     return bus_dbcs, signals.gates(doc, bus_dbcs, fail)
+
+
+def _restbus_parts(path: Path, doc: Any, bus_dbcs: dict[str, Path], ecus: list[Ecu], commands: list[Commands],
+                   problems: list[ScenarioError], fail) -> tuple[list[Ecu], list[Commands]]:
+    """Restbus and responder ECUs, commands in signals and expect.responses, read against their
+    bus's DBC (canbench.restbus, canbench.responses): an unknown node, message or signal, a bad
+    value, or a bad line of a signal trace (its own file:line) is a problem."""
+    import dataclasses
+
+    from . import responses, restbus
+    from .dbc import load_dbc
+
+    def fail_file(file: Path, line: int, message: str) -> None:
+        problems.append(ScenarioError(str(file), line or None, message))
+
+    def db_of(bus: str, where: list):
+        if bus not in bus_dbcs:
+            fail(where, "needs a DBC: give the scenario a dbc, or its bus one (buses[].dbc)")
+            return None
+        try:
+            return load_dbc(bus_dbcs[bus])
+        except Exception:  # noqa: BLE001 - reported where the DBC is named
+            return None
+
+    specs = [s for s in doc.get("ecus", []) or [] if isinstance(s, dict)]
+    out_ecus = []
+    for e in ecus:
+        i, spec = next((i, s) for i, s in enumerate(specs) if s.get("name") == e.name)
+        where = ["ecus", i]
+        if e.role == "restbus" and "dbc_node" in spec:
+            db = db_of(e.bus, [*where, "role"])
+            if db is not None:
+                e = dataclasses.replace(e, dbc_node=spec["dbc_node"],
+                                        restbus=restbus.restbus_plans(db, spec, where, path.parent, fail, fail_file))
+        elif e.role == "responder" and "rules" in spec:
+            db = db_of(e.bus, [*where, "role"])
+            if db is not None:
+                e = dataclasses.replace(e, rules=restbus.responder_rules(db, spec["rules"], [*where, "rules"],
+                                                                         path.parent, fail, fail_file))
+        out_ecus.append(e)
+    cspecs = [(i, s) for i, s in enumerate(doc.get("commands", []) or []) if isinstance(s, dict)]
+    if len(cspecs) != len(commands):  # one was refused already: its place is unknown
+        return out_ecus, commands
+    out_commands = []
+    for c, (i, spec) in zip(commands, cspecs, strict=False):
+        if "message" in spec:
+            db = db_of(c.bus, ["commands", i, "message"])
+            if db is not None:
+                plan, schedule = restbus.command_plan(db, spec, ["commands", i], path.parent, fail, fail_file)
+                c = dataclasses.replace(c, message=spec["message"], signal_plan=plan, schedule=schedule)
+        out_commands.append(c)
+    responses.rules(doc, bus_dbcs, load_dbc, fail)  # expect.responses: read again by the analysis
+    return out_ecus, out_commands

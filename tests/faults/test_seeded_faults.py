@@ -21,6 +21,7 @@ FAULTY = Path(os.environ.get("ZN_BRIDGE_FAULTY", BRIDGE.with_name("zenoh-node-fa
 SMOKE = REPO / "scenarios" / "smoke.yaml"
 ROUND_TRIP = REPO / "scenarios" / "round-trip.yaml"
 STALE = REPO / "scenarios" / "stale-commands.yaml"  # run without its fault steps (they need Docker)
+SIGNALS = REPO / "scenarios" / "signals.yaml"
 RUN_TIMEOUT_S = 120
 
 # (scenario, fault, extra bridge options) -> the checks that must fail (and only those)
@@ -42,6 +43,9 @@ CASES = {
     (STALE, "", ()): set(),
     # commands stamped 400 ms before their put (deadline 100 ms) are written instead of refused
     (STALE, "no-freshness", ()): {"no_stale_commands"},
+    (SIGNALS, "", ()): set(),
+    # every answer reaches Zenoh 100 ms late: the stimulus-response check (within 40 ms), nothing else
+    (SIGNALS, "delay:100", ()): {"responses"},
 }
 
 
@@ -101,3 +105,6 @@ def test_seeded_fault_fails_exactly_its_checks(bus, router, tmp_path, case):
     for check in CASES[case] & {"integrity", "ordering", "zenoh_to_can", "round_trip"}:
         assert any("can.log:" in p or "commands.tsv:" in p or "seq" in p for p in metrics["problems"][check]), \
             metrics["problems"][check]
+    if "responses" in CASES[case]:  # each late answer names its stimulus's put
+        assert all("commands.tsv:" in p and " late, after " in p for p in metrics["problems"]["responses"]), \
+            metrics["problems"]["responses"]

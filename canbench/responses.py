@@ -1,0 +1,284 @@
+"""Stimulus-response checks (expect.responses), on a run's captures decoded with the bus's DBC
+(cantools):
+
+  when  a command message (with these signals) is put on the tx key: its put time (commands.tsv)
+        or a bus signal starts to meet a condition (false -> true, or true in the first frame):
+        its bus time (can.log)
+  then  within within_ms a frame of the response signal's message meets the condition: received
+        on the bridge's rx key (side zenoh, the default: what a vehicle application sees) or
+        on the bus (side can)
+
+Each frame of the response message belongs to the latest stimulus before it. Per stimulus: the
+first frame after it that meets the condition is its response (latency: its time minus the
+stimulus's); none within within_ms is a late response (one came later, before the next
+stimulus) or a missing one, named with the stimulus (commands.tsv:line or can.log:line) and what
+was seen instead (the values in the window, or a matching frame that came before the stimulus:
+an early one); with `once`, further matching frames before the next stimulus are duplicates.
+metrics.json `responses.<name>`: stimuli, answered, late, missing, duplicates, the latency
+distribution and the problems."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from .stats import latency_stats
+
+if TYPE_CHECKING:
+    from . import oracle
+
+SHOW = 5
+CONDITIONS = ("equals", "range", "one_of")
+
+
+@dataclass(frozen=True)
+class Condition:
+    """A condition on one signal's physical value (value-table names already numbers)."""
+    equals: float | None = None
+    tolerance: float = 0.0
+    range: tuple[float, float] | None = None
+    one_of: tuple[float, ...] | None = None
+    text: str = ""
+
+    def met(self, value: float) -> bool:
+        if self.equals is not None and abs(value - self.equals) > self.tolerance:
+            return False
+        if self.range is not None and not self.range[0] <= value <= self.range[1]:
+            return False
+        if self.one_of is not None and not any(abs(value - v) <= self.tolerance for v in self.one_of):
+            return False
+        return True
+
+
+def _number(signal, value) -> float:
+    if isinstance(value, str):
+        return float(signal.choice_to_number(value))
+    return float(value)
+
+
+def condition(signal, spec: dict) -> Condition:
+    """The condition of a `when`/`then` mapping (KeyError for a name not in the value table)."""
+    tol = float(spec.get("tolerance", signal.scale / 2 if not signal.is_float else 0.0))
+    parts = []
+    equals = rng = one_of = None
+    if "equals" in spec:
+        equals = _number(signal, spec["equals"])
+        parts.append(f"== {spec['equals']}" + (f" +-{spec['tolerance']}" if "tolerance" in spec else ""))
+    if "range" in spec:
+        rng = (float(spec["range"][0]), float(spec["range"][1]))
+        parts.append(f"in [{rng[0]:g}, {rng[1]:g}]")
+    if "one_of" in spec:
+        one_of = tuple(_number(signal, v) for v in spec["one_of"])
+        parts.append(f"one of {list(spec['one_of'])}")
+    return Condition(equals, tol, rng, one_of, " and ".join(parts) or "present")
+
+
+@dataclass(frozen=True)
+class Rule:
+    name: str
+    bus: str
+    within_ms: float
+    response_message: Any   # cantools Message
+    response_signal: str
+    then: Condition
+    side: str = "zenoh"
+    command: Any = None     # cantools Message of a command stimulus
+    command_signals: tuple = ()  # ((signal, value, tolerance), ...)
+    stimulus_message: Any = None  # cantools Message of a bus-signal stimulus
+    stimulus_signal: str = ""
+    when: Condition | None = None
+    count: int | None = None
+    once: bool = False
+
+    def stimulus_text(self) -> str:
+        if self.command is not None:
+            carried = ", ".join(f"{s} = {v:g}" for s, v, _ in self.command_signals)
+            return f"{self.command.name}" + (f" {{{carried}}}" if carried else "") + " put"
+        assert self.when is not None
+        return f"{self.stimulus_message.name}.{self.stimulus_signal} {self.when.text} on the bus"
+
+    def response_text(self) -> str:
+        return f"{self.response_message.name}.{self.response_signal} {self.then.text}"
+
+
+def _message_signal(db, key: str):
+    message_name, _, signal_name = key.partition(".")
+    message = db.get_message_by_name(message_name)  # KeyError: no such message
+    return message, message.get_signal_by_name(signal_name)  # KeyError: no such signal
+
+
+def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
+    """expect.responses read against the buses' DBCs (load: path -> database); every unknown
+    bus, message, signal or value-table name is a problem at its line (fail(where, message))."""
+    specs = (doc.get("expect") or {}).get("responses") or []
+    buses = [b["name"] for b in doc.get("buses", []) if isinstance(b, dict) and "name" in b]
+    out = []
+    for i, spec in enumerate(specs):
+        where = ["expect", "responses", i]
+        if not isinstance(spec, dict):
+            continue
+        bus = spec.get("bus", buses[0] if buses else "")
+        if bus not in buses:
+            fail([*where, "bus"], f"'{bus}' is not one of the buses {sorted(buses)}")
+            continue
+        if bus not in bus_dbcs:
+            fail(where, f"needs a DBC for {bus}: give the scenario a dbc, or the bus one (buses[].dbc)")
+            continue
+        try:
+            db = load(bus_dbcs[bus])
+        except Exception:  # noqa: BLE001 - reported where the DBC is named
+            continue
+        when, then = spec.get("when") or {}, spec.get("then") or {}
+        if ("command" in when) == ("signal" in when):
+            fail([*where, "when"], "give either command (a command message) or signal (Message.Signal on the bus)")
+            continue
+        try:
+            message, signal = _message_signal(db, then["signal"])
+            then_cond = condition(signal, then)
+        except KeyError as e:
+            fail([*where, "then", "signal"], f"{then['signal']}: not in the DBC or its value table ({e})")
+            continue
+        rule = dict(name=spec.get("name", f"response{i}"), bus=bus, within_ms=float(spec["within_ms"]),
+                    response_message=message, response_signal=signal.name, then=then_cond,
+                    side=then.get("side", "zenoh"), count=spec.get("count"), once=bool(spec.get("once", False)))
+        if "command" in when:
+            try:
+                command = db.get_message_by_name(when["command"])
+            except KeyError:
+                fail([*where, "when", "command"], f"the DBC has no message {when['command']!r}")
+                continue
+            put = [c for c in doc.get("commands") or [] if isinstance(c, dict) and c.get("message") == command.name
+                   and c.get("bus") == bus]
+            if not put:
+                fail([*where, "when", "command"], f"no command puts {command.name} on {bus} (commands[].message)")
+            carried = []
+            for name, value in (when.get("signals") or {}).items():
+                try:
+                    s = command.get_signal_by_name(name)
+                    carried.append((name, _number(s, value), s.scale / 2 if not s.is_float else 0.0))
+                except KeyError:
+                    fail([*where, "when", "signals", name], f"{command.name} has no signal {name!r} or {value!r} "
+                         "is not in its value table")
+            out.append(Rule(**rule, command=command, command_signals=tuple(carried)))
+        else:
+            try:
+                smessage, ssignal = _message_signal(db, when["signal"])
+                out.append(Rule(**rule, stimulus_message=smessage, stimulus_signal=ssignal.name,
+                                when=condition(ssignal, when)))
+            except KeyError as e:
+                fail([*where, "when", "signal"], f"{when['signal']}: not in the DBC or its value table ({e})")
+    return tuple(out)
+
+
+def _values(message, signal: str, frames: list[oracle.Observed]) -> list[tuple[oracle.Observed, float]]:
+    """(frame, the signal's physical value) of every frame of the message (undecodable ones left out)."""
+    out = []
+    for o in frames:
+        f = o.frame
+        if f.can_id != message.frame_id or f.extended != message.is_extended_frame or f.remote:
+            continue
+        try:
+            value = message.decode(f.data, decode_choices=False).get(signal)
+        except Exception:  # noqa: BLE001 - a frame the DBC cannot decode is no value
+            continue
+        if isinstance(value, int | float) and math.isfinite(value):
+            out.append((o, float(value)))
+    return out
+
+
+def stimuli(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracle.Observed]) -> list[oracle.Observed]:
+    if rule.command is not None:
+        out = []
+        for o in commands:
+            f = o.frame
+            if f.can_id != rule.command.frame_id or f.extended != rule.command.is_extended_frame:
+                continue
+            try:
+                decoded = rule.command.decode(f.data, decode_choices=False)
+            except Exception:  # noqa: BLE001
+                continue
+            if all(abs(float(decoded[s]) - v) <= tol for s, v, tol in rule.command_signals):
+                out.append(o)
+        return out
+    assert rule.when is not None
+    out, was = [], False
+    for o, value in _values(rule.stimulus_message, rule.stimulus_signal, bus_frames):
+        now = rule.when.met(value)
+        if now and not was:
+            out.append(o)
+        was = now
+    return out
+
+
+def _seen(items: list[tuple[oracle.Observed, float]], t0: int) -> str:
+    listed = ", ".join(f"{v:g} at {(o.t_ns - t0) / 1e6:+.3f} ms ({_where(o)})" for o, v in items[:SHOW])
+    return listed + (f", ... ({len(items) - SHOW} more)" if len(items) > SHOW else "")
+
+
+def _where(o: oracle.Observed) -> str:
+    return f"{o.origin}:{o.line}" if o.line else (f"zenoh #{o.index}" if o.key else f"{o.origin} #{o.index}")
+
+
+def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracle.Observed],
+             zenoh_frames: list[oracle.Observed]) -> dict:
+    """The rule on one run's frames: counts, latency distribution (ms) and problems."""
+    window_ns = int(rule.within_ms * 1e6)
+    starts = sorted(stimuli(rule, commands, bus_frames), key=lambda o: o.t_ns)
+    seen = sorted(_values(rule.response_message, rule.response_signal,
+                          zenoh_frames if rule.side == "zenoh" else bus_frames), key=lambda ov: ov[0].t_ns)
+    latencies: list[float] = []
+    late = missing = duplicates = 0
+    problems: list[str] = []
+    j = 0  # the first response frame after the current stimulus
+    for k, s in enumerate(starts):
+        t0 = s.t_ns
+        horizon = starts[k + 1].t_ns if k + 1 < len(starts) else math.inf
+        while j < len(seen) and seen[j][0].t_ns <= t0:
+            j += 1
+        mine = []  # frames of the response message after this stimulus, before the next one
+        while j < len(seen) and seen[j][0].t_ns <= horizon:
+            mine.append(seen[j])
+            j += 1
+        meeting = [(o, v) for o, v in mine if rule.then.met(v)]
+        what = f"{rule.name}: {rule.stimulus_text()} at {_where(s)}"
+        if meeting and meeting[0][0].t_ns - t0 <= window_ns:
+            latencies.append((meeting[0][0].t_ns - t0) / 1e6)
+            if rule.once and len(meeting) > 1:
+                duplicates += len(meeting) - 1
+                problems.append(f"{what}: {len(meeting)} responses {rule.response_text()}, once expected: "
+                                f"{_seen(meeting, t0)}")
+        elif meeting:
+            late += 1
+            problems.append(f"{what}: {rule.response_text()} late, after {(meeting[0][0].t_ns - t0) / 1e6:.3f} ms "
+                            f"(within {rule.within_ms:g} ms) ({_where(meeting[0][0])})"
+                            + (f"; before it: {_seen([m for m in mine if m[0].t_ns < meeting[0][0].t_ns], t0)}"
+                               if mine[0] is not meeting[0] else ""))
+        else:
+            missing += 1
+            in_window = [m for m in mine if m[0].t_ns - t0 <= window_ns]
+            early = [(o, v) for o, v in seen if t0 - window_ns <= o.t_ns <= t0 and rule.then.met(v)]
+            instead = (f"seen instead: {_seen(in_window, t0)}" if in_window
+                       else f"no {rule.response_message.name} frame within {rule.within_ms:g} ms"
+                       + (f" (the next {_seen(mine[:1], t0)})" if mine else ""))
+            if early:
+                instead += f"; a matching one came before the stimulus: {_seen(early[-1:], t0)}"
+            problems.append(f"{what}: no {rule.response_text()} within {rule.within_ms:g} ms; {instead}")
+    if rule.count is not None and len(starts) != rule.count:
+        listed = ", ".join(_where(s) for s in starts[:SHOW]) + (" ..." if len(starts) > SHOW else "")
+        problems.insert(0, f"{rule.name}: {len(starts)} stimuli ({rule.stimulus_text()}), {rule.count} expected"
+                        + (f": {listed}" if starts else ""))
+    elif not starts:
+        problems.insert(0, f"{rule.name}: no stimulus: nothing {rule.stimulus_text()}, so nothing judged")
+    return {"bus": rule.bus, "side": rule.side, "within_ms": rule.within_ms, "stimuli": len(starts),
+            "answered": len(latencies), "late": late, "missing": missing, "duplicates": duplicates,
+            "latency": latency_stats(latencies), "problems": problems}
+
+
+def evaluate_all(rules_: tuple[Rule, ...], commands: list[tuple[str, oracle.Observed]], buses) -> dict:
+    """metrics.json `responses`: per rule name, evaluate() on its bus (analysis.BusResult)."""
+    by_bus = {b.bus: b for b in buses}
+    out = {}
+    for r in rules_:
+        b = by_bus[r.bus]
+        out[r.name] = evaluate(r, [c for bus, c in commands if bus == r.bus], b.bus_frames, b.zenoh_frames)
+    return out

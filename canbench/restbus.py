@@ -1,0 +1,481 @@
+"""Frames from signals, with a DBC (cantools encodes every frame): the restbus ECU role (every
+message a DBC node transmits, at its GenMsgCycleTime), commands in signals, and the responder
+role's answers.
+
+A signal's value comes from the scenario (a constant: a number or a value-table name; a ramp
+`{ramp: [from, to], over_s: T}`; a signal trace in CSV, `time_s,value` per line, held until the
+next line) or else from the DBC: GenSigStartValue, and the value of raw 0 where it has none.
+Signals the scenario names as counters count 0, 1, ... per frame of their message and wrap after
+their largest value; a checksum signal (one whole byte, raw = physical) carries, over the other
+bytes of the payload in order:
+
+  xor             every byte XORed together
+  crc8_sae_j1850  CRC-8 SAE J1850: polynomial 0x1D, initial 0xFF, final XOR 0xFF, not reflected
+                  (crccheck's Crc8SaeJ1850; "123456789" -> 0x4B)
+
+Plans are made lazily, like the replay ECU's (canbench.plans): an hour of a restbus node is
+hundreds of thousands of frames, each encoded as it is sent."""
+from __future__ import annotations
+
+import csv
+import heapq
+import math
+from array import array
+from bisect import bisect_right
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+from crccheck.crc import Crc8SaeJ1850
+
+
+def xor8(data: bytes) -> int:
+    out = 0
+    for b in data:
+        out ^= b
+    return out
+
+
+def crc8_sae_j1850(data: bytes) -> int:
+    return Crc8SaeJ1850.calc(data)
+
+
+CHECKSUMS: dict[str, Callable[[bytes], int]] = {"xor": xor8, "crc8_sae_j1850": crc8_sae_j1850}
+
+
+# --- where a signal's value comes from ------------------------------------------------------
+
+@dataclass(frozen=True)
+class Constant:
+    value: float | str  # a number, or a name of the signal's value table
+
+    def at(self, t: float) -> float | str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Ramp:
+    start: float
+    end: float
+    over_s: float
+
+    def at(self, t: float) -> float:
+        return self.start + (self.end - self.start) * min(max(t, 0.0) / self.over_s, 1.0)
+
+
+@dataclass(frozen=True)
+class SignalTrace:
+    """A CSV signal trace: the value of the last line at or before t (the first line's before it)."""
+    path: Path
+    times: array
+    values: tuple
+
+    def at(self, t: float) -> float | str:
+        return self.values[max(bisect_right(self.times, t) - 1, 0)]
+
+
+Source = Constant | Ramp | SignalTrace
+
+
+@dataclass(frozen=True)
+class MessagePlan:
+    """One DBC message's frames: values per signal, a rolling counter, a checksum, a cycle."""
+    message: Any  # cantools.database.can.Message
+    sources: dict[str, Source] = field(default_factory=dict)
+    counter: str | None = None
+    checksum: tuple[str, str] | None = None  # (signal, algorithm)
+    cycle_ms: float | None = None
+
+    def values(self, t: float) -> dict:
+        return {s.name: self.sources[s.name].at(t) if s.name in self.sources else default_value(s)
+                for s in self.message.signals}
+
+    def encode(self, values: dict, n: int) -> bytes:
+        """The payload of the n-th frame with these signal values (counter and checksum applied)."""
+        m = self.message
+        if self.counter:
+            values[self.counter] = n % counter_modulo(m.get_signal_by_name(self.counter))
+        if self.checksum:
+            values[self.checksum[0]] = 0
+        data = bytearray(m.encode(values, scaling=True, strict=False))
+        if self.checksum:
+            at = checksum_byte(m, self.checksum[0])
+            data[at] = CHECKSUMS[self.checksum[1]](bytes(data[:at] + data[at + 1:]))
+        return bytes(data)
+
+    def frame(self, n: int, t: float, start: float, bus: str) -> can.Message:
+        m = self.message
+        return can.Message(timestamp=start + t, arbitration_id=m.frame_id, is_extended_id=m.is_extended_frame,
+                           dlc=m.length, data=self.encode(self.values(t), n), channel=bus)
+
+
+def default_value(signal) -> float | str:
+    """GenSigStartValue (cantools' `initial`), else the value of raw 0."""
+    if signal.initial is not None:
+        return signal.initial
+    return signal.raw_to_scaled(0)
+
+
+def counter_modulo(signal) -> int:
+    top = 2 ** signal.length - 1
+    if signal.maximum is not None:
+        top = min(top, int(signal.maximum))
+    return top + 1
+
+
+def checksum_byte(message, name: str) -> int:
+    """The payload byte a one-byte signal occupies (ValueError if it is not exactly one byte)."""
+    if message.get_signal_by_name(name).length != 8:
+        raise ValueError("a checksum signal fills exactly one byte of the payload (8 bits, byte-aligned)")
+    values = {s.name: 0 for s in message.signals}
+    values[name] = 0xFF
+    data = message.encode(values, scaling=False, strict=False)
+    ones = [i for i, b in enumerate(data) if b]
+    if len(ones) != 1 or data[ones[0]] != 0xFF:
+        raise ValueError("a checksum signal fills exactly one byte of the payload (8 bits, byte-aligned)")
+    return ones[0]
+
+
+# --- plans ----------------------------------------------------------------------------------
+
+def cycle_ms(message) -> float | None:
+    """The message's GenMsgCycleTime when it is above 0 and its send type (where the DBC gives
+    one) is cyclic; else None (an event message: a restbus does not send it)."""
+    if not message.cycle_time or message.cycle_time <= 0:
+        return None
+    send_type = message.send_type
+    if send_type is not None and "cyclic" not in str(send_type).lower():
+        return None
+    return float(message.cycle_time)
+
+
+def frame_count(plan: MessagePlan, run_s: float) -> int:
+    assert plan.cycle_ms
+    return max(1, int(run_s * 1000 / plan.cycle_ms))
+
+
+def _one(plan: MessagePlan, run_s: float, start: float, bus: str) -> Iterator[can.Message]:
+    assert plan.cycle_ms
+    return (plan.frame(n, n * plan.cycle_ms / 1000, start, bus) for n in range(frame_count(plan, run_s)))
+
+
+def frames(plans: tuple[MessagePlan, ...], run_s: float, start: float, bus: str) -> Iterator[can.Message]:
+    """Every message's frames for run_s in time order (then id), made as they are consumed."""
+    return heapq.merge(*(_one(p, run_s, start, bus) for p in plans),
+                       key=lambda f: (f.timestamp, f.arbitration_id))
+
+
+def last_frame(plans: tuple[MessagePlan, ...], run_s: float, start: float, bus: str) -> can.Message | None:
+    lasts = [(p.frame(frame_count(p, run_s) - 1, (frame_count(p, run_s) - 1) * (p.cycle_ms or 0) / 1000, start,
+                      bus), i) for i, p in enumerate(plans)]
+    return max(lasts, key=lambda fi: (fi[0].timestamp, fi[0].arbitration_id, fi[1]))[0] if lasts else None
+
+
+def restbus_plan(ecu):
+    """The restbus ECU's plan (canbench.plans.Plan): its messages at their cycles for run_s."""
+    from .plans import Plan  # plans imports this module
+    plans, run_s, start, bus = ecu.restbus, ecu.run_s, ecu.start_offset_s, ecu.bus
+    last = last_frame(plans, run_s, start, bus)
+    return Plan(frames=lambda: ((0, m) for m in frames(plans, run_s, start, bus)),
+                count=sum(frame_count(p, run_s) for p in plans), last=last,
+                last_id_count=sum(frame_count(p, run_s) for p in plans if last is not None and
+                                  (p.message.frame_id, p.message.is_extended_frame)
+                                  == (last.arbitration_id, last.is_extended_id)))
+
+
+def command_frames(c) -> Iterator[tuple[int, can.Message]]:
+    """A command in signals (canbench.scenario.Commands with signal_plan): every cycle for run_s,
+    or one frame per schedule entry (each entry's signals stay until an entry changes them)."""
+    p: MessagePlan = c.signal_plan
+    if not c.schedule:
+        return ((0, m) for m in _one(p, c.run_s, c.start_offset_s, c.bus))
+
+    def scheduled() -> Iterator[tuple[int, can.Message]]:
+        held: dict = {}
+        m = p.message
+        for n, (at_s, values, line) in enumerate(c.schedule):
+            held.update(values)
+            merged = {**p.values(at_s), **held}
+            yield line, can.Message(timestamp=c.start_offset_s + at_s, arbitration_id=m.frame_id,
+                                    is_extended_id=m.is_extended_frame, dlc=m.length,
+                                    data=p.encode(merged, n), channel=c.bus)
+    return scheduled()
+
+
+# --- the responder ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Rule:
+    """On a frame of `on`, send `send` with signals set from the request (scale * its signal +
+    offset) or constants; the rest as the plan gives them (start values, counter, checksum)."""
+    on: Any           # cantools Message
+    send: MessagePlan
+    copies: dict[str, tuple[str, float, float]] = field(default_factory=dict)  # target -> (source, scale, offset)
+    line: int = 0
+
+    def answer(self, request: bytes, n: int) -> tuple[Any, bytes]:
+        decoded = self.on.decode(request, decode_choices=False)
+        values = self.send.values(0.0)
+        for target, (source, scale, offset) in self.copies.items():
+            values[target] = decoded[source] * scale + offset
+        return self.send.message, self.send.encode(values, n)
+
+
+# --- reading the scenario's values (problems reported, never raised) ---------------------------
+
+Fail = Callable[[list, str], None]
+FailFile = Callable[[Path, int, str], None]
+
+
+def value_problem(signal, value) -> str | None:
+    """Why a value cannot be this signal's (None if it can)."""
+    if isinstance(value, bool):
+        return f"{value!r} is not a number or a name of {signal.name}'s value table"
+    if isinstance(value, str):
+        names = [str(v) for v in (signal.choices or {}).values()]
+        if value not in names:
+            return (f"{value!r} is not in {signal.name}'s value table {names}" if names
+                    else f"{signal.name} has no value table: give a number")
+        return None
+    if not isinstance(value, int | float) or not math.isfinite(value):
+        return f"{value!r} is not a number"
+    lo, hi = signal.minimum, signal.maximum
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        return f"{value:g} is outside {signal.name}'s range [{lo:g}, {hi:g}] {signal.unit or ''}".rstrip()
+    return None
+
+
+def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile) -> SignalTrace | None:
+    """A CSV signal trace (`time_s,value`, an optional header line, # comments); each bad line
+    is a problem at its file:line."""
+    times, values, ok, first = array("d"), [], True, True
+    try:
+        text = path.read_text()
+    except OSError as e:
+        fail_file(shown, 0, f"cannot read: {e.strerror}")
+        return None
+    for lineno, row in enumerate(csv.reader(text.splitlines()), 1):
+        if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
+            continue
+        header, first = first, False
+        if len(row) != 2:
+            fail_file(shown, lineno, f"a line is time_s,value ({len(row)} fields)")
+            ok = False
+            continue
+        try:
+            t = float(row[0])
+        except ValueError:
+            if header:  # a header line (time_s,value): only as the first row
+                continue
+            fail_file(shown, lineno, f"time_s {row[0].strip()!r} is not a number")
+            ok = False
+            continue
+        raw = row[1].strip()
+        try:
+            value: float | str = float(raw)
+        except ValueError:
+            value = raw
+        problem = value_problem(signal, value) if math.isfinite(t) and t >= 0 else "time_s must be >= 0"
+        if problem is None and times and t < times[-1]:
+            problem = f"time_s {t:g} is before the line above's {times[-1]:g}"
+        if problem:
+            fail_file(shown, lineno, problem)
+            ok = False
+            continue
+        times.append(t)
+        values.append(value)
+    if ok and not times:
+        fail_file(shown, 1, "no values (lines of time_s,value)")
+        return None
+    return SignalTrace(path, times, tuple(values)) if ok else None
+
+
+def source_of(spec, signal, where: list, base: Path, fail: Fail, fail_file: FailFile) -> Source | None:
+    if isinstance(spec, dict) and "ramp" in spec:
+        ends = spec["ramp"]
+        for i, end in enumerate(ends):
+            problem = value_problem(signal, end) if not isinstance(end, str) else f"{end!r} is not a number"
+            if problem:
+                fail([*where, "ramp", i], problem)
+                return None
+        return Ramp(float(ends[0]), float(ends[1]), float(spec["over_s"]))
+    if isinstance(spec, dict) and "trace" in spec:
+        shown = base / spec["trace"]
+        if not shown.is_file():
+            fail([*where, "trace"], f"no such file {shown}")
+            return None
+        return read_signal_trace(shown.resolve(), shown, signal, fail_file)
+    problem = value_problem(signal, spec)
+    if problem:
+        fail(where, problem)
+        return None
+    return Constant(spec)
+
+
+def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_file: FailFile,
+                 signal_key: Callable[[str], str | None] = lambda name: name,
+                 signals_key: str = "signals") -> MessagePlan:
+    """A message's plan from a scenario mapping with `signals`, `counters`, `checksums`
+    (signal_key: the signal's name in this message of a scenario key, None if the key is another
+    message's); every unknown signal, bad value or checksum that cannot be one is a problem."""
+    names = {s.name for s in message.signals}
+
+    def local(key: str, at: list) -> str | None:
+        name = signal_key(key)
+        if name is not None and name not in names:
+            fail(at, f"{message.name} has no signal {name!r} (it has {sorted(names)})")
+            return None
+        return name
+
+    sources: dict[str, Source] = {}
+    for key, value in (spec.get(signals_key) or {}).items():
+        name = local(key, [*where, signals_key, key])
+        if name is not None:
+            source = source_of(value, message.get_signal_by_name(name), [*where, signals_key, key], base, fail,
+                               fail_file)
+            if source is not None:
+                sources[name] = source
+    counter = None
+    for i, key in enumerate(spec.get("counters") or []):
+        name = local(key, [*where, "counters", i])
+        if name is None:
+            continue
+        s = message.get_signal_by_name(name)
+        if s.is_signed or s.is_float or s.scale != 1 or s.offset != 0:
+            fail([*where, "counters", i], f"{message.name}.{name}: a counter is an unsigned integer signal "
+                 "(scale 1, offset 0)")
+        elif counter is not None:
+            fail([*where, "counters", i], f"{message.name} has a counter already ({counter})")
+        elif name in sources:
+            fail([*where, "counters", i], f"{message.name}.{name} has a value in signals too")
+        else:
+            counter = name
+    checksum = None
+    for key, algorithm in (spec.get("checksums") or {}).items():
+        name = local(key, [*where, "checksums", key])
+        if name is None:
+            continue
+        s = message.get_signal_by_name(name)
+        try:
+            if s.is_signed or s.is_float or s.scale != 1 or s.offset != 0:
+                raise ValueError("a checksum signal is one unsigned byte (scale 1, offset 0)")
+            checksum_byte(message, name)
+        except ValueError as e:
+            fail([*where, "checksums", key], f"{message.name}.{name}: {e}")
+            continue
+        if checksum is not None:
+            fail([*where, "checksums", key], f"{message.name} has a checksum already ({checksum[0]})")
+        elif name in sources or name == counter:
+            fail([*where, "checksums", key], f"{message.name}.{name} is a counter or has a value in signals too")
+        else:
+            checksum = (name, algorithm)
+    return MessagePlan(message, sources, counter, checksum, cycle_ms(message))
+
+
+def _split(key: str) -> tuple[str, str] | None:
+    message, dot, signal = key.partition(".")
+    return (message, signal) if dot and message and signal else None
+
+
+def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
+                  fail_file: FailFile) -> tuple[MessagePlan, ...]:
+    """A restbus ECU's plans: every cyclic message its dbc_node transmits; `signals`,
+    `counters`, `checksums` keyed Message.Signal, `cycle_ms` per message (overriding the DBC)."""
+    node = spec["dbc_node"]
+    nodes = sorted(n.name for n in db.nodes)
+    if node not in nodes:
+        fail([*where, "dbc_node"], f"the DBC has no node {node!r} (it has {nodes})")
+        return ()
+    sent = [m for m in db.messages if node in m.senders]
+    by_name = {m.name: m for m in sent}
+    for kind in ("signals", "counters", "checksums", "cycle_ms"):
+        items = spec.get(kind) or {}
+        for i, key in enumerate(items):
+            at = [*where, kind, key if isinstance(items, dict) else i]
+            name = key if kind == "cycle_ms" else (_split(key) or ("", ""))[0]
+            if kind != "cycle_ms" and _split(key) is None:
+                fail(at, f"{key!r}: name a signal as Message.Signal")
+            elif name not in by_name:
+                known = "the DBC has no message" if name not in {m.name for m in db.messages} \
+                    else f"{node} does not transmit"
+                fail(at, f"{known} {name!r} ({node} transmits {sorted(by_name)})")
+    out = []
+    for m in sent:
+        def key_of(key: str, m=m) -> str | None:
+            parts = _split(key)
+            return parts[1] if parts and parts[0] == m.name else None
+        plan = message_plan(m, spec, where, base, fail, fail_file, key_of)
+        cycle = (spec.get("cycle_ms") or {}).get(m.name, plan.cycle_ms)
+        if cycle:
+            out.append(MessagePlan(m, plan.sources, plan.counter, plan.checksum, float(cycle)))
+    if not out:
+        fail([*where, "dbc_node"], f"{node} transmits no cyclic message (GenMsgCycleTime): give cycle_ms")
+    return tuple(out)
+
+
+def _message(db, name: str, at: list, fail: Fail):
+    try:
+        return db.get_message_by_name(name)
+    except KeyError:
+        fail(at, f"the DBC has no message {name!r}")
+        return None
+
+
+def responder_rules(db, specs: list, where: list, base: Path, fail: Fail, fail_file: FailFile) -> tuple[Rule, ...]:
+    """The responder's rules: on each frame of `request`, `send` a message with `set: {signal: value}`, a
+    value being a signal of the request (copied), `{from: signal, scale:, offset:}`, or a constant;
+    `counters` and `checksums` of the answer as for a restbus message."""
+    rules = []
+    for i, spec in enumerate(specs):
+        at = [*where, i]
+        on = _message(db, spec["request"], [*at, "request"], fail)
+        send = _message(db, spec["send"], [*at, "send"], fail)
+        if on is None or send is None:
+            continue
+        request = {s.name for s in on.signals}
+        copies, constants = {}, {}
+        for target, value in (spec.get("set") or {}).items():
+            copy = {"from": value} if isinstance(value, str) and value in request else value
+            if isinstance(copy, dict) and "from" in copy:
+                if copy["from"] not in request:
+                    fail([*at, "set", target], f"{on.name} has no signal {copy['from']!r} (it has {sorted(request)})")
+                elif target not in {s.name for s in send.signals}:
+                    fail([*at, "set", target], f"{send.name} has no signal {target!r}")
+                else:
+                    copies[target] = (copy["from"], float(copy.get("scale", 1)), float(copy.get("offset", 0)))
+            else:
+                constants[target] = value
+        plan = message_plan(send, {**spec, "set": constants}, at, base, fail, fail_file, signals_key="set")
+        rules.append(Rule(on, plan, copies))
+    return tuple(rules)
+
+
+def command_plan(db, spec: dict, where: list, base: Path, fail: Fail, fail_file: FailFile) \
+        -> tuple[MessagePlan | None, tuple]:
+    """A command in signals: its message's plan (signals, counters, checksums, cycle_ms or the
+    DBC's cycle) and its schedule ((at_s, signal values, scenario line) per entry)."""
+    m = _message(db, spec["message"], [*where, "message"], fail)
+    if m is None:
+        return None, ()
+    plan = message_plan(m, spec, where, base, fail, fail_file)
+    cycle = spec.get("cycle_ms", plan.cycle_ms)
+    schedule = []
+    names = {s.name for s in m.signals}
+    for i, entry in enumerate(spec.get("schedule") or []):
+        values = {}
+        for key, value in (entry.get("signals") or {}).items():
+            at = [*where, "schedule", i, "signals", key]
+            if key not in names:
+                fail(at, f"{m.name} has no signal {key!r} (it has {sorted(names)})")
+                continue
+            problem = value_problem(m.get_signal_by_name(key), value)
+            if problem:
+                fail(at, problem)
+            values[key] = value
+        schedule.append((float(entry["at_s"]), values, 0))
+    if not schedule and not cycle:
+        fail([*where, "message"], f"{m.name} has no GenMsgCycleTime: give cycle_ms or a schedule")
+    return MessagePlan(m, plan.sources, plan.counter, plan.checksum, float(cycle) if cycle else None), \
+        tuple(sorted(schedule, key=lambda e: e[0]))
