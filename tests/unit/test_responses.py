@@ -142,3 +142,19 @@ def test_readmes_scenario_shows_a_response_check_that_loads():
     [r] = responses.rules(doc, {"vcan0": DBC}, load_dbc, lambda where, m: problems.append(m))
     assert problems == [] and r.command.name == "TorqueRequest" and r.once
     assert {e["role"] for e in doc["ecus"] if "role" in e} >= {"restbus", "responder"}
+
+
+def test_side_can_looks_for_the_response_on_the_bus():
+    r = rule(then={"signal": "TorqueResponse.TorqueActual", "equals": 50, "side": "can"})
+    on_bus = [Observed(answer(0, 103, 50).frame, 103 * MS, 0, line=7)]
+    out = responses.evaluate(r, [put(0, 100, 50)], on_bus, [])
+    assert (out["answered"], out["side"]) == (1, "can") and out["latency"]["p50_ms"] == pytest.approx(3.0)
+    assert responses.evaluate(r, [put(0, 100, 50)], [], on_bus)["missing"] == 1  # Zenoh's frames are not looked at
+
+
+def test_a_stimulus_signal_the_command_lacks_is_a_problem():
+    problems: list[tuple] = []
+    bad = doc({"command": "TorqueRequest", "signals": {"Torque": 1}}, {"signal": "TorqueResponse.TorqueActual"})
+    responses.rules(bad, {"vcan0": DBC}, load_dbc, lambda where, m: problems.append((".".join(map(str, where)), m)))
+    assert problems == [("expect.responses.0.when.signals.Torque",
+                         "TorqueRequest has no signal 'Torque' or 1 is not in its value table")]
