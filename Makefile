@@ -63,7 +63,7 @@ FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
 .PHONY: setup venv summarise scaffold validate open bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-host bench-tools zn-flood test clean preflight base images \
+        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-hub-proof fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -77,6 +77,7 @@ help:
 	@echo "make firmware   build zenoh-node for Linux (C component + Rust Zenoh port)"
 	@echo "make zenohd     install zenohd $(ZENOHD_VERSION) from crates.io into $(CACHE)"
 	@echo "make fuzz       bounded libFuzzer runs (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
+	@echo "make fuzz-hub-proof  the stateful hub fuzzer from an empty corpus on the hub before a fixed defect (FUZZ_PROOF_HUB)"
 	@echo "make bench      benchmarks, ratios against baselines measured in the same run (not part of check)"
 	@echo "make check-kernel  the real-kernel lane alone (kernel vcan natively, or in QEMU)"
 	@echo "make soak       one hour at ~50 % bus load with router restarts (nightly; SOAK_SCENARIO=file)"
@@ -162,8 +163,24 @@ fuzz-ucan:
 	ninja -C $(BUILD)/ucan-fuzz fuzz_hub_msg fuzz_hub_state
 	mkdir -p $(BUILD)/ucan-fuzz/corpus $(BUILD)/ucan-fuzz/corpus-state
 	$(BUILD)/ucan-fuzz/fuzz_hub_msg -max_total_time=$(FUZZ_SECONDS) -max_len=4200 $(BUILD)/ucan-fuzz/corpus
-	$(BUILD)/ucan-fuzz/fuzz_hub_state -max_total_time=$(FUZZ_SECONDS) -max_len=2048 -rss_limit_mb=1024 \
+	$(BUILD)/ucan-fuzz/fuzz_hub_state -max_total_time=$(FUZZ_SECONDS) -max_len=256 -rss_limit_mb=1024 \
 	  $(BUILD)/ucan-fuzz/corpus-state ucan/fuzz/seeds/hub_state
+
+# The stateful fuzzer's proof: from an empty corpus, on the hub before issue 19's defect 1 was
+# fixed (FUZZ_PROOF_HUB = 7900d7c^, its sources from git), it must report the flush-list overflow.
+# (Leak checks off: that hub also leaks a reply queue under nested BARRIERs, defect 4, found too.)
+FUZZ_PROOF_HUB     ?= 338c49b
+FUZZ_PROOF_SECONDS ?= 600
+fuzz-hub-proof:
+	rm -rf $(BUILD)/fuzz-proof && mkdir -p $(BUILD)/fuzz-proof/corpus
+	git archive $(FUZZ_PROOF_HUB) ucan/src ucan/include | tar -x -C $(BUILD)/fuzz-proof
+	clang -g -O1 -fsanitize=fuzzer,address -DFUZZ_HUB_NO_INVARIANTS -Wno-gnu-variable-sized-type-not-at-end \
+	  -I$(BUILD)/fuzz-proof/ucan/include -I$(BUILD)/fuzz-proof/ucan/src ucan/fuzz/fuzz_hub_state.c \
+	  $(addprefix $(BUILD)/fuzz-proof/ucan/src/,hub.c canframelen.c canfilter.c ucan_msg.c) -o $(BUILD)/fuzz-proof/fuzz_hub_state
+	-nice -n 10 $(BUILD)/fuzz-proof/fuzz_hub_state -max_total_time=$(FUZZ_PROOF_SECONDS) -max_len=256 -rss_limit_mb=1024 -detect_leaks=0 \
+	  -artifact_prefix=$(BUILD)/fuzz-proof/ $(BUILD)/fuzz-proof/corpus > $(BUILD)/fuzz-proof/log 2>&1
+	grep -m1 "SUMMARY: AddressSanitizer: heap-buffer-overflow .* in client_send" $(BUILD)/fuzz-proof/log
+	grep -o "^#[0-9]*" $(BUILD)/fuzz-proof/log | tail -1 | sed 's/^#/inputs run: /'
 
 fuzz-firmware:
 	cmake -S firmware -B $(BUILD)/firmware-fuzz $(CMAKE_GEN) -DCMAKE_C_COMPILER=clang -DZN_FUZZ=ON -DZN_BUILD_BRIDGE=OFF >/dev/null

@@ -1,32 +1,45 @@
 /* fuzz_hub_state.c - libFuzzer harness for the hub's state (hub.c, in process):
- * an input is a program of rounds over up to MAX_CONNS real connections to
- * its listening socket. Each round, clients act while the hub waits (as if it
- * were stopped: whatever they do is handled in one loop round, in the order
- * it became readable), then the hub runs one loop round or catches up. Clients open and bind in
- * bulk (up to a full slot table), send frames and floods, BARRIERs naming
- * each other, queries, raw bytes, close, read or never read. The oracle:
+ * an input is a program over up to MAX_CONNS real connections to its listening
+ * socket. The hub is paused while clients act (as if stopped: whatever they do
+ * is handled in its next loop round, in the order it became readable) until an
+ * op lets it run one loop round or catch up. Clients open and bind in bulk (up
+ * to a full slot table), send frames and floods, BARRIERs naming each other,
+ * queries, raw bytes, close, reconnect, read or never read. The oracle:
  * ASan/UBSan, the hub's assertions, hub_check_invariants after each round
  * (queues within their bounds), and nothing leaked at the end.
  *
- * Code coverage alone does not tell a round that closes and reopens a slot
- * in a full table from one that does either alone: the shape of each round
- * (table full, frame sent, slot freed, slot taken, a BARRIER naming a
- * connection of this round) is fed back as libFuzzer extra counters, so
- * inputs reaching a new combination are kept and built on.
+ * The encoding is dense: one byte is one op (kind = low 3 bits, operand a =
+ * high 5 bits), so a short input is a meaningful program and a mutation of
+ * one byte is a change of one op. Code coverage alone does not tell a round
+ * that closes and reopens a slot in a full table from one that does either
+ * alone, nor in which order: the shape of each round (table full, frame sent,
+ * slot freed, slot taken, a BARRIER naming a connection of this round) and
+ * each pair of consecutive op kinds in it (split by table full or not) are
+ * fed back as libFuzzer extra counters, so inputs reaching a new combination
+ * are kept and built on.
  *
- * Grammar (bytes; a missing byte reads as 0):
- *   input  := round*          round := count op{1 + count % 16}, then one
- *                             loop round (count bit 7) or until the hub is idle
- *   op     := kind arg...     connection arguments: bit 7 set = the newest
- *                             connection, else index % open connections
- *   kind % 11: 0 open 1+a%8 (b: bind flags)   1 fill the slot table (b)
- *              2 frame (c, id: bit 7 vcan1, len: bit 7 FD)
- *              3 barrier (c, target)           4 close (c)
- *              5 query (c, kind, target)       6 read (c, or all if a == 0)
- *              7 raw (c, len, bytes)           8 flood 8*(1+n%32) frames (c, n)
- *              9 setopt (c, bind flags)        10 reconnect: close c, open one (b)
- *   bind flags: bit 7 clear: a typical client (bound to vcan0, loopback,
- *               its own frames back); set: bit 0 unbound, 1 recv_own,
+ * Grammar (bytes; a missing byte reads as 0). Clients: c(v) = the newest
+ * connection if v == 15, else connection v % open connections (v < 16).
+ *   kind 0 open 1 + a%4 clients with bind profile a/4 (0 typical)
+ *        1 bind all: open clients until the slot table is full (typical if
+ *          a < 16, else profile a%8), then the hub catches up
+ *        2 frame from c(a%16), classic on vcan0 (a & 16: 64-byte FD frame)
+ *        3 barrier from c(a%16) naming the newest connection (a & 16: naming
+ *          c(next byte))
+ *        4 close c(a%16) (a & 16: and read every other client)
+ *        5 reconnect: close c(a%16), open one typical client (a & 16: one
+ *          that only connects)
+ *        6 the hub runs one loop round (a < 16) or catches up (until idle)
+ *        7 more, by a%8, with following bytes (x, y):
+ *          0 query kind a/8 (STATS IFLIST RESET_STATS GETOPT) from c(x) about c(y)
+ *          1 read c(x) (a/8 == 0: every client)     2 flood 8*(1+y%32) frames from c(x)
+ *          3 setopt c(x), bind flags y               4 raw: c(x), length y, y bytes
+ *          5 open 1+a/8 clients with bind flags x    6 frame from c(x): id y, len byte z
+ *          7 barrier from c(x) naming c(y)
+ *   profiles 0-7: typical (bound to vcan0, loopback, its own frames back),
+ *   unbound, no own frames, loopback off, timestamps, any interface, FD
+ *   frames, vcan1 with rcvbuf 1 MiB
+ *   bind flags: bit 7 clear: typical; set: bit 0 unbound, 1 recv_own,
  *               2 loopback off, 3 timestamps, 4 any interface, 5 fd frames,
  *               6 vcan1 with rcvbuf 1 MiB */
 #define _GNU_SOURCE
@@ -58,10 +71,13 @@ static uint8_t next(struct input *in)
 }
 
 enum shape { TABLE_FULL = 1, FRAME_SENT = 2, SLOT_FREED = 4, SLOT_TAKEN = 8, BARRIER_TO_NEW = 16 };
-__attribute__((used, section("__libfuzzer_extra_counters"))) static uint8_t round_shapes[32];
+/* per round: its shape, and each pair of consecutive op kinds (table full at the round's start or not) */
+__attribute__((used, section("__libfuzzer_extra_counters"))) static uint8_t round_shapes[32 + 2 * 8 * 8];
 
 static struct {
 	unsigned shape; /* enum shape bits of the round being written */
+	int last_kind;	/* the previous op kind in this round, -1 at its start */
+	unsigned full_at_start; /* the slot table was full when the round began */
 	unsigned round; /* rounds so far in this input */
 	unsigned born[MAX_CONNS]; /* the round each connection was opened in */
 	int fd[MAX_CONNS];
@@ -70,13 +86,15 @@ static struct {
 	char dir[64];
 } conns;
 
-static int pick(struct input *in)
+/* c(v): the newest connection if v == 15, else connection v % open connections; -1 if none */
+static int conn_of(unsigned v)
 {
-	uint8_t b = next(in);
 	if (conns.n == 0)
 		return -1;
-	return b & 0x80 ? (int)conns.n - 1 : (int)(b % conns.n);
+	return v % 16 == 15 ? (int)conns.n - 1 : (int)(v % 16 % conns.n);
 }
+
+static const uint8_t profiles[8] = { 0x02, 0x81, 0x80, 0x84, 0x8a, 0x92, 0xa2, 0xc2 };
 
 static void cookie_of(unsigned serial, char *out)
 {
@@ -99,7 +117,9 @@ static void send_opts(int c, uint32_t type, uint8_t flags)
 	struct ucan_sockopts o = { .type = type, .ifindex = flags & 16 ? 0 : UCAN_IFINDEX_BASE + !!(flags & 64),
 				   .rcvbuf = flags & 64 ? 1u << 20 : 0, .loopback = !(flags & 4),
 				   .recv_own = !!(flags & 2), .fd_frames = !!(flags & 32), .nfilters = 1 };
+#ifdef UCAN_TS_MAX /* (a hub from before timestamps has no such field) */
 	o.timestamps = flags & 8 ? UCAN_TS_NSEC : UCAN_TS_NONE;
+#endif
 	uint8_t msg[sizeof(o) + sizeof(struct can_filter)] = { 0 };
 	memcpy(msg, &o, sizeof(o));
 	send_msg(c, msg, sizeof(msg));
@@ -162,63 +182,75 @@ static void send_frame(int c, uint8_t id, uint8_t len)
 		conns.shape |= FRAME_SENT;
 }
 
-static void do_op(struct input *in)
+static void send_barrier(int c, int t)
 {
-	uint8_t kind = next(in) % 11;
-	switch (kind) {
+	struct ucan_barrier b = { .type = UCAN_MSG_BARRIER };
+	if (t >= 0)
+		cookie_of(serial_of[t], b.cookie);
+	send_msg(c, &b, sizeof(b));
+	if (c >= 0 && t >= 0 && conns.born[t] == conns.round)
+		conns.shape |= BARRIER_TO_NEW;
+}
+
+static void begin_round(void)
+{
+	conns.full_at_start = conns.n && conns.n % SLOT_TABLE == 0;
+	conns.shape = conns.full_at_start ? TABLE_FULL : 0;
+	conns.last_kind = -1;
+	conns.round++;
+}
+
+/* the hub runs one loop round (once) or until a round finds nothing */
+static void run_hub(int once)
+{
+	round_shapes[conns.shape]++;
+	for (unsigned round = 0; round < (once ? 1u : MAX_CATCH_UP_ROUNDS); round++) {
+		int events = hub_run_once(0);
+		if (events < 0)
+			abort();
+#ifndef FUZZ_HUB_NO_INVARIANTS /* a hub from before hub_check_invariants (proving the harness on old code) */
+		hub_check_invariants();
+#endif
+		if (events == 0)
+			break;
+	}
+	begin_round();
+}
+
+static void do_more(struct input *in, unsigned a)
+{
+	unsigned arg = a / 8;
+	switch (a % 8) {
 	case 0: {
-		unsigned n = 1 + next(in) % 8;
-		uint8_t flags = next(in);
-		while (n--)
-			open_conn(flags);
+		static const uint32_t kinds[] = { UCAN_MSG_STATS, UCAN_MSG_IFLIST, UCAN_MSG_RESET_STATS, UCAN_MSG_GETOPT };
+		int c = conn_of(next(in)), t = conn_of(next(in));
+		struct ucan_barrier q = { .type = kinds[arg] };
+		if (t >= 0)
+			cookie_of(serial_of[t], q.cookie);
+		send_msg(c, &q, q.type == UCAN_MSG_GETOPT ? sizeof(q) : sizeof(q.type));
 		break;
 	}
-	case 1: { /* every slot of the hub's table taken: where reuse and growth meet */
-		uint8_t flags = next(in);
-		unsigned target = (conns.n / SLOT_TABLE + 1) * SLOT_TABLE;
-		while (conns.n < target && conns.n < MAX_CONNS)
-			open_conn(flags);
+	case 1: {
+		int c = conn_of(next(in));
+		for (unsigned i = 0; i < conns.n; i++)
+			if (arg == 0 || (int)i == c)
+				read_conn((int)i);
 		break;
 	}
 	case 2: {
-		int c = pick(in);
-		uint8_t id = next(in), len = next(in);
-		send_frame(c, id, len);
+		int c = conn_of(next(in));
+		unsigned n = 8 * (1 + next(in) % 32);
+		for (unsigned i = 0; i < n; i++)
+			send_frame(c, (uint8_t)i, 8);
 		break;
 	}
 	case 3: {
-		int c = pick(in), t = pick(in);
-		struct ucan_barrier b = { .type = UCAN_MSG_BARRIER };
-		if (t >= 0)
-			cookie_of(serial_of[t], b.cookie);
-		send_msg(c, &b, sizeof(b));
-		if (c >= 0 && t >= 0 && conns.born[t] == conns.round)
-			conns.shape |= BARRIER_TO_NEW;
+		int c = conn_of(next(in));
+		send_opts(c, UCAN_MSG_SETOPT, next(in));
 		break;
 	}
-	case 4:
-		close_conn(pick(in));
-		break;
-	case 5: {
-		int c = pick(in);
-		static const uint32_t kinds[] = { UCAN_MSG_STATS, UCAN_MSG_IFLIST, UCAN_MSG_RESET_STATS, UCAN_MSG_GETOPT };
-		uint32_t k = kinds[next(in) % 4];
-		int t = pick(in);
-		struct ucan_barrier q = { .type = k };
-		if (t >= 0)
-			cookie_of(serial_of[t], q.cookie);
-		send_msg(c, &q, k == UCAN_MSG_GETOPT ? sizeof(q) : sizeof(k));
-		break;
-	}
-	case 6: {
-		uint8_t a = next(in);
-		for (unsigned c = 0; c < conns.n; c++)
-			if (a == 0 || c == a % conns.n)
-				read_conn((int)c);
-		break;
-	}
-	case 7: {
-		int c = pick(in);
+	case 4: {
+		int c = conn_of(next(in));
 		uint8_t msg[256];
 		size_t len = next(in);
 		for (size_t i = 0; i < len; i++)
@@ -226,27 +258,77 @@ static void do_op(struct input *in)
 		send_msg(c, msg, len);
 		break;
 	}
-	case 8: {
-		int c = pick(in);
-		unsigned n = 8 * (1 + next(in) % 32);
-		for (unsigned i = 0; i < n; i++)
-			send_frame(c, (uint8_t)i, 8);
-		break;
-	}
-	case 9: {
-		int c = pick(in);
-		send_opts(c, UCAN_MSG_SETOPT, next(in));
-		break;
-	}
-	case 10: { /* a program restarting: its slot is free for whoever connects next */
-		int c = pick(in);
+	case 5: {
 		uint8_t flags = next(in);
+		for (unsigned i = 0; i <= arg; i++)
+			open_conn(flags);
+		break;
+	}
+	case 6: {
+		int c = conn_of(next(in));
+		uint8_t id = next(in), len = next(in);
+		send_frame(c, id, len);
+		break;
+	}
+	case 7: {
+		int c = conn_of(next(in));
+		send_barrier(c, conn_of(next(in)));
+		break;
+	}
+	}
+}
+
+static void do_op(struct input *in)
+{
+	uint8_t op = next(in);
+	unsigned kind = op % 8, a = op / 8;
+	if (conns.last_kind >= 0)
+		round_shapes[32 + conns.full_at_start * 64 + conns.last_kind * 8 + kind]++;
+	conns.last_kind = (int)kind;
+	switch (kind) {
+	case 0:
+		for (unsigned n = 1 + a % 4; n; n--)
+			open_conn(profiles[a / 4]);
+		break;
+	case 1: { /* every slot of the hub's table taken and bound: where reuse and growth meet */
+		unsigned target = (conns.n / SLOT_TABLE + 1) * SLOT_TABLE;
+		while (conns.n < target && conns.n < MAX_CONNS)
+			open_conn(a < 16 ? profiles[0] : profiles[a % 8]);
+		run_hub(0);
+		break;
+	}
+	case 2: {
+		int c = conn_of(a);
+		send_frame(c, (uint8_t)(conns.round & 0x7f), a & 16 ? 0x80 | 64 : 8);
+		break;
+	}
+	case 3: {
+		int c = conn_of(a);
+		send_barrier(c, a & 16 ? conn_of(next(in)) : (int)conns.n - 1);
+		break;
+	}
+	case 4: {
+		int c = conn_of(a);
+		close_conn(c);
+		if (a & 16)
+			for (unsigned i = 0; i < conns.n; i++)
+				read_conn((int)i);
+		break;
+	}
+	case 5: { /* a program restarting: its slot is free for whoever connects next */
+		int c = conn_of(a);
 		if (c >= 0) {
 			close_conn(c);
-			open_conn(flags);
+			open_conn(a & 16 ? profiles[1] : profiles[0]);
 		}
 		break;
 	}
+	case 6:
+		run_hub(a < 16);
+		break;
+	case 7:
+		do_more(in, a);
+		break;
 	}
 }
 
@@ -268,27 +350,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	struct hub_options opts = { .dir = conns.dir, .default_queue = 64, .verbose = -1 };
 	if (hub_add_iface("vcan0") < 0 || hub_add_iface("vcan1:mtu=16") < 0 || hub_start(&opts) < 0)
 		abort();
-	while (in.pos < in.size) {
-		uint8_t count = next(&in);
-		conns.shape = conns.n && conns.n % SLOT_TABLE == 0 ? TABLE_FULL : 0;
-		conns.round++;
-		for (unsigned ops = 1 + count % 16; ops; ops--)
-			do_op(&in);
-		round_shapes[conns.shape]++;
-		/* bit 7: one loop round, else the hub catches up (until a round finds nothing) */
-		for (unsigned round = 0; round < (count & 0x80 ? 1u : MAX_CATCH_UP_ROUNDS); round++) {
-			int events = hub_run_once(0);
-			if (events < 0)
-				abort();
-			hub_check_invariants();
-			if (events == 0)
-				break;
-		}
-	}
+	begin_round();
+	while (in.pos < in.size)
+		do_op(&in);
+	run_hub(0);
 	while (conns.n)
 		close_conn(0);
 	hub_run_once(0);
+#ifndef FUZZ_HUB_NO_INVARIANTS
 	hub_check_invariants();
+#endif
 	hub_shutdown();
 	conns.serial = conns.round = 0;
 	return 0;
