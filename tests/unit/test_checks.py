@@ -132,3 +132,25 @@ def test_stale_refusals_are_attributed_to_fault_windows(tmp_path):
 
 def test_no_deadline_is_not_judged(tmp_path):
     assert checks.no_stale_commands(stale_result(tmp_path, [(0x6A0, 0, 5000)], stale=0, deadline=0)) is None
+
+
+def reorder_result(pairs: list[tuple[int, int]]) -> SimpleNamespace:
+    """zenoh_to_can's input with reordered (command, the one put after it that reached the bus first) ids."""
+    from canbench import oracle, wire
+
+    def obs(can_id, i):
+        return oracle.Observed(wire.Frame(can_id, 1, b"\x01", can_id > 0x7FF), i, i, line=i + 2, origin="commands.tsv")
+    c = SimpleNamespace(lost=[], duplicates=[], corrupted=[], unexpected=[],
+                        reordered=[(obs(s, 2 * i), obs(p, 2 * i + 1)) for i, (s, p) in enumerate(pairs)])
+    return SimpleNamespace(scenario=SimpleNamespace(commands=[object()], expect={}),
+                           buses=[SimpleNamespace(bus="vcan0", zenoh_to_can=c, commands=[object()])])
+
+
+def test_a_command_overtaken_by_a_higher_priority_one_is_in_order():
+    assert checks.zenoh_to_can(reorder_result([(0x200, 0x100)])) == []  # 0x100 waited with 0x200 and won
+    assert checks.zenoh_to_can(reorder_result([(0x100 << 18 | 5, 0x100)])) == []  # standard before extended
+    for pairs in ([(0x100, 0x200)], [(0x100, 0x100)]):  # lower priority first, or one id out of order
+        problems = checks.zenoh_to_can(reorder_result(pairs))
+        assert problems and "1 commands out of put order" in problems[0], pairs
+    assert checks.arbitration_key(SimpleNamespace(can_id=0x100, extended=False, remote=True)) < \
+        checks.arbitration_key(SimpleNamespace(can_id=0x100 << 18, extended=True, remote=False))
