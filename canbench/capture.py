@@ -107,8 +107,11 @@ class ZenohCapture:
     def __init__(self, session: zenoh.Session, endpoint: str, key_expr: str, path: Path, token: str,
                  timeout_s: float = 30):
         self.path = path
+        # BENCH_CAPTURE_ZENOH_CONFIG: the capture's own identity (docs/access-control.md)
+        identity = os.environ.get("BENCH_CAPTURE_ZENOH_CONFIG")
         self.proc = subprocess.Popen([zn_capture_binary(), "--connect", endpoint, "--key", key_expr,
-                                      "--ready-token", token, "--out", str(path)],
+                                      "--ready-token", token, "--out", str(path),
+                                      *(["--zenoh-config", identity] if identity else [])],
                                      stdin=subprocess.PIPE, stderr=subprocess.PIPE)
         self._offset = 0
         self._partial = b""

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import wraps
 
-from . import rxqos, signals, validity, wire
+from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult
 from .commands import stale_at_put, stamp_ages_ns
 from .dbc import cycle_time_ms, load_dbc
@@ -488,6 +488,7 @@ _BRIDGE_CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "only_expected_keys": only_expected_keys,
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,
+    "access_control": security.check,  # the security scenario (canbench.security)
     "no_stale_commands": no_stale_commands,
 }
 CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {

@@ -12,7 +12,7 @@ import threading
 import time
 from pathlib import Path
 
-from . import oracle, runkeys
+from . import oracle, runkeys, security
 from .analysis import RunResult, analyse, answer_ids, expected_answers
 from .capture import CanCapture, ZenohCapture
 from .commands import Commander
@@ -227,6 +227,7 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
         try:
             run.captures()
             run.traffic()
+            security.observe(run)  # the security scenario's probes (else nothing)
             run.drain()
         finally:
             run.stop_captures()

@@ -4,6 +4,7 @@ every bench process opens: explicit endpoint, multicast scouting off."""
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 
@@ -74,10 +75,17 @@ def ecu_stop(run_id: str) -> str:
     return f"bench/runs/{run_id}/stop"
 
 
+def base_config() -> zenoh.Config:
+    """$ZENOH_CONFIG (a Zenoh JSON5 file: the service's identity, TLS; docs/access-control.md)
+    when set and not empty, else zenoh's defaults; the caller's settings go on top."""
+    path = os.environ.get("ZENOH_CONFIG")
+    return zenoh.Config.from_file(path) if path else zenoh.Config()
+
+
 def open_session(endpoint: str, wait: bool = True) -> zenoh.Session:
     """wait: for the router rather than fail, and back within a second of a router restart;
     without, zenoh's defaults (the tests: a router they started is already listening)."""
-    conf = zenoh.Config()
+    conf = base_config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")

@@ -28,7 +28,7 @@ from pathlib import Path
 import rerun as rr
 import zenoh
 
-from . import ros2, ros2_msgs, wire
+from . import ros2, ros2_msgs, runkeys, wire
 from .dbc import load_dbc
 from .errors import InputError
 from .viewer_args import DEFAULT_ENDPOINT
@@ -245,7 +245,7 @@ class Viewer:
 
 
 def open_session(mode: str, endpoints: list[str]) -> zenoh.Session:
-    conf = zenoh.Config()
+    conf = runkeys.base_config()  # $ZENOH_CONFIG: TLS and identity (docs/access-control.md)
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("connect/endpoints", json.dumps(endpoints or [DEFAULT_ENDPOINT]))
     conf.insert_json5("scouting/multicast/enabled", "false")

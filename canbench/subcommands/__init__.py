@@ -7,7 +7,9 @@ from . import (
     compose_override,
     ecu,
     gen_trace,
+    identities,
     open_report,
+    probe,
     run_scenario,
     scaffold,
     suite,
@@ -18,4 +20,4 @@ from . import (
 
 # the order of `canbench --help`
 ALL = (validate, compose_override, ecu, gen_trace, compare, summarise, scaffold, run_scenario, open_report, suite,
-       view)
+       view, identities, probe)

@@ -121,8 +121,9 @@ def test_partition_gives_the_bridge_its_own_router_listener(tmp_path):
     write(tmp_path, "trace.log", GOOD_TRACE)
     path = write(tmp_path, "s.yaml", scenario_text(faults="\n  - {at_s: 1, action: partition, duration_s: 2}"))
     services = compose.compose_override(scenario.load(path), "/scenarios/s.yaml")["services"]
-    assert "tcp/0.0.0.0:7446" in services["router"]["command"]
-    assert services["bridge"]["environment"]["ZENOH_ROUTER_ADDRESS"] == "tcp/router:7446"
+    # the scheme: tls by default, tcp with BENCH_ACCESS=open (compose interpolates it)
+    assert "${BENCH_ZENOH_SCHEME:-tls}/0.0.0.0:7446" in services["router"]["command"]
+    assert services["bridge"]["environment"]["ZENOH_ROUTER_ADDRESS"] == "${BENCH_ZENOH_SCHEME:-tls}/router:7446"
     assert services["orchestrator"]["volumes"] == ["/var/run/docker.sock:/var/run/docker.sock"]
 
 
