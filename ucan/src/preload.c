@@ -1088,7 +1088,9 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 		n_iov += user->msg_iovlen;
 		msg.msg_iovlen = n_iov;
 
-		ssize_t n = get_recvmsg()(fd, &msg, flags & ~MSG_TRUNC);
+		/* MSG_TRUNC: the message's own length, so a frame cut to 8 bytes by a small
+		 * buffer is not taken for a control reply (which is 8 bytes long) */
+		ssize_t n = get_recvmsg()(fd, &msg, flags | MSG_TRUNC);
 		if (n < 0) {
 			if (errno == ECONNRESET || errno == EPIPE || errno == ENOTCONN)
 				errno = ENETDOWN;
@@ -1115,10 +1117,8 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 			n -= (ssize_t)sizeof(hdr);
 		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
 		frame_meta(cs, user, header_mode ? &hdr : NULL, msg.msg_controllen, controllen, msg.msg_flags);
-		/* MSG_TRUNC in flags asks for the real length, as on any datagram socket */
-		if ((user->msg_flags & MSG_TRUNC) && !(flags & MSG_TRUNC) && (size_t)n > room)
-			n = (ssize_t)room;
-		return n;
+		/* as raw_recvmsg: the copied length, MSG_TRUNC set when the frame was cut */
+		return (size_t)n > room ? (ssize_t)room : n;
 	}
 }
 
@@ -1207,8 +1207,7 @@ static void iov_scatter(const struct iovec *iov, size_t n, const void *in, size_
 }
 
 /* One hub message into the program's mmsghdr; 0 if it was a control reply (skipped). */
-static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *data, size_t len, int native_flags,
-			int flags)
+static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *data, size_t len, int native_flags)
 {
 	if (len == sizeof(struct ucan_ctl)) {
 		struct ucan_ctl ctl;
@@ -1232,8 +1231,7 @@ static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *da
 	if (len > room)
 		native_flags |= MSG_TRUNC;
 	frame_meta(cs, user, header_mode ? &hdr : NULL, 0, user->msg_controllen, native_flags);
-	/* as raw_recvmsg: the copied length, the frame's own with MSG_TRUNC in flags */
-	out->msg_len = (unsigned)(len > room && !(flags & MSG_TRUNC) ? room : len);
+	out->msg_len = (unsigned)(len > room ? room : len); /* as raw_recvmsg: the copied length */
 	return 1;
 }
 
@@ -1290,7 +1288,7 @@ static int can_recvmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 				errno = ENETDOWN;
 				return -1;
 			}
-			got += (unsigned)mmsg_deliver(cs, &vec[got], buf[k], raw[k].msg_len, raw[k].msg_hdr.msg_flags, flags);
+			got += (unsigned)mmsg_deliver(cs, &vec[got], buf[k], raw[k].msg_len, raw[k].msg_hdr.msg_flags);
 		}
 		if (got == 0)
 			continue; /* only control replies: still waiting for the first frame */

@@ -286,6 +286,15 @@ static void checks(void)
 	CHECK(n == 1 && v.m[0].msg_len == 8 && (v.m[0].msg_hdr.msg_flags & MSG_TRUNC) && v.f[0].can_id == 0x140,
 	      "8-byte buffer: msg_len 8, MSG_TRUNC (got %d, %u, flags 0x%x)", n, v.m[0].msg_len, v.m[0].msg_hdr.msg_flags);
 
+	/* the same with recv(): 8 bytes, not mistaken for anything else (the library's control
+	 * replies are 8 bytes long) */
+	settle(tx, witness, 0x141, 1);
+	char eight[8];
+	n = (int)recv(rx, eight, sizeof(eight), MSG_DONTWAIT);
+	canid_t id8;
+	memcpy(&id8, eight, sizeof(id8));
+	CHECK(n == 8 && id8 == 0x141, "recv() into 8 bytes: 8, the frame's first 8 bytes (got %d, 0x%X)", n, id8);
+
 	/* per-message stamps: SO_TIMESTAMPNS and SO_TIMESTAMP, one control message each */
 	int rxns = open_can(ifindex), rxus = open_can(ifindex), on = 1;
 	setsockopt(rxns, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on));
