@@ -2,6 +2,7 @@
 hand-made results: they pass on noise and fail on a real regression."""
 from __future__ import annotations
 
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -154,3 +155,52 @@ def test_a_command_overtaken_by_a_higher_priority_one_is_in_order():
         assert problems and "1 commands out of put order" in problems[0], pairs
     assert checks.arbitration_key(SimpleNamespace(can_id=0x100, extended=False, remote=True)) < \
         checks.arbitration_key(SimpleNamespace(can_id=0x100 << 18, extended=True, remote=False))
+
+
+def stale_scenario_run(run_dir, write_stamped_stale: bool):
+    """stale-commands.yaml analysed without its fault steps, as the host fault test runs it: an ECU
+    frame every 10 ms, the 6A0 commands written 1 ms after their put, the 6B0 ones (stamped 400 ms
+    before their put) refused as the bridge must, or written by a bridge that ignores the deadline."""
+    from canbench import analysis, commands, oracle, plans, scenario, wire
+    sc = scenario.load(Path(__file__).resolve().parents[2] / "scenarios" / "stale-commands.yaml")
+    t0, ms = 1_700_000_000 * 10**9, 1_000_000
+    bus_lines, zenoh_lines, written, refused = [], [], 0, 0
+    with open(run_dir / "commands.tsv", "w") as cmd_log, open(run_dir / "ecu-engine.sent.tsv", "w") as ecu_log:
+        cmd_log.write(plans.SENT_LOG_HEADER)
+        ecu_log.write(plans.SENT_LOG_HEADER)
+        for i in range(50):  # the engine ECU: on the bus, then on Zenoh
+            f, t = wire.Frame(0x0C0, 1, bytes([i])), t0 + i * 10 * ms
+            ecu_log.write(plans.sent_line(0, t, f, "vcan0"))
+            bus_lines.append((t, f))
+            zenoh_lines.append(f"{t + ms // 2}\tvehicle/can/rx\t{wire.encode(f).hex()}\t"
+                               f"{wire.encode_attachment(i, [t]).hex()}\n")
+        for offset, bus, line, f in commands.plan(sc)[:60]:
+            put = t0 + int(offset * 1e9) + 3 * ms
+            cmd_log.write(plans.sent_line(line, put, f, bus))
+            if f.can_id == 0x6B0 and not write_stamped_stale:
+                refused += 1
+                continue
+            written += 1
+            bus_lines.append((put + ms, f))
+    with open(run_dir / "can.log", "w") as can_log:
+        for t, f in sorted(bus_lines, key=lambda x: x[0]):
+            can_log.write(f"({t // 10**9}.{t % 10**9 // 1000:06d}) {f.candump('vcan0')}\n")
+    (run_dir / "zenoh.tsv").write_text("".join(zenoh_lines))
+    stats = {"buses": [{"bus": "vcan0", "published_frames": 50, "tx_frames": written,
+                        "tx_rejected": {"stale": refused}}]}
+    return analysis.analyse(sc, "stale", run_dir, "vehicle/can", {}, stats, 1.0), oracle
+
+
+@pytest.mark.parametrize("write_stamped_stale", [False, True])
+def test_stale_commands_scenario_fails_only_no_stale_commands_when_the_deadline_is_ignored(tmp_path,
+                                                                                           write_stamped_stale):
+    result, _ = stale_scenario_run(tmp_path, write_stamped_stale)
+    assert checks.zenoh_to_can(result) == []  # the refused ones are not lost, the written ones in order
+    assert checks.bridge_stats_agree(result) == []
+    problems = checks.no_stale_commands(result)
+    if write_stamped_stale:
+        assert problems and "older than the deadline 100 ms" in problems[0] and "6B0#" in problems[0]
+    else:
+        assert problems == []
+        assert result.metrics["freshness"]["vcan0"]["stamped_stale_refused"] == \
+            result.metrics["freshness"]["vcan0"]["refused_stale"] > 0
