@@ -3,16 +3,22 @@ it needs, against the frame count. An hour of a saturated 1 Mbit/s bus is 32.4 M
 (9000 frames/s); the analysis must take minutes with bounded memory (issue 18).
 
 For each size: canbench.groundtruth makes the traffic (one bus, heavy repetition, a fault
-every ~1000 frames, batches of up to 16 frames per sample) and writes can.log and zenoh.tsv
-as candump and zn-capture do; a fresh process then analyses them as a run does (both
-captures read through the bench's codecs, matched, summarised, cycle times per id) and
+every ~1000 frames, batches of up to 16 frames per sample) in chunks of CHUNK_FRAMES, each
+stamped more than the oracle's window after the one before (so the generator's memory stays
+bounded too and its truth per chunk is the truth of the whole), and writes can.log and
+zenoh.tsv as candump and zn-capture do; a fresh process then analyses them as a run does and
 reports CPU and wall time (wall depends on what else runs) and peak RSS; the counts are
-checked against the truth.
+checked against the truth. Modes of the analysis:
 
-  python3 -m bench.oracle_scale --frames 100000 300000 1000000 [--out DIR]
+  stream  compare_stream: both captures read as they go in one time-ordered pass, cycle times
+          per id on both sides, bounded memory (the default)
+  whole   every frame read into lists, compare() and cycle_times(), as canbench.analysis does
 
-Writes oracle_scale.json (and prints a table) with the per-frame cost and the linear
-extrapolation to 32.4 M frames. Files go to a temporary directory, removed at the end."""
+  python3 -m bench.oracle_scale --frames 1000000 3000000 [--mode stream] [--out DIR] [--keep DIR]
+
+Writes oracle_scale.json (and prints a table) with the per-frame cost. Files go to a temporary
+directory, removed at the end (--keep DIR: written there and kept, e.g. to analyse them again
+with another version of the oracle: `python3 -m bench.oracle_scale --analyse DIR`)."""
 from __future__ import annotations
 
 import argparse
@@ -25,76 +31,117 @@ import time
 from pathlib import Path
 
 HOUR_FRAMES = 9000 * 3600  # a saturated 1 Mbit/s bus of 8-byte frames for an hour
+CHUNK_FRAMES = 250_000     # frames generated at a time
+TRUTH = ("lost", "duplicates", "corrupted", "reordered")
 
 
 def write_captures(frames: int, where: Path) -> dict:
     from canbench import groundtruth
+    from canbench.oracle import MATCH_WINDOW_NS
     started = time.monotonic()
-    truths = groundtruth.generate(seed=frames, frames_per_bus=frames, buses=1, faults=frames // 1000, max_batch=16)
-    with open(where / "can.log", "w") as f:
-        f.writelines(groundtruth.can_log_lines(truths))
-    with open(where / "zenoh.tsv", "w") as f:
-        f.writelines(groundtruth.zenoh_lines(truths))
-    t = truths[0]
-    return {"generate_s": round(time.monotonic() - started, 1), "faults": len(t.faults), "lost": len(t.lost),
-            "duplicates": len(t.duplicates), "corrupted": len(t.corrupted), "reordered": len(t.reordered),
+    totals = dict.fromkeys(("faults", *TRUTH), 0)
+    t0 = groundtruth.T0_NS
+    seq = 0
+    with open(where / "can.log", "w") as can, open(where / "zenoh.tsv", "w") as zen:
+        for chunk, at in enumerate(range(0, frames, CHUNK_FRAMES)):
+            n = min(CHUNK_FRAMES, frames - at)
+            truths = groundtruth.generate(seed=frames + chunk, frames_per_bus=n, buses=1, faults=n // 1000,
+                                          max_batch=16, t0_ns=t0)
+            can.writelines(groundtruth.can_log_lines(truths))
+            zen.writelines(groundtruth.zenoh_lines(truths, first_seq=seq))
+            t = truths[0]
+            for k, v in (("faults", t.faults), ("lost", t.lost), ("duplicates", t.duplicates),
+                         ("corrupted", t.corrupted), ("reordered", t.reordered)):
+                totals[k] += len(v)
+            seq += len(t.delivered)
+            t0 = t.sent[-1][0] + MATCH_WINDOW_NS + 1_000_000_000
+    return {"generate_s": round(time.monotonic() - started, 1), **totals,
             "can_log_mib": round((where / "can.log").stat().st_size / 2**20, 1),
             "zenoh_tsv_mib": round((where / "zenoh.tsv").stat().st_size / 2**20, 1)}
 
 
-def analyse(where: Path) -> dict:
+def peak_rss_mib() -> float:
+    """This process's peak resident set (VmHWM: its own memory since exec; getrusage's ru_maxrss
+    would also count the parent's that a vfork + exec child starts from)."""
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM:"):
+            return round(int(line.split()[1]) / 1024, 1)
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+
+
+def analyse(where: Path, mode: str) -> dict:
     """What canbench.analysis does with a run's captures, for one bus, timed."""
     from canbench import oracle
     from canbench.capture import iter_zenoh_capture
     started, cpu0 = time.monotonic(), time.process_time()
-    by_key, _ = oracle.zenoh_frames_by_key(iter_zenoh_capture(where / "zenoh.tsv"), {"vehicle/can/rx"})
-    received, problems = by_key["vehicle/can/rx"]
-    can = oracle.read_candump(where / "can.log", "vcan0")
-    read_s = time.monotonic() - started
-    c = oracle.compare(can, received)
-    summary = c.summary()
-    oracle.cycle_times(can)
-    oracle.cycle_times(sorted((r for _, r in c.matched), key=lambda o: o.index))
-    return {"frames": len(can), "read_s": round(read_s, 1), "wall_s": round(time.monotonic() - started, 1),
+    problems: list[str] = []
+    if mode == "stream":
+        can_cycles, zenoh_cycles = oracle.CycleTimes(), oracle.CycleTimes()
+
+        def sent():
+            for o in oracle.iter_candump_frames(where / "can.log", "vcan0"):
+                can_cycles.add(o)
+                yield o
+        received = oracle.iter_zenoh_frames(iter_zenoh_capture(where / "zenoh.tsv"), "vehicle/can/rx", problems)
+        c = oracle.compare_stream(sent(), received, on_match=lambda s, r: zenoh_cycles.add(r))
+        summary = c.summary()
+        can_cycles.result()
+        zenoh_cycles.result()
+    else:
+        by_key, _ = oracle.zenoh_frames_by_key(iter_zenoh_capture(where / "zenoh.tsv"), {"vehicle/can/rx"})
+        received_list, problems = by_key["vehicle/can/rx"]
+        can = oracle.read_candump(where / "can.log", "vcan0")
+        c = oracle.compare(can, received_list)
+        summary = c.summary()
+        oracle.cycle_times(can)
+        oracle.cycle_times(sorted((r for _, r in c.matched), key=lambda o: o.index))
+    return {"mode": mode, "frames": summary["sent"], "wall_s": round(time.monotonic() - started, 1),
             "cpu_s": round(time.process_time() - cpu0, 1),
-            "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "lost": summary["lost"], "duplicates": summary["duplicates"], "corrupted": summary["corrupted"],
-            "reordered": summary["reordered"], "problems": problems}
+            "peak_rss_mib": peak_rss_mib(),
+            **{k: summary[k] for k in TRUTH}, "latency": summary["latency"], "problems": problems}
+
+
+def measure(n: int, where: Path, mode: str) -> dict:
+    made = write_captures(n, where)
+    child = subprocess.run([sys.executable, "-m", "bench.oracle_scale", "--analyse", str(where), "--mode", mode],
+                           check=True, capture_output=True, text=True, timeout=3600)
+    got = json.loads(child.stdout)
+    agree = all(got[k] == made[k] for k in TRUTH)
+    return {**made, **got, "agrees_with_truth": agree, "cpu_us_per_frame": round(got["cpu_s"] / n * 1e6, 2),
+            "bytes_per_frame": round(got["peak_rss_mib"] * 2**20 / n)}
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--frames", type=int, nargs="+", default=[100_000, 300_000, 1_000_000])
+    ap.add_argument("--frames", type=int, nargs="+", default=[1_000_000, 3_000_000])
+    ap.add_argument("--mode", choices=("stream", "whole"), default="stream")
     ap.add_argument("--out", type=Path, help="where oracle_scale.json goes (default: print only)")
-    ap.add_argument("--analyse", type=Path, help=argparse.SUPPRESS)  # the measured child process
+    ap.add_argument("--keep", type=Path, help="write the captures under DIR/<frames> and keep them")
+    ap.add_argument("--analyse", type=Path, help="analyse the captures in this directory (one JSON line)")
     args = ap.parse_args()
     if args.analyse:
-        print(json.dumps(analyse(args.analyse)))
+        print(json.dumps(analyse(args.analyse, args.mode)))
         return 0
     rows = []
     for n in args.frames:
-        with tempfile.TemporaryDirectory(prefix="oracle-scale-") as d:
-            made = write_captures(n, Path(d))
-            child = subprocess.run([sys.executable, "-m", "bench.oracle_scale", "--analyse", d], check=True,
-                                   capture_output=True, text=True, timeout=3600)
-            got = json.loads(child.stdout)
-        agree = all(got[k] == made[k] for k in ("lost", "duplicates", "corrupted", "reordered"))
-        rows.append({**made, **got, "agrees_with_truth": agree,
-                     "cpu_us_per_frame": round(got["cpu_s"] / n * 1e6, 2),
-                     "bytes_per_frame": round(got["peak_rss_mib"] * 2**20 / n)})
+        if args.keep:
+            where = args.keep / str(n)
+            where.mkdir(parents=True, exist_ok=True)
+            rows.append(measure(n, where, args.mode))
+        else:
+            with tempfile.TemporaryDirectory(prefix="oracle-scale-") as d:
+                rows.append(measure(n, Path(d), args.mode))
         r = rows[-1]
-        print(f"{n:>10} frames: analysed in {r['cpu_s']} s CPU ({r['wall_s']} s wall, reading {r['read_s']} s), "
-              f"peak RSS "
-              f"{r['peak_rss_mib']} MiB, {r['cpu_us_per_frame']} us CPU and {r['bytes_per_frame']} B per frame; truth "
-              f"{'agrees' if agree else 'DISAGREES'} ({r['faults']} faults)", flush=True)
+        print(f"{n:>10} frames ({r['mode']}): analysed in {r['cpu_s']} s CPU ({r['wall_s']} s wall), peak RSS "
+              f"{r['peak_rss_mib']} MiB, {r['cpu_us_per_frame']} us CPU and {r['bytes_per_frame']} B per frame; "
+              f"truth {'agrees' if r['agrees_with_truth'] else 'DISAGREES'} ({r['faults']} faults)", flush=True)
     last = rows[-1]
-    hour = {"frames": HOUR_FRAMES, "cpu_min": round(last["cpu_us_per_frame"] * HOUR_FRAMES / 1e6 / 60, 1),
-            "peak_rss_gib": round(last["bytes_per_frame"] * HOUR_FRAMES / 2**30, 1)}
-    print(f"an hour of a saturated 1 Mbit/s bus ({HOUR_FRAMES} frames), extrapolated linearly from "
-          f"{last['frames']} frames: {hour['cpu_min']} min of CPU, {hour['peak_rss_gib']} GiB peak RSS")
+    hour = {"frames": HOUR_FRAMES, "cpu_min": round(last["cpu_us_per_frame"] * HOUR_FRAMES / 1e6 / 60, 1)}
+    print(f"an hour of a saturated 1 Mbit/s bus ({HOUR_FRAMES} frames) at {last['cpu_us_per_frame']} us per frame: "
+          f"{hour['cpu_min']} min of CPU; peak RSS at {last['frames']} frames: {last['peak_rss_mib']} MiB")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "oracle_scale.json").write_text(json.dumps({"sizes": rows, "hour_extrapolated": hour}, indent=2))
+        (args.out / "oracle_scale.json").write_text(json.dumps({"sizes": rows, "hour": hour}, indent=2))
     return 0 if all(r["agrees_with_truth"] for r in rows) else 1
 
 

@@ -192,15 +192,19 @@ def _truth(truth: BusTruth, runs: list[int]) -> None:
         truth.latency_ms[i] = (stream[pos].t_ns - truth.sent[i][0]) / 1e6
 
 
+T0_NS = 1_700_000_000_000_000_000
+
+
 def generate(seed: int, frames_per_bus: int, buses: int = 1, faults: int = 4, max_batch: int = 1,
-             kinds: tuple[str, ...] = FAULTS) -> list[BusTruth]:
-    """Traffic on `buses` buses with up to `faults` faults each, and the truth per bus."""
+             kinds: tuple[str, ...] = FAULTS, t0_ns: int = T0_NS) -> list[BusTruth]:
+    """Traffic on `buses` buses with up to `faults` faults each, and the truth per bus; the
+    first frame stamped just after t0_ns."""
     rng = random.Random(seed)
     out = []
     for b in range(buses):
         bus = f"vcan{b}"
         key = "vehicle/can/rx" if buses == 1 else f"vehicle/can/{bus}/rx"
-        truth = BusTruth(bus, key, traffic(rng, frames_per_bus, 1_700_000_000_000_000_000 + b * 37_000))
+        truth = BusTruth(bus, key, traffic(rng, frames_per_bus, t0_ns + b * 37_000))
         runs = identical_runs(truth.sent)
         slots = list(range(2, frames_per_bus - 8, FAULT_SPACING))
         chosen = sorted(rng.sample(slots, min(faults, len(slots))))
@@ -231,12 +235,12 @@ def can_log_lines(truths: list[BusTruth]) -> Iterator[str]:
         yield trace.format_line(t, truths[b].bus, truths[b].sent[i][1]) + "\n"
 
 
-def zenoh_lines(truths: list[BusTruth]) -> Iterator[str]:
+def zenoh_lines(truths: list[BusTruth], first_seq: int = 0) -> Iterator[str]:
     """zenoh.tsv: every sample in receive order as zn-capture writes it (attachment: a sequence
-    number per frame and the true bus stamps)."""
+    number per frame from first_seq, and the true bus stamps)."""
     samples = []
     for b, truth in enumerate(truths):
-        seq = 0
+        seq = first_seq
         at = 0
         items = truth.delivered
         while at < len(items):

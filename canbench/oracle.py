@@ -15,22 +15,27 @@ show up at the end of the run instead of where it happened. Frames left on
 the CAN side are lost; Zenoh frames with a key the CAN side had are
 duplicates; Zenoh frames with a key it never had are paired with the lost
 frame at the same place in the stream, if that one has the same id and length
-(corrupted), else counted as unexpected."""
+(corrupted), else counted as unexpected.
+
+One pass over both streams in time order, keeping a window: a bus frame can be
+matched by a Zenoh frame that arrived at most MATCH_WINDOW_NS after its stamp,
+so memory is bounded by the traffic of a window, not by the length of the run
+(compare_stream; compare keeps every frame for the checks and the report)."""
 from __future__ import annotations
 
 import bisect
 import gc
 from array import array
-from collections import Counter, defaultdict
-from collections.abc import Iterable
+from collections import Counter, deque
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from functools import wraps
 from pathlib import Path
 
 from . import trace, wire
 from .capture import Sample
+from .distribution import Distribution
 from .errors import TraceError
-from .stats import latency_stats, percentile
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,6 +74,13 @@ def read_candump(path: Path, interface: str | None = None, drops: dict[str, int]
     """The frames of a candump -L capture (of one interface), each with its line."""
     return [Observed(frame, t_ns, i, line=lineno)
             for i, (lineno, t_ns, _, frame) in enumerate(trace.iter_candump(path, interface, drops))]
+
+
+def iter_candump_frames(path: Path, interface: str | None = None,
+                        drops: dict[str, int] | None = None) -> Iterator[Observed]:
+    """read_candump's frames one at a time (compare_stream: never the whole capture in memory)."""
+    for i, (lineno, t_ns, _, frame) in enumerate(trace.iter_candump(path, interface, drops)):
+        yield Observed(frame, t_ns, i, line=lineno)
 
 
 @dataclass(frozen=True)
@@ -129,77 +141,99 @@ def zenoh_frames_by_key(samples: Iterable[Sample], keys: set[str]) \
     return out, seen
 
 
+def iter_zenoh_frames(samples: Iterable[Sample], key: str, problems: list[str] | None = None) -> Iterator[Observed]:
+    """zenoh_frames' frames on key one at a time, in arrival order; bad payloads appended to problems."""
+    cache: dict[bytes, wire.Frame] = {}
+    n = 0
+    for t_ns, sample_key, payload, att in samples:
+        if sample_key != key:
+            continue
+        if len(cache) > FRAME_CACHE:
+            cache.clear()
+        try:
+            frames = wire.decode_batch(payload, cache)
+            meta = wire.decode_attachment(att) if att is not None else None
+        except wire.WireError as e:
+            if problems is not None:
+                problems.append(f"undecodable sample on {sample_key} at {t_ns}: {e}")
+            continue
+        for i, f in enumerate(frames):
+            yield Observed(f, t_ns, n, key=sample_key, seq=meta.first_seq + i if meta else -1,
+                           bridge_rx_ns=meta.rx_times_ns[i] if meta and i < meta.count else 0)
+            n += 1
+
+
 def _key(f: wire.Frame) -> tuple:
     return (f.can_id, f.extended, f.remote, f.dlc, f.data)
+
+
+# A bus frame is matched by a Zenoh frame that arrived at most MATCH_WINDOW_NS after it: the
+# analysis keeps only that window of the bus capture (memory bounded by the traffic of a window,
+# not by the run). An older frame still unmatched is lost; a frame that arrives later than the
+# window is not its copy (lost, and the late arrival unexpected, or a duplicate if a copy of its
+# content is in the window). 20 s: the longest a frame can legitimately wait is a link outage
+# shorter than the Zenoh lease (10 s: longer ones drop the session and its queue) plus TCP's
+# retransmission backoff after it (up to another ~3 s), the lead and settle time of a fault
+# window (1 s each) around it, with margin; every scenario's latency gate is far below (p50 25 ms).
+MATCH_WINDOW_NS = 20_000_000_000
+FAILURES_KEPT = 1000  # compare_stream: frames kept per kind of failure (all are counted)
+EXAMPLES = 5  # attachment disagreements listed per kind
 
 
 @dataclass
 class Comparison:
     sent: int = 0
     received: int = 0
-    matched: list[tuple[Observed, Observed]] = field(default_factory=list)
+    matched: list[tuple[Observed, Observed]] = field(default_factory=list)  # compare_stream: not kept
     lost: list[Observed] = field(default_factory=list)
     duplicates: list[Observed] = field(default_factory=list)
     corrupted: list[tuple[Observed, Observed, list[int]]] = field(default_factory=list)
     unexpected: list[Observed] = field(default_factory=list)
     reordered: list[tuple[Observed, Observed]] = field(default_factory=list)  # (frame, frame it overtook)
     reordered_per_id: int = 0
-    latency_ms: array[float] = field(default_factory=lambda: array("d"))  # 8 bytes a frame: an hour's stays small
+    latency: Distribution = field(default_factory=Distribution)  # bounded (canbench.distribution)
     lost_in_faults: list[Observed] = field(default_factory=list)  # lost inside a fault window: allowed, counted
     recovery_s: list[float | None] = field(default_factory=list)  # per fault window: end -> first bridged frame
-    attachment: dict | None = None  # CAN -> Zenoh: where the bridge's own account disagrees (attachment_check)
+    attachment: dict | None = None  # CAN -> Zenoh: where the bridge's own account disagrees
+    negative: list[tuple[Observed, Observed]] = field(default_factory=list)  # matched, arrived before sent
+    counts: Counter = field(default_factory=Counter)  # per kind, all of them (the lists above may be capped)
+
+    @property
+    def latency_ms(self) -> array[float]:
+        """The latencies (ms) in arrival order; past canbench.distribution.EXACT_VALUES, a uniform sample."""
+        return self.latency.values
 
     def negative_latencies(self) -> list[tuple[Observed, Observed]]:
         """Matched pairs that arrived before they were sent: the bench's clocks or stamps are wrong."""
-        return [(s, r) for s, r in self.matched if r.t_ns < s.t_ns]
+        return self.negative
 
     def summary(self) -> dict:
+        n = self.counts
         return {
-            "sent": self.sent, "received": self.received, "matched": len(self.matched), "lost": len(self.lost),
-            "duplicates": len(self.duplicates), "corrupted": len(self.corrupted),
-            "unexpected": len(self.unexpected), "reordered": len(self.reordered),
-            "reordered_per_id": self.reordered_per_id, "latency": latency_stats(self.latency_ms),
-            "lost_in_faults": len(self.lost_in_faults), "recovery_s": self.recovery_s,
+            "sent": self.sent, "received": self.received, "matched": n["matched"], "lost": n["lost"],
+            "duplicates": n["duplicates"], "corrupted": n["corrupted"],
+            "unexpected": n["unexpected"], "reordered": n["reordered"],
+            "reordered_per_id": self.reordered_per_id, "latency": self.latency.stats(),
+            "lost_in_faults": n["lost_in_faults"], "recovery_s": self.recovery_s,
             **({"attachment_disagrees": self.attachment} if self.attachment is not None else {}),
         }
 
 
-def compare(sent: list[Observed], received: list[Observed]) -> Comparison:
-    """sent: CAN frames in bus order; received: Zenoh frames in arrival order."""
-    c, _ = _classify(sent, received, None)
-    c.attachment = attachment_check(sent, c.matched)
-    return c
+def compare(sent: Iterable[Observed], received: Iterable[Observed],
+            windows: list[tuple[int, int]] | None = None) -> Comparison:
+    """sent: CAN frames in bus order; received: Zenoh frames in arrival order. Every frame of
+    every kind kept (the matched pairs too); windows: fault windows (apply_fault_windows)."""
+    return _classify(sent, received, None, windows=windows, attachment=True)[0]
 
 
-EXAMPLES = 5  # disagreements listed per kind
-
-
-def attachment_check(sent: list[Observed], matched: list[tuple[Observed, Observed]]) -> dict:
-    """The bridge's own account (the attachment's sequence numbers and CAN receive stamps)
-    against the oracle's: reported, never used to match or judge (a broken bridge must not
-    hide its faults). can_stamp: the bridge's stamp of a frame is not the bus capture's (at the
-    capture's microseconds; with one stamp per frame they are equal). seq: two frames that
-    arrived one after the other are numbered further apart (or closer) than the bus had them."""
-    rank = {o.index: i for i, o in enumerate(sent)}
-    stamps: list[str] = []
-    stamp_count, stamp_max_ns = 0, 0
-    for s, r in matched:
-        if r.bridge_rx_ns and r.bridge_rx_ns // 1000 != s.t_ns // 1000:
-            stamp_count += 1
-            stamp_max_ns = max(stamp_max_ns, abs(r.bridge_rx_ns - s.t_ns))
-            if len(stamps) < EXAMPLES:
-                stamps.append(f"{describe(s)}: bridge stamp {(r.bridge_rx_ns - s.t_ns) / 1000:+.3f} us off")
-    seqs: list[str] = []
-    seq_count = 0
-    by_arrival = sorted((p for p in matched if p[1].seq >= 0), key=lambda p: p[1].index)
-    for (s0, r0), (s1, r1) in zip(by_arrival, by_arrival[1:], strict=False):
-        if r1.seq - r0.seq != rank[s1.index] - rank[s0.index]:
-            seq_count += 1
-            if len(seqs) < EXAMPLES:
-                seqs.append(f"seq {r0.seq} -> {r1.seq} for {describe(s0)} -> {describe(s1)} "
-                            f"({rank[s1.index] - rank[s0.index]:+d} on the bus)")
-    return {"can_stamp": {"count": stamp_count, "max_us": round(stamp_max_ns / 1000, 3), "examples": stamps},
-            "seq": {"count": seq_count, "examples": seqs}}
+def compare_stream(sent: Iterable[Observed], received: Iterable[Observed],
+                   windows: list[tuple[int, int]] | None = None, keep: int = FAILURES_KEPT,
+                   on_match: Callable[[Observed, Observed], None] | None = None) -> Comparison:
+    """compare() in bounded memory, for captures of any length read as they go (iter_candump_frames,
+    iter_zenoh_frames): the same verdicts, counts and latencies; the matched pairs are not kept
+    (on_match sees each), and `keep` frames per kind of failure are."""
+    return _classify(sent, received, None, windows=windows, attachment=True, keep=keep,
+                     keep_matched=False, on_match=on_match)[0]
 
 
 def compare_commands(commands: list[Observed], bus: list[Observed],
@@ -210,71 +244,110 @@ def compare_commands(commands: list[Observed], bus: list[Observed],
     return _classify(commands, bus, Counter(sent_by_others))
 
 
-def match_subset(expected: list[Observed], observed: list[Observed]) -> Comparison:
+def match_subset(expected: list[Observed], observed: list[Observed], window_ns: int | None = None) -> Comparison:
     """Each expected frame against a stream that also carries other traffic (round trip:
-    echo answers among everything on the rx key). Only matched and lost are meaningful."""
-    c, _ = _classify(expected, observed, _everything())
-    c.received = len(c.matched)
+    echo answers among everything on the rx key). Only matched and lost are meaningful.
+    No window by default: both lists are in memory, and a caller may match by order alone
+    (every expected frame stamped 0, as validity's send-order check does)."""
+    c, _ = _classify(expected, observed, _everything(), window_ns=window_ns)
+    c.received = c.counts["matched"]
     return c
 
 
 STAMP_SLACK_NS = 5_000_000  # a frame this much "before it was sent" is matched anyway: a bench error, not a loss
 BEHIND_SCAN = 4096           # matched copies looked past for a late one (a later frame is a duplicate + a loss)
+LOAD_TRIM_NS = 1_000_000_000  # how far past its window a frame may stay while the bus capture is read ahead
+_END = 1 << 62               # a time after every stamp: the end of both streams
+_COMPACT = 16                # evicted copies a _Copies may keep at its front (and at most as many as live ones)
 
 
 class _Copies:
-    """The sent frames with one key, in stream order, and which of them are matched."""
+    """The sent frames with one key still in the window, in stream order, and which of them
+    are matched. Positions before `start` are evicted (gone from the window)."""
 
-    def __init__(self) -> None:
-        self.frames: list[Observed] = []
+    __slots__ = ("key", "frames", "indices", "times", "ranks", "used", "head", "start")
+
+    def __init__(self, key: tuple) -> None:
+        self.key = key
+        self.frames: list[Observed | None] = []
         self.indices: list[int] = []
         self.times: list[int] = []
+        self.ranks: list[int] = []  # position in the sent stream (index: position on the bus)
         self.used = bytearray()
-        self.head = 0  # every copy before it is matched
+        self.head = 0   # every copy before it is matched or evicted
+        self.start = 0  # every copy before it is evicted
 
-    def add(self, o: Observed) -> None:
+    def add(self, o: Observed, rank: int) -> None:
         self.frames.append(o)
         self.indices.append(o.index)
         self.times.append(o.t_ns)
+        self.ranks.append(rank)
         self.used.append(0)
 
-    def take(self, frontier: int, t_ns: int) -> Observed | None:
+    def take(self, frontier: int, t_ns: int) -> int | None:
         """The copy a frame received at t_ns is, marked matched (None: it is none of them).
         Only a copy sent by t_ns can be it. Of those, the one with the fewest frames of other
         contents between it and the frontier; on a tie the one ahead (a loss is the simpler
         story than a late frame; within a run of identical frames the earliest one: nothing
         tells them apart). If no copy was sent by t_ns, the next one ahead if it was sent at
-        most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error."""
+        most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error.
+        Returns the copy's position (frames[position])."""
         n = len(self.indices)
-        ahead_at = bisect.bisect_right(self.indices, frontier)
+        indices, used, times = self.indices, self.used, self.times
+        ahead_at = bisect.bisect_right(indices, frontier, self.start)
         ahead = ahead_at
-        while ahead < n and self.used[ahead]:
+        while ahead < n and used[ahead]:
             ahead += 1
         best = None
         best_distance = None
-        if ahead < n and self.times[ahead] <= t_ns:
+        if ahead < n and times[ahead] <= t_ns:
             best = ahead
-            best_distance = (self.indices[ahead] - frontier) - (ahead - ahead_at)
-        behind_at = bisect.bisect_left(self.indices, frontier)
+            best_distance = (indices[ahead] - frontier) - (ahead - ahead_at)
+        behind_at = bisect.bisect_left(indices, frontier, self.start, ahead_at)
         behind = behind_at - 1
         scanned = 0
-        while behind >= self.head and scanned < BEHIND_SCAN:
-            distance = (frontier - self.indices[behind]) - (behind_at - 1 - behind)
+        head = self.head
+        while behind >= head and scanned < BEHIND_SCAN:
+            distance = (frontier - indices[behind]) - (behind_at - 1 - behind)
             if best_distance is not None and distance >= best_distance:
                 break
-            if not self.used[behind] and self.times[behind] <= t_ns:
+            if not used[behind] and times[behind] <= t_ns:
                 best = behind
                 break
             behind -= 1
             scanned += 1
-        if best is None and ahead < n and self.times[ahead] <= t_ns + STAMP_SLACK_NS:
+        if best is None and ahead < n and times[ahead] <= t_ns + STAMP_SLACK_NS:
             best = ahead
         if best is None:
             return None
-        self.used[best] = 1
-        while self.head < n and self.used[self.head]:
-            self.head += 1
-        return self.frames[best]
+        used[best] = 1
+        while head < n and used[head]:
+            head += 1
+        self.head = head
+        return best
+
+    def evict(self) -> Observed | None:
+        """Drops the oldest copy from the window; returns it if it was never matched (lost)."""
+        at = self.start
+        o = self.frames[at]
+        lost = not self.used[at]
+        self.frames[at] = None
+        self.used[at] = 1
+        self.start = at = at + 1
+        n = len(self.used)
+        head = max(self.head, at)
+        while head < n and self.used[head]:
+            head += 1
+        self.head = head
+        if at >= _COMPACT and 2 * at >= n:
+            for column in (self.frames, self.indices, self.times, self.ranks, self.used):
+                del column[:at]
+            self.head -= at
+            self.start = 0
+        return o if lost else None
+
+    def live(self) -> bool:
+        return self.start < len(self.used)
 
     def __bool__(self) -> bool:
         return self.head < len(self.frames)
@@ -287,69 +360,242 @@ class _everything(Counter):
         return 1 << 62
 
 
+class _Faults:
+    """Fault windows applied as the pass goes (the rule of apply_fault_windows): per window the
+    first frame bridged after its end (the earliest sent, of those matched), and where each
+    lost frame goes once it is final."""
+
+    def __init__(self, windows: list[tuple[int, int]]) -> None:
+        self.windows = windows
+        self.first: list[tuple[int, int] | None] = [None] * len(windows)  # (sent, received) stamps
+        self.waiting: list[list[Observed]] = [[] for _ in windows]  # lost after a window nothing got through yet
+
+    def matched(self, s: Observed, r: Observed, c: Comparison, keep: int | None) -> None:
+        for i, (_, end) in enumerate(self.windows):
+            if s.t_ns >= end:
+                first = self.first[i]
+                if first is None or s.t_ns < first[0]:
+                    self.first[i] = (s.t_ns, r.t_ns)
+                    for o in self.waiting[i]:  # something got through: the window reaches past them
+                        _note(c, c.lost_in_faults, o, "lost_in_faults", keep)
+                    self.waiting[i] = []
+
+    def lost(self, o: Observed, c: Comparison, keep: int | None) -> None:
+        """o is final: nothing sent before it will be matched any more."""
+        waiting = None
+        for i, (start, end) in enumerate(self.windows):
+            if o.t_ns < start - FAULT_LEAD_NS:
+                continue
+            first = self.first[i]
+            if o.t_ns < end or (first is not None and o.t_ns < first[0] + FAULT_SETTLE_NS):
+                _note(c, c.lost_in_faults, o, "lost_in_faults", keep)
+                return
+            if first is None:
+                waiting = i  # inside if anything ever gets through after this window
+        if waiting is not None:
+            self.waiting[waiting].append(o)
+        else:
+            _note(c, c.lost, o, "lost", keep)
+
+    def finish(self, c: Comparison, keep: int | None) -> None:
+        for i, (_, end) in enumerate(self.windows):
+            first = self.first[i]
+            c.recovery_s.append(round((first[1] - end) / 1e9, 3) if first else None)
+            for o in self.waiting[i]:
+                _note(c, c.lost, o, "lost", keep)
+
+
+def _note(c: Comparison, where: list, item, kind: str, keep: int | None) -> None:
+    c.counts[kind] += 1
+    if keep is None or len(where) < keep:
+        where.append(item)
+
+
 @_without_gc
-def _classify(sent: list[Observed], received: list[Observed],
-              explained: Counter | None) -> tuple[Comparison, list[Observed]]:
-    c = Comparison(sent=len(sent), received=len(received))
+def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained: Counter | None, *,
+              windows: list[tuple[int, int]] | None = None, attachment: bool = False, keep: int | None = None,
+              keep_matched: bool = True, on_match: Callable[[Observed, Observed], None] | None = None,
+              window_ns: int | None = MATCH_WINDOW_NS) -> tuple[Comparison, list[Observed]]:
+    """One pass in time order: a sent frame enters the window when the received stream gets to
+    STAMP_SLACK_NS before its stamp, leaves it window_ns after its stamp (lost if unmatched);
+    a received frame no copy in the window matches waits until every lost frame it could be a
+    corruption of is final (corrupted or unexpected), a lost frame until no such frame waits."""
+    c = Comparison()
+    slack = STAMP_SLACK_NS
     waiting: dict[tuple, _Copies] = {}
-    for s in sent:
-        waiting.setdefault(_key(s.frame), _Copies()).add(s)
-    seen_keys = set(waiting)
-    leftovers: list[Observed] = []
+    window: deque[_Copies] = deque()  # the copies each frame of the window belongs to, in stream order
+    window_t: deque[int] = deque()
     others: list[Observed] = []
+    faults = _Faults(windows or [])
+    leftovers: deque[tuple[Observed, int]] = deque()  # (frame, frontier when it arrived), arrival order
+    lost_fifo: deque[Observed] = deque()  # lost frames a waiting leftover may still be a corruption of
+    pool: dict[tuple, tuple[list[int], list[int], list[Observed]]] = {}  # by (id, ext, dlc): index, t, frame
+    paired: set[int] = set()  # indexes of lost frames paired with a corrupted one, still in lost_fifo
     frontier = -1  # the furthest sent index matched so far
-    leftover_frontier: list[int] = []  # where the stream had got to when each leftover arrived
+    horizon = -(1 << 62)  # every sent frame stamped before it has left the window
+    rank = 0
+    sent_it = iter(sent)
+    nxt = next(sent_it, None)
+    last_by_id: dict[tuple, int] = {}
+    previous: Observed | None = None  # the matched sent frame with the highest index so far
+    stamp_count = stamp_max_ns = seq_count = 0
+    stamps: list[str] = []
+    seqs: list[str] = []
+    previous_seq: tuple[Observed, Observed, int] | None = None
+    latency = c.latency
+    counts = c.counts
+
+    def release() -> None:
+        """Lost frames no waiting leftover can be a corruption of are final."""
+        oldest = leftovers[0][0].t_ns - (window_ns or _END) if leftovers else None
+        while lost_fifo and (oldest is None or lost_fifo[0].t_ns < oldest):
+            o = lost_fifo.popleft()
+            if o.index in paired:
+                paired.discard(o.index)
+                continue
+            idx, ts, frames = pool[(o.frame.can_id, o.frame.extended, o.frame.dlc)]
+            at = bisect.bisect_left(idx, o.index)
+            del idx[at], ts[at], frames[at]
+            faults.lost(o, c, keep)
+
+    def decide(r: Observed, at: int) -> None:
+        """r matched no copy: a corruption of the lost frame of its id and length sent within the
+        window before it nearest to where the stream had got to (ahead on a tie), else unexpected."""
+        entry = pool.get((r.frame.can_id, r.frame.extended, r.frame.dlc))
+        hi = bisect.bisect_right(entry[1], r.t_ns + slack) if entry else 0
+        if not hi:
+            _note(c, c.unexpected, r, "unexpected", keep)
+            return
+        idx, ts, frames = entry  # type: ignore[misc]
+        i = bisect.bisect_right(idx, at, 0, hi)
+        if i == hi or (i > 0 and at - idx[i - 1] < idx[i] - at):
+            i -= 1
+        s = frames[i]
+        del idx[i], ts[i], frames[i]
+        paired.add(s.index)
+        diff = [b for b, (x, y) in enumerate(zip(s.frame.data, r.frame.data, strict=False)) if x != y]
+        _note(c, c.corrupted, (s, r, diff), "corrupted", keep)
+
+    def advance(now: int) -> None:
+        nonlocal horizon
+        limit = now if now == _END else now - window_ns if window_ns is not None else horizon
+        if limit <= horizon:
+            return
+        horizon = limit
+        while window_t and window_t[0] < limit:
+            window_t.popleft()
+            copies = window.popleft()
+            o = copies.evict()
+            if o is not None:
+                lost_fifo.append(o)
+                idx, ts, frames = pool.setdefault((o.frame.can_id, o.frame.extended, o.frame.dlc), ([], [], []))
+                at = bisect.bisect_right(idx, o.index)
+                idx.insert(at, o.index)
+                ts.insert(at, o.t_ns)
+                frames.insert(at, o)
+            if not copies.live():
+                del waiting[copies.key]
+        while leftovers and leftovers[0][0].t_ns + slack < limit:
+            release()
+            decide(*leftovers.popleft())
+        release()
+
+    # while loading, the window is trimmed a second at a time (memory), before a received frame
+    # is matched to the nanosecond (the verdict)
+    lag = slack + (window_ns or 0) + LOAD_TRIM_NS
+
+    def load(until: int) -> None:
+        nonlocal nxt, rank
+        while nxt is not None and nxt.t_ns <= until:
+            if window_ns is not None and nxt.t_ns - lag > horizon:
+                advance(nxt.t_ns - slack)
+            k = _key(nxt.frame)
+            copies = waiting.get(k)
+            if copies is None:
+                copies = waiting[k] = _Copies(k)
+            copies.add(nxt, rank)
+            window.append(copies)
+            window_t.append(nxt.t_ns)
+            rank += 1
+            nxt = next(sent_it, None)
+
+    values = latency.values
     for r in received:
+        if nxt is not None and nxt.t_ns <= r.t_ns + slack:
+            load(r.t_ns + slack)
+        if window_ns is not None and r.t_ns - window_ns > horizon:
+            advance(r.t_ns)
+        c.received += 1
         k = _key(r.frame)
         copies = waiting.get(k)
-        nearest = copies.take(frontier, r.t_ns) if copies else None
-        if nearest is not None:
-            frontier = max(frontier, nearest.index)
-            c.matched.append((nearest, r))
+        at = copies.take(frontier, r.t_ns) if copies else None
+        if at is not None:
+            s = copies.frames[at]  # type: ignore[union-attr]
+            assert s is not None
+            if s.index > frontier:
+                frontier = s.index
+            counts["matched"] += 1
+            if keep_matched:
+                c.matched.append((s, r))
+            if on_match is not None:
+                on_match(s, r)
+            # reordering: received order against sent order, globally and per id
+            if previous is not None and s.index < previous.index:
+                _note(c, c.reordered, (s, previous), "reordered", keep)
+            ident = (s.frame.can_id, s.frame.extended)
+            last = last_by_id.get(ident, -1)
+            if s.index < last:
+                c.reordered_per_id += 1
+            else:
+                last_by_id[ident] = s.index
+            if previous is None or s.index > previous.index:
+                previous = s
+            if len(values) < latency.cap:  # Distribution.add's exact mode, inline: the hot path
+                values.append((r.t_ns - s.t_ns) / 1e6)
+            else:
+                latency.add((r.t_ns - s.t_ns) / 1e6)
+            if r.t_ns < s.t_ns:
+                _note(c, c.negative, (s, r), "negative", keep)
+            if windows:
+                faults.matched(s, r, c, keep)
+            if attachment:
+                # the bridge's own account against the oracle's (reported, never used to judge):
+                # its stamp of the frame (at the capture's microseconds), and its numbering of two
+                # frames that arrived one after the other against their distance on the bus
+                if r.bridge_rx_ns and r.bridge_rx_ns // 1000 != s.t_ns // 1000:
+                    stamp_count += 1
+                    stamp_max_ns = max(stamp_max_ns, abs(r.bridge_rx_ns - s.t_ns))
+                    if len(stamps) < EXAMPLES:
+                        stamps.append(f"{describe(s)}: bridge stamp {(r.bridge_rx_ns - s.t_ns) / 1000:+.3f} us off")
+                if r.seq >= 0:
+                    s_rank = copies.ranks[at]  # type: ignore[union-attr]
+                    if previous_seq is not None:
+                        s0, r0, rank0 = previous_seq
+                        if r.seq - r0.seq != s_rank - rank0:
+                            seq_count += 1
+                            if len(seqs) < EXAMPLES:
+                                seqs.append(f"seq {r0.seq} -> {r.seq} for {describe(s0)} -> {describe(s)} "
+                                            f"({s_rank - rank0:+d} on the bus)")
+                    previous_seq = (s, r, s_rank)
         elif explained is not None and explained[k] > 0:
             explained[k] -= 1
+            c.received -= 1
             others.append(r)
-        elif k in seen_keys:
-            c.duplicates.append(r)
+        elif k in waiting:
+            _note(c, c.duplicates, r, "duplicates", keep)
         else:
-            leftovers.append(r)
-            leftover_frontier.append(frontier)
-    if explained is not None:
-        c.received -= len(others)
-    lost = sorted((copies.frames[i] for copies in waiting.values() for i in range(copies.head, len(copies.frames))
-                   if not copies.used[i]), key=lambda o: o.index)
-    # corruption: an unknown frame where a lost frame of the same id and length was due: the
-    # one nearest to where the stream had got to (ahead of it on a tie)
-    lost_by_id: dict[tuple, list[Observed]] = defaultdict(list)
-    for s in lost:
-        lost_by_id[(s.frame.can_id, s.frame.extended, s.frame.dlc)].append(s)
-    corrupted_sent = set()
-    for r, at in zip(leftovers, leftover_frontier, strict=True):
-        candidates = lost_by_id.get((r.frame.can_id, r.frame.extended, r.frame.dlc))
-        if candidates:
-            i = bisect.bisect_right([o.index for o in candidates], at)
-            if i == len(candidates) or (i > 0 and at - candidates[i - 1].index < candidates[i].index - at):
-                i -= 1
-            s = candidates.pop(i)
-            corrupted_sent.add(s.index)
-            diff = [i for i, (a, b) in enumerate(zip(s.frame.data, r.frame.data, strict=False)) if a != b]
-            c.corrupted.append((s, r, diff))
-        else:
-            c.unexpected.append(r)
-    c.lost = [s for s in lost if s.index not in corrupted_sent]
-    # reordering: received order against sent order, globally and per id
-    last_by_id: dict[tuple, int] = {}
-    previous: tuple[Observed, Observed] | None = None
-    for s, r in sorted(c.matched, key=lambda p: p[1].index):
-        if previous and s.index < previous[0].index:
-            c.reordered.append((s, previous[0]))
-        ident = (s.frame.can_id, s.frame.extended)
-        if ident in last_by_id and s.index < last_by_id[ident]:
-            c.reordered_per_id += 1
-        last_by_id[ident] = max(s.index, last_by_id.get(ident, -1))
-        if not previous or s.index > previous[0].index:
-            previous = (s, r)
-        c.latency_ms.append((r.t_ns - s.t_ns) / 1e6)
+            leftovers.append((r, frontier))
+    load(_END)
+    advance(_END)
+    c.sent = rank
+    faults.finish(c, keep)
+    if keep is None:
+        c.lost.sort(key=lambda o: o.index)
+        c.lost_in_faults.sort(key=lambda o: o.index)
+    if attachment:
+        c.attachment = {"can_stamp": {"count": stamp_count, "max_us": round(stamp_max_ns / 1000, 3),
+                                      "examples": stamps},
+                        "seq": {"count": seq_count, "examples": seqs}}
     return c, others
 
 
@@ -363,28 +609,61 @@ def apply_fault_windows(c: Comparison, windows: list[tuple[int, int]]) -> None:
     """Loss inside a fault window is the fault's, not the bridge's: a lost frame sent between
     a fault's start (minus FAULT_LEAD_NS) and FAULT_SETTLE_NS after the first frame bridged
     after the fault's end moves from lost to lost_in_faults. recovery_s per window: fault
-    end -> arrival of that first frame (None: nothing sent after the fault got through)."""
+    end -> arrival of that first frame (None: nothing sent after the fault got through).
+    On a comparison that kept its matched pairs (compare); compare_stream and compare take
+    the windows and apply the same rule during the pass."""
     matched = sorted(c.matched, key=lambda p: p[0].t_ns)
     allowed = []
     for start_ns, end_ns in windows:
         first = next(((s, r) for s, r in matched if s.t_ns >= end_ns), None)
         c.recovery_s.append(round((first[1].t_ns - end_ns) / 1e9, 3) if first else None)
         allowed.append((start_ns - FAULT_LEAD_NS, first[0].t_ns + FAULT_SETTLE_NS if first else end_ns))
-    c.lost_in_faults = [o for o in c.lost if any(a <= o.t_ns < b for a, b in allowed)]
+    moved = [o for o in c.lost if any(a <= o.t_ns < b for a, b in allowed)]
+    c.lost_in_faults = sorted(c.lost_in_faults + moved, key=lambda o: o.index)
     c.lost = [o for o in c.lost if not any(a <= o.t_ns < b for a, b in allowed)]
+    c.counts["lost"] -= len(moved)
+    c.counts["lost_in_faults"] += len(moved)
 
 
-def cycle_times(frames: list[Observed]) -> dict[str, dict]:
+class CycleTimes:
+    """Per id: count and cycle time statistics (ms) of a stream, frame by frame; the gaps
+    per id in a Distribution of CYCLE_EXACT values (then its sketch)."""
+
+    def __init__(self) -> None:
+        self.ids: dict[tuple, list] = {}  # (id, ext) -> [last stamp, gaps]
+
+    def add(self, o: Observed) -> None:
+        f = o.frame
+        seen = self.ids.get((f.can_id, f.extended))
+        if seen is None:
+            self.ids[(f.can_id, f.extended)] = [o.t_ns, Distribution(CYCLE_EXACT, sample=False)]
+            return
+        gaps = seen[1]
+        gap = (o.t_ns - seen[0]) / 1e6
+        seen[0] = o.t_ns
+        if len(gaps.values) < CYCLE_EXACT:  # exact mode, inline
+            gaps.values.append(gap)
+        else:
+            gaps.add(gap)
+
+    def result(self) -> dict[str, dict]:
+        out = {}
+        for (can_id, extended), (_, gaps) in self.ids.items():
+            stats = gaps.stats()
+            out[wire.id_hex(can_id, extended)] = {"count": len(gaps) + 1, "cycle_p50_ms": stats["p50_ms"],
+                                                  "cycle_min_ms": stats["min_ms"], "cycle_max_ms": stats["max_ms"]}
+        return dict(sorted(out.items()))
+
+
+CYCLE_EXACT = 1 << 13  # gaps kept exactly per id (64 KiB), then the sketch (canbench.distribution)
+
+
+def cycle_times(frames: Iterable[Observed]) -> dict[str, dict]:
     """Per id: count and cycle time statistics (ms) of a CAN stream."""
-    by_id: dict[str, list[int]] = defaultdict(list)
+    acc = CycleTimes()
     for o in frames:
-        by_id[wire.id_hex(o.frame.can_id, o.frame.extended)].append(o.t_ns)
-    out = {}
-    for ident, times in sorted(by_id.items()):
-        gaps = [(b - a) / 1e6 for a, b in zip(times, times[1:], strict=False)]
-        out[ident] = {"count": len(times), "cycle_p50_ms": percentile(gaps, 0.5),
-                      "cycle_min_ms": min(gaps) if gaps else None, "cycle_max_ms": max(gaps) if gaps else None}
-    return out
+        acc.add(o)
+    return acc.result()
 
 
 def frame_key(f: wire.Frame) -> tuple:
