@@ -426,7 +426,8 @@ def freshness(result: RunResult) -> dict:
         late = sorted((a for a in aged if a[2] > deadline_ms), key=lambda a: -a[2])
         reached = {id(s) for s, _ in pairs}
         per_window = [{"action": w["action"], "start_s": w.get("start_s"), "lost": 0} for w in windows]
-        for o in c.lost_in_faults:
+        in_faults = [o for o in c.lost_in_faults if key(o) not in aged_out]  # those stamped stale: counted apart
+        for o in in_faults:
             at = [i for i, w in enumerate(windows) if w["start_ns"] - FAULT_LEAD_NS <= o.t_ns]
             if at:
                 per_window[at[-1]]["lost"] += 1
@@ -441,7 +442,7 @@ def freshness(result: RunResult) -> dict:
             "refused_stale": (stats or {}).get("tx_rejected", {}).get("stale"),
             "stamped_stale": sum(1 for s in b.commands if key(s) in aged_out),
             "stamped_stale_refused": sum(1 for s in b.commands if key(s) in aged_out and id(s) not in reached),
-            "lost_in_faults": len(c.lost_in_faults),
+            "lost_in_faults": len(in_faults),
             "lost_per_window": per_window,
         }
     result.metrics["freshness"] = out
