@@ -63,7 +63,7 @@ FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
 .PHONY: setup venv summarise scaffold validate open bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-hub-proof fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-host bench-tools zn-flood test clean preflight base images \
+        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-hub-proof fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-dbc bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -245,9 +245,9 @@ CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run
            -v $(CURDIR):$(CURDIR) -w $(CURDIR) canbench/orchestrator:$(BENCH_TAG) canbench)
 CANBENCH_DEP = $(if $(wildcard $(VENV)/bin/canbench),,images)
 summarise: $(CANBENCH_DEP)
-	@$(CANBENCH) summarise $(TRACE)
+	@$(CANBENCH) summarise $(TRACE) $(if $(DBC),--dbc $(DBC))
 scaffold: $(CANBENCH_DEP)
-	@$(CANBENCH) scaffold $(TRACE) --name $(NAME)
+	@$(CANBENCH) scaffold $(TRACE) --name $(NAME) $(if $(DBC),--dbc $(DBC))
 validate: $(CANBENCH_DEP)
 	@$(CANBENCH) validate $(SCENARIO)
 open:
@@ -301,7 +301,7 @@ bench-qos: ucan firmware zenohd bench-tools
 # Benchmarks for nightly runs, never part of check (docs/benchmark.md, docs/userspace-bus.md):
 # in compose, with the binaries of the images `make test` runs (compose.bench.yaml, no network);
 # BENCHMARKS= picks some of them. bench-host runs the same scripts with the host's builds.
-BENCHMARKS ?= bus bridge capture paths callgrind qos viewer
+BENCHMARKS ?= bus bridge capture paths callgrind qos viewer dbc
 bench: images
 	@scripts/build-images $(BENCH_TAG) $(BENCH_BASE) bench
 	@mkdir -p $(BENCH_OUT)
@@ -313,7 +313,11 @@ bench: images
 bench-viewer:
 	$(PYTHON) -m bench.viewer --out $(BENCH_OUT)
 
-bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-viewer
+# DBC load and signal-decode time: cantools' large DBCs and a generated one (bench/dbc.py)
+bench-dbc:
+	$(PYTHON) -m bench.dbc --out $(BENCH_OUT)
+
+bench-host: bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-viewer bench-dbc
 
 preflight:
 	@command -v docker >/dev/null || { echo "preflight: docker is not installed (https://docs.docker.com/engine/install/)" >&2; exit 1; }

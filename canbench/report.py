@@ -132,8 +132,8 @@ def _signal_section(result: RunResult) -> str:
         for value in ([gate.equals] if gate.equals is not None else []) + list(gate.one_of or ()):
             ax.axhline(value, color="green", lw=0.8, ls=":")
         for s, colour in zip(sides, ("tab:blue", "tab:orange"), strict=False):
-            if s.points:
-                ax.plot([t for t, _ in s.points], [v for _, v in s.points], ".", ms=2, color=colour,
+            if s.times:
+                ax.plot(s.times, s.values, ".", ms=2, color=colour,
                         label=f"{'bus' if s.side == 'can' else 'Zenoh'} ({s.count})")
             if s.marks:
                 ax.plot([t for t, _ in s.marks], [v for _, v in s.marks], "x", color="red", ms=7,
@@ -149,6 +149,17 @@ def _signal_section(result: RunResult) -> str:
     axes[-1, 0].set_xlabel("s since the first bus frame")
     fig.tight_layout()
     return "<h2>Signals</h2>" + table + _png(fig)
+
+
+def _response_section(m: dict) -> str:
+    """Stimulus-response checks (expect.responses): counts and each rule's latency distribution."""
+    rows = [[html.escape(name), r["bus"], r["side"], r["within_ms"], r["stimuli"], r["answered"], r["late"],
+             r["missing"], r["duplicates"], _ms(r["latency"]["min_ms"]), _ms(r["latency"]["p50_ms"]),
+             _ms(r["latency"]["p99_ms"]), _ms(r["latency"]["max_ms"])] for name, r in m.get("responses", {}).items()]
+    if not rows:
+        return ""
+    return "<h2>Responses</h2>" + _table(["check", "bus", "side", "within ms", "stimuli", "answered", "late",
+                                          "missing", "duplicates", "min ms", "p50 ms", "p99 ms", "max ms"], rows)
 
 
 def _table(header: list[str], rows: list[list]) -> str:
@@ -230,6 +241,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
 {_table(["bus", "id", "on bus", "on Zenoh", "lost", "bus cycle p50 ms", "Zenoh cycle p50 ms", "Zenoh max gap ms"],
         id_rows)}
 {_signal_section(result)}
+{_response_section(m)}
 <h2>Emulated ECUs</h2><p>Send-time error against the trace (echo: turnaround), so a verdict never blames the
 bridge for the emulator's jitter.</p>
 {_table(["ECU", "role", "bus", "sent", "p50 ms", "p99 ms", "max ms"], ecu_rows)}

@@ -7,15 +7,17 @@ as cantools returns them).
 
 The evaluator is one streaming pass per side and bus: frames are fed in order and each gated
 signal keeps running state only (count, min, max, the last value for the rate), at most
-MAX_VIOLATIONS described violations (the rest counted), and a series for the report thinned to
-at most PLOT_POINTS points (every other point dropped when full, so its step doubles), so an
-hour of traffic takes the memory of a second of it.
+MAX_VIOLATIONS described violations (the rest counted), MARKS violations to mark, and a series
+for the report thinned to at most PLOT_POINTS points (every other point dropped when full, so its
+step doubles; 16 bytes a point), so an hour of traffic takes the memory of a minute of it: about
+40 KiB per gated signal and side at most.
 
 Validation (gates): a name the bus's DBC lacks, a value-table name the signal lacks, or an
 expectation on a bus without a DBC is a scenario problem at its file:line."""
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -208,9 +210,15 @@ class Series:
     last_value: float | None = None
     violations: list[str] = field(default_factory=list)
     more: int = 0  # violations beyond MAX_VIOLATIONS
-    points: list[tuple[float, float]] = field(default_factory=list)  # (s since t0, value), thinned
-    step: int = 1   # every step-th sample is kept in points
+    times: array = field(default_factory=lambda: array("d"))   # s since t0 of the plotted values, thinned
+    values: array = field(default_factory=lambda: array("d"))  # (16 bytes a point: thousands of signals fit)
+    step: int = 1   # every step-th value is kept for the plot
     marks: list[tuple[float, float]] = field(default_factory=list)  # violations, first MARKS
+
+    @property
+    def points(self) -> list[tuple[float, float]]:
+        """(s since t0, value) of the plot series."""
+        return list(zip(self.times, self.values, strict=True))
 
     @property
     def violation_count(self) -> int:
@@ -224,13 +232,14 @@ class Series:
         if value is not None and len(self.marks) < MARKS:
             self.marks.append((t_s, value))
 
-    def add(self, t_ns: int, t0_ns: int, value: float, where: Callable[[], str]) -> None:
-        """One decoded value; where() names its frame (called only for a violation)."""
+    def add(self, t_ns: int, t0_ns: int, value: float, where: str | Callable[[], str]) -> None:
+        """One decoded value; where names its frame (a function giving that is called only for a
+        violation, so good values build no strings)."""
         g = self.gate
         t_s = (t_ns - t0_ns) / 1e9
 
         def at() -> str:
-            return f"at t={t_s:.3f} s, {where()}"
+            return f"at t={t_s:.3f} s, {where() if callable(where) else where}"
         if g.range and not g.range[0] <= value <= g.range[1]:
             self.violate(f"{g.key} = {g.show(value)} outside [{_num(g.range[0])}, {_num(g.range[1])}] {at()}",
                          t_s, value)
@@ -251,9 +260,10 @@ class Series:
         self.max = value if self.max is None else max(self.max, value)
         self.last_t_ns, self.last_value = t_ns, value
         if (self.count - 1) % self.step == 0:
-            self.points.append((t_s, value))
-            if len(self.points) >= PLOT_POINTS:
-                self.points = self.points[::2]
+            self.times.append(t_s)
+            self.values.append(value)
+            if len(self.times) >= PLOT_POINTS:
+                self.times, self.values = self.times[::2], self.values[::2]
                 self.step *= 2
 
     def finish(self, side_name: str) -> None:
@@ -295,7 +305,6 @@ class Evaluator:
         message = self._message(frame)
         if message is None:
             return
-        place: Callable[[], str] = where if callable(where) else (lambda: where)  # type: ignore[assignment,return-value]
         series = self.by_message[message.name]
         try:
             decoded = message.decode(frame.data, decode_choices=False)
@@ -303,12 +312,13 @@ class Evaluator:
             t_s = (t_ns - self.t0_ns) / 1e9
             for s in series:
                 s.violate(f"{s.gate.key}: {message.name} frame {wire.id_hex(frame.can_id, frame.extended)}#"
-                          f"{frame.data.hex().upper()} does not decode ({e}) at t={t_s:.3f} s, {place()}", t_s, None)
+                          f"{frame.data.hex().upper()} does not decode ({e}) at t={t_s:.3f} s, "
+                          f"{where() if callable(where) else where}", t_s, None)
             return
         for s in series:
             value = decoded.get(s.gate.signal)
             if isinstance(value, int | float):  # else a multiplexed signal not selected in this frame
-                s.add(t_ns, self.t0_ns, float(value), place)
+                s.add(t_ns, self.t0_ns, float(value), where)
 
     def finish(self) -> list[Series]:
         side_name = "on the bus" if self.side == "can" else "on Zenoh"
