@@ -34,6 +34,7 @@ MAX_VIOLATIONS = 20  # described per signal and side; the rest are counted
 PLOT_POINTS = 2000   # per signal and side, for report.html
 MARKS = 200          # violations marked in the report per signal and side
 SIDES = ("can", "zenoh")
+OPERATORS = ("range", "equals", "one_of", "max_rate", "present")
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,9 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
         if not isinstance(spec, dict) or not isinstance(key, str) or key.count(".") != 1:
             continue  # the schema refused it
         message_name, signal_name = key.split(".")
+        if not set(spec) & set(OPERATORS) and set(spec) <= {*OPERATORS, "buses"}:  # (else the schema said)
+            fail(where, f"nothing to judge: give at least one of {', '.join(OPERATORS)}")
+            continue
         wanted = spec.get("buses")
         if isinstance(wanted, list):
             for i, bus in enumerate(wanted):

@@ -183,6 +183,8 @@ def test_the_plotted_series_is_thinned_to_a_bound(tmp_path):
     ("    EngineData.EngineSpeed:\n      equals: fast\n", 13, "(it has none)"),
     ("    EngineData.EngineSpeed:\n      rang: [0, 1]\n", 13, "Additional properties are not allowed ('rang'"),
     ("    EngineSpeed: {range: [0, 1]}\n", 12, "'EngineSpeed' does not match"),
+    ("    EngineData.EngineSpeed: {buses: [vcan0]}\n", 12,
+     "nothing to judge: give at least one of range, equals, one_of, max_rate, present"),
 ])
 def test_names_the_dbc_lacks_are_errors_at_their_line(tmp_path, signals_yaml, line, message):
     with pytest.raises(ScenarioError) as e:
