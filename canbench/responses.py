@@ -14,8 +14,8 @@ stimulus's); none within within_ms is a late response (one came later, before th
 stimulus) or a missing one, named with the stimulus (commands.tsv:line or can.log:line) and what
 was seen instead (the values in the window, or a matching frame that came before the stimulus:
 an early one); with `once`, further matching frames before the next stimulus are duplicates.
-metrics.json `responses.<name>`: stimuli, answered, late, missing, duplicates, the latency
-distribution and the problems."""
+metrics.json `responses.<name>`: stimuli, answered (in time), late, missing, duplicates, the
+latency distribution of every response found (in time or late) and the problems."""
 from __future__ import annotations
 
 import math
@@ -226,8 +226,8 @@ def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracl
     starts = sorted(stimuli(rule, commands, bus_frames), key=lambda o: o.t_ns)
     seen = sorted(_values(rule.response_message, rule.response_signal,
                           zenoh_frames if rule.side == "zenoh" else bus_frames), key=lambda ov: ov[0].t_ns)
-    latencies: list[float] = []
-    late = missing = duplicates = 0
+    latencies: list[float] = []  # of every response found, in time or late
+    answered = late = missing = duplicates = 0
     problems: list[str] = []
     j = 0  # the first response frame after the current stimulus
     for k, s in enumerate(starts):
@@ -241,8 +241,10 @@ def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracl
             j += 1
         meeting = [(o, v) for o, v in mine if rule.then.met(v)]
         what = f"{rule.name}: {rule.stimulus_text()} at {_where(s)}"
-        if meeting and meeting[0][0].t_ns - t0 <= window_ns:
+        if meeting:
             latencies.append((meeting[0][0].t_ns - t0) / 1e6)
+        if meeting and meeting[0][0].t_ns - t0 <= window_ns:
+            answered += 1
             if rule.once and len(meeting) > 1:
                 duplicates += len(meeting) - 1
                 problems.append(f"{what}: {len(meeting)} responses {rule.response_text()}, once expected: "
@@ -270,7 +272,7 @@ def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracl
     elif not starts:
         problems.insert(0, f"{rule.name}: no stimulus: nothing {rule.stimulus_text()}, so nothing judged")
     return {"bus": rule.bus, "side": rule.side, "within_ms": rule.within_ms, "stimuli": len(starts),
-            "answered": len(latencies), "late": late, "missing": missing, "duplicates": duplicates,
+            "answered": answered, "late": late, "missing": missing, "duplicates": duplicates,
             "latency": latency_stats(latencies), "problems": problems}
 
 
