@@ -11,11 +11,22 @@ per frame (voluntary + involuntary, /proc/<pid>/task/*/status), CPU time per fra
 stime) and its kernel share, and whether every frame arrived. Compare two builds by running it
 twice (--bridge, --ucan-build: the bridge and the hub/preload it runs on).
 
+--can-side: the CAN side alone, zenoh-node-memzenoh (the bridge on the real CAN port with Zenoh
+replaced by the in-memory recorder, built with the unit tests, no cargo): no router, what was
+published read from the bridge's final stats; CAN -> Zenoh at RATES and a near-saturated
+unthrottled bus (CAN_SIDE_FAST), both modes. --strace adds syscalls per frame (strace -c
+attached for the load, which slows the bridge: its CPU numbers are then not comparable).
+
+CPU time is the threads' run time from /proc/<pid>/task/*/schedstat (nanoseconds; the tick-based
+utime/stime only split it into user and kernel).
+
 Loopback only; every load is bounded in frames and time."""
 from __future__ import annotations
 
 import argparse
 import json
+import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -23,14 +34,15 @@ import time
 from pathlib import Path
 
 from canbench import wire
-from canbench.rig import Rig, Router, start_bridge, zn_capture
+from canbench.rig import Rig, Router, start_bridge, stop, zn_capture
 from canbench.runkeys import open_session
 
 from .bridge import count_frames
 from .common import add_tool_arguments, cpu_split_s, machine_line, run_id_and_output, settle
 
 RATES = (900, 4500, 8100)  # frames/s: 10, 50, 90 % of a saturated 1 Mbit/s bus of 8-byte frames
-LOAD_S = 2.0
+CAN_SIDE_FAST = 50000  # frames/s: an unthrottled userspace bus, frames queue between wakeups
+LOAD_S = 3.0
 BATCH_MS = 10
 TX_RATE = 8000  # frames/s Zenoh -> CAN
 COMMAND_FRAMES = 16  # frames per command Zenoh -> CAN
@@ -48,6 +60,42 @@ def ctx_switches(pid: int) -> int:
         except OSError:  # a thread that just ended
             pass
     return total
+
+
+def run_ns(pid: int) -> int:
+    """CPU time of every thread of a process so far, ns (schedstat: not tick-rounded)."""
+    total = 0
+    for stat in Path(f"/proc/{pid}/task").glob("*/schedstat"):
+        try:
+            total += int(stat.read_text().split()[0])
+        except OSError:  # a thread that just ended
+            pass
+    return total
+
+
+class Probe:
+    """CPU, kernel share and context switches of a process between start() and end()."""
+
+    def __init__(self, pid: int):
+        self.pid = pid
+        self.start = (run_ns(pid), *cpu_split_s(pid), ctx_switches(pid))
+
+    def end(self, frames: int) -> dict:
+        ns, user, system, ctx = (a - b for a, b in zip((run_ns(self.pid), *cpu_split_s(self.pid),
+                                                         ctx_switches(self.pid)), self.start, strict=True))
+        return {"ctx_per_frame": round(ctx / max(frames, 1), 3),
+                "cpu_us_per_frame": round(ns / max(frames, 1) / 1e3, 2),
+                "kernel_share": round(system / (user + system), 2) if user + system else None}
+
+
+def strace_counts(path: Path) -> dict[str, int]:
+    """Calls per syscall from strace -c output (the total row left out)."""
+    calls = {}
+    for line in path.read_text().splitlines():
+        f = line.split()
+        if len(f) >= 5 and f[-1].isidentifier() and f[-1] != "total" and f[3].isdigit():
+            calls[f[-1]] = int(f[3])
+    return calls
 
 
 class Run(Rig):
@@ -72,8 +120,7 @@ class Run(Rig):
         frames = int(rate * LOAD_S)
         if direction == "zenoh-to-can":
             frames -= frames % COMMAND_FRAMES
-        user0, sys0 = cpu_split_s(bridge.pid)
-        ctx0 = ctx_switches(bridge.pid)
+        probe = Probe(bridge.pid)
         if direction == "can-to-zenoh":
             self.procs.spawn([self.args.can_load, "send", "vcan0", "100", rate, frames], env=self.env,
                              stdout=subprocess.DEVNULL).wait()
@@ -96,23 +143,55 @@ class Run(Rig):
             counted = json.loads(reader.communicate(timeout=SETTLE_S + 5)[0])  # stops after 1 s idle
             received = counted["frames"]
             pub.undeclare()
-        user1, sys1 = cpu_split_s(bridge.pid)
-        ctx = ctx_switches(bridge.pid) - ctx0
+        measured = probe.end(received)
         self.procs.close()
         session.close()
-        cpu = (user1 - user0) + (sys1 - sys0)
         return {"direction": direction, "mode": mode, "rate": rate, "frames": frames, "received": received,
-                "lossless": received == frames, "ctx_per_frame": round(ctx / max(received, 1), 3),
-                "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2),
-                "kernel_share": round((sys1 - sys0) / cpu, 2) if cpu else None}
+                "lossless": received == frames, **measured}
+
+    def can_side(self, mode: str, rate: int, strace: bool) -> dict:
+        """CAN -> Zenoh into zenoh-node-memzenoh: the reader, the queue and the publisher, no Zenoh."""
+        self.hub.start(["vcan0"])
+        log = self.workdir / "bridge.log"
+        period = str(BATCH_MS) if mode == "batching" else "0"
+        with open(log, "w") as out:
+            bridge = self.procs.spawn([self.args.bridge, "--can", "vcan0", "--publish-period-ms", period],
+                                      env=self.env, stdout=out, stderr=subprocess.STDOUT)
+        self.hub.wait_bound(1)
+        tracer = None
+        if strace:
+            tracer = subprocess.Popen(["strace", "-f", "-c", "-o", str(self.workdir / "strace.txt"), "-p",
+                                       str(bridge.pid)], stderr=subprocess.DEVNULL)
+            time.sleep(1.0)  # strace attaches to every thread; no signal says it has
+        frames = int(rate * LOAD_S)
+        probe = Probe(bridge.pid)
+        self.procs.spawn([self.args.can_load, "send", "vcan0", "100", rate, frames], env=self.env,
+                         stdout=subprocess.DEVNULL).wait()
+        time.sleep(4 * BATCH_MS / 1000)  # a duration: the last period's frames are read
+        measured = probe.end(frames)
+        if tracer:
+            tracer.send_signal(signal.SIGINT)
+            tracer.wait()
+        stop(bridge)
+        m = re.search(r'"published_frames": (\d+)', log.read_text())
+        received = int(m.group(1)) if m else 0
+        row = {"direction": "can-to-zenoh (CAN side)", "mode": mode, "rate": rate, "frames": frames,
+               "received": received, "lossless": received == frames, **measured}
+        if tracer:
+            calls = strace_counts(self.workdir / "strace.txt")
+            row["syscalls_per_frame"] = round(sum(calls.values()) / frames, 3)
+            row["syscalls"] = {k: round(v / frames, 3) for k, v in sorted(calls.items(), key=lambda kv: -kv[1])[:4]}
+        return row
 
 
 def table(results: list[dict]) -> str:
     rows = ["| direction | mode | frames/s | received | context switches per frame | CPU µs per frame | "
-            "of it in the kernel |", "|---|---|---|---|---|---|---|"]
+            "of it in the kernel | syscalls per frame |", "|---|---|---|---|---|---|---|---|"]
     for r in results:
+        calls = (f"{r['syscalls_per_frame']} ({', '.join(f'{k} {v}' for k, v in r['syscalls'].items())})"
+                 if "syscalls" in r else "")
         rows.append(f"| {r['direction']} | {r['mode']} | {r['rate']} | {r['received']}/{r['frames']} | "
-                    f"{r['ctx_per_frame']} | {r['cpu_us_per_frame']} | {r['kernel_share']} |")
+                    f"{r['ctx_per_frame']} | {r['cpu_us_per_frame']} | {r['kernel_share']} | {calls} |")
     return "\n".join(rows)
 
 
@@ -121,16 +200,23 @@ def main() -> int:
     add_tool_arguments(ap)
     ap.add_argument("--rates", default=",".join(map(str, RATES)))
     ap.add_argument("--label", default="", help="what build this is (printed with the table)")
+    ap.add_argument("--can-side", action="store_true", help="--bridge is zenoh-node-memzenoh: the CAN side alone")
+    ap.add_argument("--strace", action="store_true", help="--can-side: syscalls per frame (strace -c)")
     args = ap.parse_args()
     run_id, out = run_id_and_output(args)
     results = []
-    plan = [("can-to-zenoh", mode, int(rate)) for mode in ("immediate", "batching")
-            for rate in args.rates.split(",")] + [("zenoh-to-can", "immediate", TX_RATE)]
+    rates = [int(rate) for rate in args.rates.split(",")]
+    if args.can_side:
+        plan = [("can-side", mode, rate) for mode in ("immediate", "batching") for rate in rates + [CAN_SIDE_FAST]]
+    else:
+        plan = [("can-to-zenoh", mode, rate) for mode in ("immediate", "batching") for rate in rates]
+        plan.append(("zenoh-to-can", "immediate", TX_RATE))
     for direction, mode, rate in plan:
-        with tempfile.TemporaryDirectory(prefix="bench-wakeups-") as tmp:
+        with tempfile.TemporaryDirectory(prefix="bench-wakeups-", dir="/tmp") as tmp:  # short: unix socket path
             run = Run(args, Path(tmp))
             try:
-                results.append(run.one(direction, mode, rate))
+                results.append(run.can_side(mode, rate, args.strace) if direction == "can-side"
+                               else run.one(direction, mode, rate))
             finally:
                 run.close()
         print(json.dumps(results[-1]), flush=True)
