@@ -133,14 +133,21 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
             for b in with_dbc:
                 if b not in on:
                     fail([*where, "buses"], f"the DBC of {b} has no message {message_name}")
-        message = _message(dbs[on[0]], message_name)
-        assert message is not None
-        signal = next((s for s in message.signals if s.name == signal_name), None)
-        if signal is None:
+        # the signal as each bus's DBC has it: judged where it is, missing where it was asked for
+        found = {b: next((s for s in _message(dbs[b], message_name).signals if s.name == signal_name), None)
+                 for b in on}
+        having = [b for b in on if found[b] is not None]
+        if not having:
+            message = _message(dbs[on[0]], message_name)
             fail(where, f"message {message_name} has no signal {signal_name} "
                  f"({_listing([s.name for s in message.signals])})")
             continue
-        gate = _gate(key, message_name, signal, tuple(on), spec, where, fail)
+        if isinstance(wanted, list):
+            for b in on:
+                if b not in having:
+                    fail([*where, "buses"], f"message {message_name} in the DBC of {b} has no signal {signal_name}")
+        signal = found[having[0]]
+        gate = _gate(key, message_name, signal, tuple(having), spec, where, fail)
         if gate is not None:
             out.append(gate)
     return tuple(out)

@@ -225,6 +225,19 @@ def test_per_bus_dbc_overrides_the_default_and_gates_follow_the_message(tmp_path
             buses="  - name: vcan0\n  - name: vcan1\n    dbc: dbc/powertrain.dbc\n"))
 
 
+def test_a_signal_only_one_buses_dbc_has_is_judged_there(tmp_path):
+    (tmp_path / "dbc").mkdir()
+    shutil.copy(REPO / "scenarios" / "dbc" / "powertrain.dbc", tmp_path / "dbc" / "powertrain.dbc")
+    two = "  - name: vcan0\n  - name: vcan1\n    dbc: dbc/powertrain.dbc\n"
+    # GearboxState is in both DBCs; Gear only in signals.dbc (powertrain's has GearboxOilPressure only)
+    sc = scenario.load(write_scenario(tmp_path, "  signals:\n    GearboxState.Gear: {one_of: [P, D]}\n", buses=two))
+    assert [g.buses for g in sc.signal_gates] == [("vcan0",)]
+    with pytest.raises(ScenarioError, match=r"sc.yaml:16: expect.signals.GearboxState.Gear.buses: message "
+                                            r"GearboxState in the DBC of vcan1 has no signal Gear"):
+        scenario.load(write_scenario(tmp_path, "  signals:\n    GearboxState.Gear:\n      one_of: [P, D]\n"
+                                               "      buses: [vcan0, vcan1]\n", buses=two))
+
+
 def test_validate_exits_2_on_a_missing_signal(tmp_path):
     path = write_scenario(tmp_path, "  signals:\n    EngineData.Speed: {range: [0, 1]}\n")
     proc = subprocess.run([sys.executable, "-m", "canbench.cli", "validate", str(path)], capture_output=True,
