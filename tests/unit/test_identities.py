@@ -67,7 +67,7 @@ class Inbox:
 
     def __call__(self, sample) -> None:
         with self.cv:
-            self.items.append(sample.payload.to_bytes().decode())
+            self.items.append(sample.payload.to_bytes().decode(errors="replace"))
             self.cv.notify_all()
 
     def wait_for(self, item: str, timeout_s: float = 5) -> None:
@@ -158,3 +158,50 @@ def test_keys_are_not_world_readable_and_the_ca_key_is_gone(tmp_path):
     assert not list(root.rglob("ca.key")) and not (root / "anonymous" / "key.pem").exists()
     with pytest.raises(RuntimeError, match="not empty"):
         identities.generate(root)
+
+
+def test_the_security_scenarios_probes_are_refused(net, tmp_path, monkeypatch):
+    """canbench.security's probes and the orchestrator's observation, against the real Zenoh: the
+    anonymous and the rogue probe get no session, the ECU's does and puts, but nothing reaches the
+    bridge; security.json says so, and check access_control passes on it (and fails when the
+    rogue bridge's token shows)."""
+    from types import SimpleNamespace
+
+    from canbench import security
+    monkeypatch.setattr(security, "CONNECT_TIMEOUT_MS", 1000)  # loopback: a refusal is at once
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    configs = tmp_path / "configs"
+    configs.mkdir()
+    for d in ("anonymous", "ecu", "rogue-bridge"):
+        text = (net.root / d / "zenoh.json5").read_text().replace(identities.MOUNT, str(net.root / d))
+        (configs / f"{d}.json5").write_text(text)
+    bridge, orch = net.client("bridge"), net.client("orchestrator")
+    commands = Inbox()
+    keep = [bridge.declare_subscriber(f"{P}/tx", commands),
+            bridge.liveliness().declare_token(f"{P}/bridges/zenoh-node/vcan0/client"),
+            orch.liveliness().declare_token(runkeys.capture_ready("r"))]
+    runkeys.wait_token(orch, runkeys.bridges(P), 5)  # as the bench: the bridge subscribes before the token
+    endpoint = f"tls/localhost:{net.port}"
+    results = {name: security.probe(name, endpoint, "r", run_dir, 5, config_file=str(configs / f"{name}.json5"))
+               for name in security.PROBES}
+    assert [a["session"] for a in results["anonymous"]["attempts"]] == [False, False]
+    assert results["rogue-bridge"]["session"] is False
+    assert results["ecu"]["session"] is True and results["ecu"]["put"] == 5 and results["ecu"]["capture_ready_seen"]
+    orch.put(f"{P}/tx", b"after")  # the orchestrator's command after the probes' arrives; theirs never did
+    commands.wait_for("after")
+    assert commands.items == ["after"]
+    scenario = SimpleNamespace(raw={"security": {"probes": list(security.PROBES), "frames": 5}})
+    run = SimpleNamespace(scenario=scenario, run_dir=run_dir, session=orch, prefix=P)
+    security.observe(run)
+    seen = json.loads((run_dir / "security.json").read_text())
+    assert seen["rogue_bridge_tokens"] == [] and set(seen["probes"]) == set(security.PROBES)
+    result = SimpleNamespace(scenario=scenario, run_dir=run_dir, buses=[], bridge_stats=None)
+    assert security.check(result) == []
+    # a rogue bridge that got in is named
+    rogue = bridge.liveliness().declare_token(f"{P}/bridges/{security.ROGUE_NODE}/vcan0/client")
+    runkeys.wait_token(orch, f"{P}/bridges/{security.ROGUE_NODE}/**", 5)
+    security.observe(run)
+    assert any("rogue bridge" in p for p in security.check(result))
+    rogue.undeclare()
+    del keep
