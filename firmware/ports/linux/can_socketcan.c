@@ -23,6 +23,12 @@
  * frame's skb is under 1 KiB on x86-64 and arm64; the userspace hub's unix messages
  * are smaller still and the hub queues more behind them): capacity = buffer / this. */
 #define CAN_FRAME_RCVBUF_COST 2048
+/* ... and at most this many: on the userspace bus the socket holds only what the hub's
+ * send buffer keeps in flight (net.core.wmem_default 212992 B: about 280 messages); the hub
+ * queues the rest, but hands it over only as fast as the reader empties the socket, so a
+ * reader that lets more wait than this falls behind (measured: 33 k frames still in the hub
+ * after a 50 k frames/s load, capacity taken as 4096 from an 8 MiB SO_RCVBUF). */
+#define CAN_RX_CAPACITY_MAX 256
 
 struct zn_can {
 	int fd;
@@ -75,6 +81,8 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 	if (getsockopt(can->fd, SOL_SOCKET, SO_RCVBUF, &granted, &len) < 0 || granted <= 0)
 		granted = 0;
 	can->rx_capacity = (size_t)granted / CAN_FRAME_RCVBUF_COST;
+	if (can->rx_capacity > CAN_RX_CAPACITY_MAX)
+		can->rx_capacity = CAN_RX_CAPACITY_MAX;
 	if (can->rx_capacity < 1)
 		can->rx_capacity = 1;
 	*out = can;
