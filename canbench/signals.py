@@ -243,10 +243,13 @@ class Series:
         if value is not None and len(self.marks) < MARKS:
             self.marks.append((t_s, value))
 
-    def add(self, t_ns: int, t0_ns: int, value: float, where: str | Callable[[], str]) -> None:
+    def add(self, t_ns: int, t0_ns: int, value: float, where: str | Callable[[], str],
+            rate_t_ns: int | None = None) -> None:
         """One decoded value; where names its frame (a function giving that is called only for a
-        violation, so good values build no strings)."""
+        violation, so good values build no strings); rate_t_ns: the time its rate is judged at
+        (default t_ns; on Zenoh the bus stamp of the frame it was, as a batch arrives at once)."""
         g = self.gate
+        rate_t = t_ns if rate_t_ns is None else rate_t_ns
         t_s = (t_ns - t0_ns) / 1e9
 
         def at() -> str:
@@ -260,7 +263,7 @@ class Series:
             self.violate(f"{g.key} = {g.show(value)} not one of [{', '.join(g._name(v) or _num(v) for v in g.one_of)}]"
                          f" {at()}", t_s, value)
         if g.max_rate is not None and self.last_t_ns is not None and self.last_value is not None:
-            dt = (t_ns - self.last_t_ns) / 1e9
+            dt = (rate_t - self.last_t_ns) / 1e9
             change = abs(value - self.last_value)
             if change > 0 and (dt <= 0 or change / dt > g.max_rate):
                 rate = "no time" if dt <= 0 else f"{dt * 1000:.3f} ms ({_num(change / dt)}/s > {_num(g.max_rate)}/s)"
@@ -269,7 +272,7 @@ class Series:
         self.count += 1
         self.min = value if self.min is None else min(self.min, value)
         self.max = value if self.max is None else max(self.max, value)
-        self.last_t_ns, self.last_value = t_ns, value
+        self.last_t_ns, self.last_value = rate_t, value
         if (self.count - 1) % self.step == 0:
             self.times.append(t_s)
             self.values.append(value)
@@ -308,9 +311,10 @@ class Evaluator:
             self._messages[k] = m if m is not None and m.name in self.by_message else None
         return self._messages[k]
 
-    def feed(self, frame: wire.Frame, t_ns: int, where: str | Callable[[], str]) -> None:
+    def feed(self, frame: wire.Frame, t_ns: int, where: str | Callable[[], str], rate_t_ns: int | None = None) -> None:
         """One frame; where names it (file:line or the sample), or is a function giving that,
-        called only when something is wrong, so good frames build no strings."""
+        called only when something is wrong, so good frames build no strings; rate_t_ns: see
+        Series.add."""
         if frame.remote:
             return
         message = self._message(frame)
@@ -329,7 +333,7 @@ class Evaluator:
         for s in series:
             value = decoded.get(s.gate.signal)
             if isinstance(value, int | float):  # else a multiplexed signal not selected in this frame
-                s.add(t_ns, self.t0_ns, float(value), where)
+                s.add(t_ns, self.t0_ns, float(value), where, rate_t_ns)
 
     def finish(self) -> list[Series]:
         side_name = "on the bus" if self.side == "can" else "on Zenoh"
@@ -365,15 +369,20 @@ class SignalRun:
         return out
 
 
-def _zenoh_place(b) -> Callable[[Observed], Callable[[], str]]:
-    """A Zenoh frame named by its sample and the bus frame the oracle paired it with."""
-    sent: dict[int, int] = {}
+def _zenoh_sources(b) -> dict[int, Observed]:
+    """Zenoh frame index -> the bus frame the oracle paired it with (matched or corrupted)."""
+    sent: dict[int, Observed] = {}
     for s, r in b.comparison.matched:
-        sent[r.index] = s.line
+        sent[r.index] = s
     for s, r, _ in b.comparison.corrupted:
-        sent[r.index] = s.line
-    return lambda o: lambda: (f"zenoh #{o.index} seq {o.seq}"
-                              + (f" (sent as can.log:{sent[o.index]})" if sent.get(o.index) else ""))
+        sent[r.index] = s
+    return sent
+
+
+def _zenoh_place(o: Observed, source: Observed | None) -> Callable[[], str]:
+    """A Zenoh frame named by its sample and the bus frame it was."""
+    return lambda: (f"zenoh #{o.index} seq {o.seq}"
+                    + (f" (sent as {source.origin}:{source.line})" if source is not None and source.line else ""))
 
 
 def evaluate(result: RunResult) -> SignalRun:
@@ -396,9 +405,10 @@ def evaluate(result: RunResult) -> SignalRun:
             can.feed(o.frame, o.t_ns, f"{o.origin}:{o.line}" if o.line else f"{o.origin} #{o.index}")
         series += can.finish()
         zen = Evaluator(gate_list, db, "zenoh", b.bus, t0)
-        place = _zenoh_place(b)
-        for o in b.zenoh_frames:
-            zen.feed(o.frame, o.t_ns, place(o))
+        sources = _zenoh_sources(b)
+        for o in b.zenoh_frames:  # a rate at the bus stamp: the frames of one batch arrive at one time
+            source = sources.get(o.index)
+            zen.feed(o.frame, o.t_ns, _zenoh_place(o, source), source.t_ns if source is not None else None)
         series += zen.finish()
     run = SignalRun(series, t0)
     try:

@@ -112,6 +112,16 @@ def test_max_rate_per_second(tmp_path):
         in problems[0]
 
 
+def test_max_rate_on_zenoh_is_judged_at_the_bus_stamps_of_a_batch(tmp_path):
+    gates = gates_of(tmp_path, "    EngineData.EngineSpeed: {max_rate: 10000}\n")
+    steady = [(i * 10, frame("EngineData", EngineSpeed=1000 + 100 * i)) for i in range(5)]  # 10000 rpm/s
+    batch = [(50, f) for _, f in steady]  # all five in one sample: one receive time
+    assert checks.signals_zenoh(run_of(gates, steady, zenoh=batch)) == []
+    unpaired = batch[:2] + [(50, frame("EngineData", EngineSpeed=5000))]  # no bus frame: at its receive time
+    assert "EngineSpeed changed 1100 rpm -> 5000 rpm in 40.400 ms (96534.7/s > 10000/s) at t=0.050 s, zenoh #2" \
+        in checks.signals_zenoh(run_of(gates, steady, zenoh=unpaired))[0]
+
+
 def test_present_counts_per_side(tmp_path):
     gates = gates_of(tmp_path, "    EngineData.Counter: {present: 3}\n")
     frames = [(i * 10, frame("EngineData", Counter=i)) for i in range(3)]
