@@ -51,6 +51,7 @@ class Observed:
 
 
 FRAME_CACHE = 1 << 20  # distinct frame contents kept for sharing (then it starts again: only memory is at stake)
+STREAM_FRAME_CACHE = 1 << 14  # the same for the bounded readers (iter_candump_frames, iter_zenoh_frames): ~4 MiB
 
 
 def _without_gc(fn):
@@ -79,7 +80,8 @@ def read_candump(path: Path, interface: str | None = None, drops: dict[str, int]
 def iter_candump_frames(path: Path, interface: str | None = None,
                         drops: dict[str, int] | None = None) -> Iterator[Observed]:
     """read_candump's frames one at a time (compare_stream: never the whole capture in memory)."""
-    for i, (lineno, t_ns, _, frame) in enumerate(trace.iter_candump(path, interface, drops)):
+    for i, (lineno, t_ns, _, frame) in enumerate(trace.iter_candump(path, interface, drops,
+                                                                    cache_size=STREAM_FRAME_CACHE)):
         yield Observed(frame, t_ns, i, line=lineno)
 
 
@@ -148,7 +150,7 @@ def iter_zenoh_frames(samples: Iterable[Sample], key: str, problems: list[str] |
     for t_ns, sample_key, payload, att in samples:
         if sample_key != key:
             continue
-        if len(cache) > FRAME_CACHE:
+        if len(cache) > STREAM_FRAME_CACHE:
             cache.clear()
         try:
             frames = wire.decode_batch(payload, cache)

@@ -94,15 +94,18 @@ def format_line(t_ns: int, iface: str, frame: Frame) -> str:
 
 
 def iter_candump(path: str | Path, interface: str | None = None, drops: dict[str, int] | None = None,
-                 growing: bool = False) -> Iterator[tuple[int, int, str, Frame]]:
+                 growing: bool = False, cache_size: int = FRAME_CACHE) -> Iterator[tuple[int, int, str, Frame]]:
     """(line number, t_ns, interface, frame) of every frame line of a candump -L file.
     drops: filled with the frames candump says the kernel dropped, per interface (DROPCOUNT).
-    growing: candump may still be writing, so a last line without its newline is skipped."""
+    growing: candump may still be writing, so a last line without its newline is skipped.
+    cache_size: distinct frame texts kept for sharing (a reader in bounded memory keeps fewer)."""
     cache: dict[tuple[str, str], Frame] = {}
     with open(path, errors="replace") as f:
         for lineno, raw in enumerate(f, 1):
             if growing and not raw.endswith("\n"):
                 return
+            if len(cache) > cache_size:
+                cache.clear()
             parsed = parse_line(raw.lstrip(), str(path), lineno, cache)
             if parsed is None:
                 if drops is not None and (m := DROPCOUNT.match(raw)):

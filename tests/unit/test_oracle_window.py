@@ -119,8 +119,10 @@ def test_failures_beyond_keep_are_counted_not_kept():
 def test_memory_is_bounded_by_the_window_not_the_run(monkeypatch):
     """tracemalloc's peak for 6000 and for 24 000 frames (constant frames, counters, some lost;
     the window holds 1000): the same within a margin. Latencies kept exactly up to 1000 here
-    (canbench.distribution.EXACT_VALUES), so they are bounded too."""
+    and then folded into the sketch 1000 at a time (canbench.distribution.EXACT_VALUES, FOLD), so
+    they are bounded too."""
     monkeypatch.setattr(distribution, "EXACT_VALUES", 1000)
+    monkeypatch.setattr(distribution, "FOLD", 1000)
     def peak(n: int) -> int:
         def sent():
             for i in range(n):
@@ -141,7 +143,9 @@ def test_memory_is_bounded_by_the_window_not_the_run(monkeypatch):
     assert large < small * 1.25, (small, large)
 
 
-def test_a_distribution_is_exact_up_to_its_cap_then_a_sketch_within_half_a_percent():
+@pytest.mark.parametrize("fold", [distribution.FOLD, 777])
+def test_a_distribution_is_exact_up_to_its_cap_then_a_sketch_within_half_a_percent(monkeypatch, fold):
+    monkeypatch.setattr(distribution, "FOLD", fold)
     rng = random.Random(3)
     values = [rng.lognormvariate(-1, 1) for _ in range(20_000)]
     exact = Distribution(cap=len(values))
@@ -156,3 +160,7 @@ def test_a_distribution_is_exact_up_to_its_cap_then_a_sketch_within_half_a_perce
     assert (got["count"], got["min_ms"], got["max_ms"]) == (truth["count"], truth["min_ms"], truth["max_ms"])
     for q in ("p50_ms", "p90_ms", "p99_ms"):
         assert got[q] == pytest.approx(truth[q], rel=0.005), q
+    # the values kept for plots are a uniform sample: as many from each half of the run
+    position = {v: i for i, v in enumerate(values)}
+    early = sum(1 for v in sketch.values if position[v] < len(values) // 2)
+    assert 400 < early < 600
