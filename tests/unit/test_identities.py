@@ -205,3 +205,32 @@ def test_the_security_scenarios_probes_are_refused(net, tmp_path, monkeypatch):
     assert any("rogue bridge" in p for p in security.check(result))
     rogue.undeclare()
     del keep
+
+
+def test_ros2_output_reaches_the_viewer(tmp_path):
+    """With the bridge's ROS 2 output (scenario ros2-output), the viewer sees rmw_zenoh's tokens
+    (its subscription is @ros2_lv/**) and the data key; the ECU sees neither."""
+    from canbench import scenario
+    sc = scenario.load(Path(__file__).resolve().parents[2] / "scenarios" / "ros2-output.yaml")
+    (data_key,) = runkeys.ros2_data_keys(sc)
+    root = tmp_path / "identities"
+    port = free_port()
+    identities.generate(root, ros2_keys=(data_key,), ros2_domains=(0,))
+    router = json.loads((root / "router" / "zenohd.json5").read_text())
+    router["listen"]["endpoints"] = [f"tls/127.0.0.1:{port}"]
+    n = Net.__new__(Net)
+    n.root, n.port, n.scheme, n.sessions = root, port, "tls", [zenoh.open(config(router, root, "router"))]
+    try:
+        bridge, viewer, ecu = n.client("bridge"), n.client("viewer"), n.client("ecu")
+        token = bridge.liveliness().declare_token("@ros2_lv/0/abc/0/0/NN/%/%/can_bridge")
+        runkeys.wait_token(viewer, "@ros2_lv/**", 5)
+        got = Inbox()
+        sub = viewer.declare_subscriber(data_key, got)
+        # put until it arrives: the viewer's subscription reaches the bridge some time after it is made
+        runkeys.wait_until(lambda: bridge.put(data_key, b"frame") or "frame" in got.items, 5, "the ROS 2 sample",
+                           step_s=0.05)
+        assert [r for r in ecu.liveliness().get("@ros2_lv/**", timeout=1) if r.ok] == []
+        sub.undeclare()
+        token.undeclare()
+    finally:
+        n.close()
