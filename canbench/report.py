@@ -18,6 +18,8 @@ if TYPE_CHECKING:
     from .analysis import RunResult
 
 
+SIGNAL_PLOTS = 40  # gated signals plotted (those with violations first); the table lists every one
+
 # ---- HTML ----
 
 def _png(fig) -> str:
@@ -117,8 +119,12 @@ def _signal_section(result: RunResult) -> str:
              "" if s.max is None else f"{s.max:.6g}", s.violation_count, s.gate.limits()] for s in run.series]
     table = _table(["bus", "signal", "side", "values", "min", "max", "violations", "expected"], rows)
     plots: dict[tuple[str, str], list] = {}
-    for s in run.series:
+    for s in sorted(run.series, key=lambda s: -s.violation_count):  # the violated first
         plots.setdefault((s.bus, s.gate.key), []).append(s)
+    left_out = max(0, len(plots) - SIGNAL_PLOTS)
+    plots = dict(list(plots.items())[:SIGNAL_PLOTS])
+    for sides in plots.values():
+        sides.sort(key=lambda s: s.side)  # bus, then Zenoh
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -148,7 +154,9 @@ def _signal_section(result: RunResult) -> str:
         ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("s since the first bus frame")
     fig.tight_layout()
-    return "<h2>Signals</h2>" + table + _png(fig)
+    more = f"<p>{left_out} more gated signals (the fewest violations) are not plotted; the table lists them.</p>" \
+        if left_out else ""
+    return "<h2>Signals</h2>" + table + _png(fig) + more
 
 
 def _response_section(m: dict) -> str:

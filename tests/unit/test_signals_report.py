@@ -33,6 +33,16 @@ def test_report_plots_gated_signals_and_names_the_violation(tmp_path):
     assert metrics["can"]["vcan0"]["EngineData.EngineSpeed"]["max"] == 2790.0
 
 
+def test_the_plots_are_bounded_the_violated_first(tmp_path, monkeypatch):
+    result, _ = flipped_run(tmp_path)
+    monkeypatch.setattr(report, "SIGNAL_PLOTS", 1)
+    seen = []
+    monkeypatch.setattr(report, "_png", lambda fig: seen.append([a.get_title() for a in fig.axes]) or "<img>")
+    section = report._signal_section(result)
+    assert "3 more gated signals (the fewest violations) are not plotted" in section
+    assert seen == [["vcan0 EngineData.EngineSpeed (rpm): [0, 8000]"]]
+
+
 def test_the_report_of_a_run_without_signal_gates_has_no_signal_section(tmp_path):
     result, _ = flipped_run(tmp_path)
     object.__setattr__(result.scenario, "signal_gates", ())
