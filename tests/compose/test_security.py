@@ -46,7 +46,9 @@ def test_without_access_control_the_probes_reach_the_bus():
     seen = json.loads((run_dir / "security.json").read_text())
     assert all(p["session"] for p in seen["probes"].values()), seen
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    assert metrics["zenoh_to_can"]["vcan0"]["unexpected"] >= 20  # at least the anonymous probe's frames
-    cases = junit_cases(run_dir)
-    assert cases["test_check[access_control]"] == "failed" and cases["test_check[zenoh_to_can]"] == "failed", cases
+    problems = metrics["problems"]["access_control"]
+    assert any("the router gave it a session" in p for p in problems), problems
+    # what the probes put got through: onto the bus, or at least to the bridge
+    assert any("reached the bus" in p or "came from a probe" in p for p in problems), problems
+    assert junit_cases(run_dir)["test_check[access_control]"] == "failed"
     assert leftovers(run_dir) == []
