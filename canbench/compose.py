@@ -128,6 +128,7 @@ def probe_services(sc: scenario.Scenario) -> dict:
         services[f"probe-{name}"] = hardened({
             "image": "canbench/ecu:${BENCH_TAG:-latest}",
             "depends_on": {"router": {"condition": "service_healthy"}},
+            "environment": ["BENCH_CAN_MODE=none"],  # no bus here: bench-can preloads nothing
             "volumes": ["./reports:/reports", identity(name)],
             "command": ["canbench", "probe", name, "--router", ROUTER, "--run-id", "${RUN_ID}", "--run-dir",
                         "/reports/${RUN_ID}", "--frames", frames, "--zenoh-config", "/run/zenoh/zenoh.json5"],
