@@ -332,12 +332,15 @@ static void checks(void)
 		CHECK(good, "%s: one %s per message, between send and receipt, never decreasing (got %d)",
 		      kind ? "SO_TIMESTAMP" : "SO_TIMESTAMPNS", kind ? "SCM_TIMESTAMP" : "SCM_TIMESTAMPNS", n);
 	}
-	/* control room too small for the stamp: MSG_CTRUNC, no control data */
+	/* control room too small for the stamp: MSG_CTRUNC, no whole stamp (put_cmsg may leave a
+	 * cut header in the room there is; the library leaves none) */
 	settle(tx, witness, 0x160, 1);
 	rxvec_init(&v, 1, sizeof(struct can_frame), sizeof(struct cmsghdr));
 	n = recvmmsg(rxns, v.m, 1, 0, NULL);
-	CHECK(n == 1 && (v.m[0].msg_hdr.msg_flags & MSG_CTRUNC) && v.m[0].msg_hdr.msg_controllen == 0,
-	      "control room 16 bytes: MSG_CTRUNC, msg_controllen 0 (got %d, flags 0x%x, %zu)", n,
+	struct cmsghdr *cut = v.m[0].msg_hdr.msg_controllen ? CMSG_FIRSTHDR(&v.m[0].msg_hdr) : NULL;
+	CHECK(n == 1 && (v.m[0].msg_hdr.msg_flags & MSG_CTRUNC) && v.m[0].msg_hdr.msg_controllen <= sizeof(struct cmsghdr) &&
+		      (!cut || cut->cmsg_len < CMSG_LEN(sizeof(struct timespec))),
+	      "control room 16 bytes: MSG_CTRUNC, no whole stamp (got %d, flags 0x%x, %zu)", n,
 	      v.m[0].msg_hdr.msg_flags, (size_t)v.m[0].msg_hdr.msg_controllen);
 	recvmmsg(rxus, v.m, 1, 0, NULL);
 
