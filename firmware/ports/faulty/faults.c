@@ -9,6 +9,10 @@
  *   drop:N   drop every Nth sample          dup:N    publish every Nth sample twice
  *   swap:N   publish every Nth sample after the one that follows it
  *   flip:N   flip the lowest bit of data byte 0 of every Nth sample
+ *   flip:N@BYTE.BIT  flip bit BIT (0 = lowest) of data byte BYTE (both 0..7) in every
+ *            Nth frame that has that byte (a data frame with dlc > BYTE), counted
+ *            frame by frame through batches, per publisher: one bit inside one
+ *            signal, which a signal check can see (byte 0 bit 0 is often a counter's)
  *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted
  * and on the Zenoh -> CAN path:
  *   txdrop:N never write every Nth command (reported written)
@@ -17,6 +21,7 @@
  *            component without its source times (attachment times and Zenoh
  *            timestamp 0), so it is never refused as stale (counted unstamped) */
 #define _GNU_SOURCE
+#include <ctype.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -51,18 +56,37 @@ static struct {
 	pthread_once_t once;
 	enum kind kind;
 	unsigned n, tx_count;
-} fault = { .once = PTHREAD_ONCE_INIT };
+	int flip_byte; /* flip:N@BYTE.BIT: the byte (0..7) and its bit as a mask; -1: flip:N */
+	uint8_t flip_mask;
+} fault = { .once = PTHREAD_ONCE_INIT, .flip_byte = -1 };
 
 /* The handle the component holds: the real publisher, and for the rx keys
  * what a fault needs (a second publisher, a sample held back). */
 struct faulty_pub {
 	zn_publisher_t *real, *misrouted;
 	int faulted; /* an rx key: the CAN -> Zenoh faults apply */
-	uint64_t count;
+	uint64_t count, frames; /* samples; frames that have the flip:N@BYTE.BIT byte */
 	uint8_t held[ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE], held_att[ZN_ATTACHMENT_SIZE(ZN_BATCH_MAX_FRAMES)];
 	size_t held_len, held_att_len;
 	uint8_t copy[ZN_BATCH_MAX_FRAMES * ZN_WIRE_FRAME_SIZE];
 };
+
+/* "BYTE.BIT" of flip:N@BYTE.BIT, each a decimal 0..7; 0 or -1 (malformed). */
+static int parse_flip_at(const char *at)
+{
+	char *end;
+	if (!isdigit((unsigned char)at[0]))
+		return -1;
+	unsigned long byte = strtoul(at, &end, 10);
+	if (*end != '.' || byte > 7 || !isdigit((unsigned char)end[1]))
+		return -1;
+	unsigned long bit = strtoul(end + 1, &end, 10);
+	if (*end != '\0' || bit > 7)
+		return -1;
+	fault.flip_byte = (int)byte;
+	fault.flip_mask = (uint8_t)(1u << bit);
+	return 0;
+}
 
 static void parse_fault(void)
 {
@@ -72,15 +96,27 @@ static void parse_fault(void)
 	for (int k = 1; k < KINDS; k++) {
 		size_t len = strlen(names[k]);
 		if (strncmp(spec, names[k], len) == 0 && (spec[len] == ':' || spec[len] == '\0')) {
-			fault.kind = (enum kind)k;
-			fault.n = spec[len] == ':' ? (unsigned)strtoul(spec + len + 1, NULL, 10) : 1;
+			char *end = (char *)spec + len;
+			fault.n = spec[len] == ':' ? (unsigned)strtoul(spec + len + 1, &end, 10) : 1;
 			if (fault.n == 0)
 				fault.n = 1;
-			zn_log("W", "SEEDED FAULT ACTIVE: %s (n=%u) - this bridge is broken on purpose", names[k], fault.n);
+			if (k == FLIP && *end == '@' && parse_flip_at(end + 1) != 0) {
+				zn_log("E", "ZN_FAULT='%s': flip:N@BYTE.BIT wants BYTE and BIT 0..7 (e.g. flip:5@2.7); no fault seeded",
+				       spec);
+				return;
+			}
+			fault.kind = (enum kind)k;
+			if (fault.flip_byte >= 0)
+				zn_log("W", "SEEDED FAULT ACTIVE: %s (n=%u, byte %d mask 0x%02x) - this bridge is broken on purpose",
+				       names[k], fault.n, fault.flip_byte, fault.flip_mask);
+			else
+				zn_log("W", "SEEDED FAULT ACTIVE: %s (n=%u) - this bridge is broken on purpose", names[k], fault.n);
 			return;
 		}
 	}
-	zn_log("E", "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N, wrongkey or no-freshness; no fault seeded",
+	zn_log("E",
+	       "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N, flip:N@BYTE.BIT, wrongkey or no-freshness; "
+	       "no fault seeded",
 	       spec);
 }
 
@@ -170,7 +206,13 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 		return 0;
 	case FLIP:
 		memcpy(p->copy, payload, len);
-		if (nth && len >= ZN_WIRE_FRAME_SIZE && p->copy[4] > 0 && !(p->copy[5] & ZN_WIRE_FLAG_RTR))
+		if (fault.flip_byte >= 0) { /* flip:N@BYTE.BIT: frame by frame */
+			for (size_t off = 0; off + ZN_WIRE_FRAME_SIZE <= len; off += ZN_WIRE_FRAME_SIZE) {
+				uint8_t *f = p->copy + off;
+				if (f[4] > fault.flip_byte && !(f[5] & ZN_WIRE_FLAG_RTR) && ++p->frames % fault.n == 0)
+					f[8 + fault.flip_byte] ^= fault.flip_mask;
+			}
+		} else if (nth && len >= ZN_WIRE_FRAME_SIZE && p->copy[4] > 0 && !(p->copy[5] & ZN_WIRE_FLAG_RTR))
 			p->copy[8] ^= 0x01;
 		return __real_zn_put(p->real, p->copy, len, att, att_len);
 	case DELAY:
