@@ -267,3 +267,29 @@ def test_the_shipped_signals_scenario_validates():
     roles = {e.role for e in sc.ecus}
     assert {"replay", "restbus", "responder"} <= roles and any(c.signal_plan for c in sc.commands)
     assert sc.expect["responses"]
+
+
+def test_multiplexed_extended_and_event_messages_as_cantools_has_them(tmp_path):
+    """On the signals test DBC: Diag's page follows a signal trace and each page carries its own
+    signals; the BODY node's 29-bit Chassis is sent, its event message DoorEvent is not."""
+    (tmp_path / "dbc").mkdir()
+    (tmp_path / "dbc" / "powertrain.dbc").write_text((REPO / "tests" / "data" / "dbc" / "signals.dbc").read_text())
+    (tmp_path / "page.csv").write_text("0,0\n0.5,1\n")
+    path = tmp_path / "s.yaml"
+    path.write_text(HEAD + textwrap.dedent("""\
+    ecus:
+      - {name: engine, bus: vcan0, role: restbus, dbc_node: ENGINE, run_s: 1,
+         signals: {Diag.Page: {trace: page.csv}, Diag.CoolantTemp: 90, Diag.OilPressure: 300}}
+      - {name: body, bus: vcan0, role: restbus, dbc_node: BODY, run_s: 1,
+         signals: {Chassis.LongAccel: {ramp: [-2, 2], over_s: 1}}}
+    """))
+    sc = scenario.load(path)
+    db = cantools.database.load_file(str(tmp_path / "dbc" / "powertrain.dbc"))
+    diag = [db.get_message_by_name("Diag").decode(m.data) for _, m in plans.schedule(sc.ecus[0], sc).frames()
+            if m.arbitration_id == 0x400]
+    assert [(d["Page"], d.get("CoolantTemp"), d.get("OilPressure")) for d in diag] == \
+        [(0, 90, None)] * 3 + [(1, None, 300.0)] * 2  # every 200 ms; page 1 from 0.5 s on
+    body = [m for _, m in plans.schedule(sc.ecus[1], sc).frames()]
+    assert {(m.arbitration_id, m.is_extended_id) for m in body} == {(0x18FEF100, True)}  # no DoorEvent
+    chassis = db.get_message_by_name("Chassis")
+    assert [chassis.decode(m.data)["LongAccel"] for m in body[:3]] == [-2.0, -1.6, -1.2]  # every 100 ms
