@@ -105,8 +105,16 @@ def observe(run) -> None:
                            f"the probes' results ({', '.join(sorted(files))})", step_s=0.1)
     except TimeoutError:
         pass  # the check names the missing ones
-    rogue_tokens = [str(r.ok.key_expr) for r in run.session.liveliness().get(
-        f"{run.prefix}/bridges/{ROGUE_NODE}/**", timeout=2) if r.ok]
+    key = f"{run.prefix}/bridges/{ROGUE_NODE}/**"
+    # a subscriber with history, and a query (it returns at its final reply): zenoh 1.10's answer
+    # to a liveliness query can miss a token an earlier query on the same key did not find
+    seen: set[str] = set()
+    sub = run.session.liveliness().declare_subscriber(key, lambda s: seen.add(str(s.key_expr)), history=True)
+    try:
+        seen |= {str(r.ok.key_expr) for r in run.session.liveliness().get(key, timeout=10) if r.ok}
+    finally:
+        sub.undeclare()
+    rogue_tokens = sorted(seen)
     out = {"probes": {n: json.loads(f.read_text()) if f.exists() else None for n, f in files.items()},
            "rogue_bridge_tokens": rogue_tokens if "rogue-bridge" in names else None}
     (run.run_dir / "security.json").write_text(json.dumps(out, indent=1) + "\n")

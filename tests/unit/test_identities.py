@@ -202,7 +202,7 @@ def test_the_security_scenarios_probes_are_refused(net, tmp_path, monkeypatch):
     rogue = bridge.liveliness().declare_token(f"{P}/bridges/{security.ROGUE_NODE}/vcan0/client")
     runkeys.wait_token(orch, f"{P}/bridges/{security.ROGUE_NODE}/**", 5)
     security.observe(run)
-    assert any("rogue bridge" in p for p in security.check(result))
+    assert any("rogue bridge" in p for p in security.check(result)), (run_dir / "security.json").read_text()
     rogue.undeclare()
     del keep
 
