@@ -77,7 +77,13 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
         orchestrator_env["BENCH_CONSUMER"] = f"{SCHEME}/router2:7447"
     if viewer:
         # `canbench view --save` records the run next to its reports (make test VIEWER=1)
-        dbc = ["--dbc", str(Path(scenario_in_container).parent / sc.dbc.relative_to(sc.path.parent))] if sc.dbc else []
+        def inside(p: Path) -> str:  # a file of the scenario's directory, as the container mounts it
+            return str(Path(scenario_in_container).parent / p.relative_to(sc.path.resolve().parent))
+        dbc = ["--dbc", inside(sc.dbc)] if sc.dbc else []
+        # each bus with a DBC of its own (buses[].dbc) decoded with it; the others with the top-level one
+        for bus, bus_dbc in sc.bus_dbcs.items():
+            if bus_dbc != sc.dbc:
+                dbc += ["--bus-dbc", f"{bus}={inside(bus_dbc)}"]
         services["viewer"] = hardened({
             "image": "canbench/orchestrator:${BENCH_TAG:-latest}",
             "network_mode": "service:bus",

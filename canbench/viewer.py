@@ -9,7 +9,8 @@ last publisher's token goes away. Callbacks only enqueue; one thread decodes
 (canbench.ros2_msgs) and logs (canbench.viewer_types.LOGGERS). A malformed
 payload is counted per topic and skipped; an unsupported type is listed once.
 
-  canbench view --zenoh-connect tcp/127.0.0.1:7447 --auto-subscribe [--dbc f.dbc] [--urdf car.urdf] [--save out.rrd]
+  canbench view --zenoh-connect tcp/127.0.0.1:7447 --auto-subscribe [--dbc f.dbc] [--bus-dbc BUS=f.dbc ...]
+                [--urdf car.urdf] [--save out.rrd]
   canbench view reports/latest/recording.mcap
 
 Network safety: multicast scouting is off; endpoints are explicit."""
@@ -82,10 +83,10 @@ def normalise_topic(topic: str) -> str:
 
 class Viewer:
     def __init__(self, session: zenoh.Session, topics: list[str], auto_subscribe: bool, dbc=None,
-                 prefix: str = "vehicle/can"):
+                 prefix: str = "vehicle/can", bus_dbcs: dict | None = None):
         self.session, self.auto, self.prefix = session, auto_subscribe, prefix
         self.topics = {normalise_topic(t) for t in topics}
-        self.ctx = Context(dbc)
+        self.ctx = Context(dbc, bus_dbcs)  # a bus's own DBC, by the bus its keys name; else dbc
         self.samples: queue.Queue[Sample | None] = queue.Queue(maxsize=QUEUE_SAMPLES)
         self.entities: dict[str, ros2.Entity] = {}
         self.bridges: set[str] = set()
@@ -218,7 +219,7 @@ class Viewer:
         self.stopping = False
         while not self.stopping:
             batch = self._batch()
-            can = CanColumns(self.ctx.dbc)
+            can = CanColumns(self.ctx.dbc, self.ctx.bus_dbcs)
             for sample in batch:
                 if sample.type_name:
                     self._log_ros(sample)
@@ -256,10 +257,27 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def bus_dbc_paths(specs: list[str]) -> dict[str, Path]:
+    """--bus-dbc BUS=FILE (repeatable) -> bus -> DBC path; a malformed spec, a bus named twice
+    or a missing file is an InputError naming it."""
+    out: dict[str, Path] = {}
+    for spec in specs:
+        bus, sep, path = spec.partition("=")
+        if not sep or not bus or not path or "/" in bus:
+            raise InputError(spec, None, "--bus-dbc: expected BUS=FILE (e.g. vcan1=body.dbc)")
+        if bus in out:
+            raise InputError(spec, None, f"--bus-dbc: bus {bus} given twice")
+        if not Path(path).is_file():
+            raise InputError(path, None, f"--bus-dbc {bus}: no such file")
+        out[bus] = Path(path)
+    return out
+
+
 def run(args) -> int:
     for option, path in (("--urdf", args.urdf), ("--dbc", args.dbc), ("source", args.source)):
         if path is not None and not Path(path).is_file():
             raise InputError(str(path), None, f"{option}: no such file")
+    bus_dbcs = {bus: load_dbc(path) for bus, path in bus_dbc_paths(args.bus_dbc).items()}
     rr.init("canbench-view", spawn=False)
     if args.save:
         rr.save(str(args.save))
@@ -273,7 +291,7 @@ def run(args) -> int:
     dbc = load_dbc(args.dbc) if args.dbc else None
     if args.source:
         from .recording import view_mcap
-        count, malformed = view_mcap(args.source, Context(dbc))
+        count, malformed = view_mcap(args.source, Context(dbc, bus_dbcs))
         print(f"canbench view: {count} messages from {args.source}, {malformed} malformed")
         rr.disconnect()
         return 0
@@ -282,7 +300,7 @@ def run(args) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     signal.signal(signal.SIGINT, _interrupt)
     session = open_session(args.zenoh_mode, args.zenoh_connect)
-    viewer = Viewer(session, args.topic, args.auto_subscribe, dbc)
+    viewer = Viewer(session, args.topic, args.auto_subscribe, dbc, bus_dbcs=bus_dbcs)
     viewer.start()
     try:
         deadline = time.monotonic() + args.duration if args.duration else None

@@ -15,5 +15,8 @@ def add_arguments(p) -> None:
     p.add_argument("-t", "--topic", action="append", default=[], help="a ROS 2 topic to subscribe (repeatable)")
     p.add_argument("--urdf", type=Path, help="a robot or vehicle model (URDF) shown with the live data")
     p.add_argument("--dbc", type=Path, help="decode CAN signals with this DBC (cantools)")
+    p.add_argument("--bus-dbc", action="append", default=[], metavar="BUS=FILE",
+                   help="decode this bus's frames with its own DBC instead of --dbc (repeatable; the bus "
+                        "as its keys name it: <prefix>/<bus>/rx, or a one-bus bridge's token)")
     p.add_argument("--save", type=Path, help="write an .rrd file instead of spawning the Rerun viewer")
     p.add_argument("--duration", type=float, default=0, help="stop after this many seconds (0: until Ctrl-C)")

@@ -1,6 +1,7 @@
 """CAN frames: the bridge's own frames and can_msgs/msg/Frame (the bridge's ROS 2
 output, recording.mcap) alike -> <base>/<id>/raw (candump text) and, with a DBC,
-<base>/<id>/<signal> (scalars). Frames are collected and sent to Rerun one column
+<base>/<id>/<signal> (scalars), decoded with the DBC of the base's bus (its last part: can/rx/<bus>,
+/can/<bus>) where one is given for it, else the default DBC. Frames are collected and sent to Rerun one column
 per entity (send_columns): per-frame rr.log calls cost more than a busy bus allows."""
 from __future__ import annotations
 
@@ -22,19 +23,21 @@ def time_column(times_ns: list[int]) -> rr.TimeColumn:
 class CanColumns:
     """Frames of one batch grouped by entity, sent with their receive times."""
 
-    def __init__(self, dbc):
+    def __init__(self, dbc, bus_dbcs: dict | None = None):
         self.dbc = dbc
+        self.bus_dbcs = bus_dbcs or {}  # bus -> its own DBC (a scenario's buses[].dbc)
         self.raw: dict[str, tuple[list[int], list[str]]] = defaultdict(lambda: ([], []))
         self.signals: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
 
     def add(self, base: str, t_ns: int, frames: list[wire.Frame]) -> None:
         bus = base.rsplit("/", 1)[-1]
+        dbc = self.bus_dbcs.get(bus, self.dbc)
         for f in frames:
             ident = wire.id_hex(f.can_id, f.extended)
             times, texts = self.raw[f"{base}/{ident}/raw"]
             times.append(t_ns)
             texts.append(f.candump(bus).split(" ", 1)[1])
-            if self.dbc is not None and not f.remote and (decoded := decode_signals(self.dbc, f)):
+            if dbc is not None and not f.remote and (decoded := decode_signals(dbc, f)):
                 for name, value in decoded[1].items():
                     times, values = self.signals[f"{base}/{ident}/{name}"]
                     times.append(t_ns)
@@ -61,6 +64,6 @@ def frame_of(msg) -> wire.Frame:
 
 @logger("can_msgs/msg/Frame")
 def log_frame(ctx: Context, path: str, msg) -> None:
-    columns = CanColumns(ctx.dbc)
+    columns = CanColumns(ctx.dbc, ctx.bus_dbcs)
     columns.add(path, ctx.t_ns, [frame_of(msg)])
     columns.flush()

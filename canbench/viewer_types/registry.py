@@ -21,11 +21,13 @@ def logger(type_name: str) -> Callable[[Logger], Logger]:
 
 
 class Context:
-    """What loggers share across messages: the DBC, the TF tree (child -> parent), whether a
-    topic's entities are static (/tf_static), the markers whose lifetime is running."""
+    """What loggers share across messages: the DBC (and a bus's own, bus_dbcs: bus -> DBC, for
+    the buses that have one), the TF tree (child -> parent), whether a topic's entities are
+    static (/tf_static), the markers whose lifetime is running."""
 
-    def __init__(self, dbc=None):
+    def __init__(self, dbc=None, bus_dbcs: dict | None = None):
         self.dbc = dbc
+        self.bus_dbcs = dict(bus_dbcs or {})
         self.parents: dict[str, str] = {}
         self.frames_of: dict[str, str] = {}  # entity path -> the frame last declared for it
         self.static = False  # set per sample by the viewer
