@@ -76,7 +76,7 @@ def test_what_a_frozen_router_delivers_late_is_refused(bus, bridge, router, sess
             put(session, 0x200 + i, bytes([i]), puts[-1], seq=i)
             time.sleep(PAUSE_PERIOD_S)  # pacing the commands, not synchronisation
     finally:
-        resumed_ns = time.time_ns()  # nothing put before reaches the bridge before this
+        resumed_ns = time.time_ns()
         router.proc.send_signal(signal.SIGCONT)
     # the link works again: a fresh command goes through, after what waited
     put(session, 0x7AB, b"\x01", time.time_ns(), seq=PAUSE_PUTS)
@@ -86,9 +86,10 @@ def test_what_a_frozen_router_delivers_late_is_refused(bus, bridge, router, sess
     stop_candump(dump, out)
     written = {int(r.split(" ")[1].split("#")[0], 16) - 0x200: t for t, r in bus_frames(out.name)
                if not r.endswith("7AB#01")}
-    too_old = {i for i, t in enumerate(puts) if resumed_ns - t > MAX_AGE_MS * MS}
-    assert too_old, "the pause was too short to age any command"
-    assert not too_old & set(written), f"written although older than {MAX_AGE_MS} ms: {sorted(too_old & set(written))}"
-    for i, bus_ns in written.items():  # what was written was fresh when taken
-        assert (bus_ns - puts[i]) / MS <= MAX_AGE_MS + WRITE_SLACK_MS, (i, (bus_ns - puts[i]) / MS)
-    assert stats["tx_rejected"]["stale"] >= len(too_old), stats
+    for i, bus_ns in written.items():  # nothing on the bus older than the deadline (and the write after it)
+        age_ms = (bus_ns - puts[i]) / MS
+        assert age_ms <= MAX_AGE_MS + WRITE_SLACK_MS, f"command {i} written {age_ms:.0f} ms after its put"
+    # what waited in the frozen router was refused, each command once: written or counted
+    late = sum(1 for t in puts if resumed_ns - t > (MAX_AGE_MS + WRITE_SLACK_MS) * MS)
+    assert stats["tx_rejected"]["stale"] + len(written) == PAUSE_PUTS, (stats, sorted(written))
+    assert stats["tx_rejected"]["stale"] >= late - 1, (stats, late)  # the first may pass before the router stops
