@@ -1,16 +1,18 @@
 """The bridge's command path and CAN port under abuse (issue 19, defects 9-13):
 a stalled bus under large commands, SIGTERM during a stalled batch, the bus hub
-killed and restarted under a running bridge, and configuration that cannot
-work. Each abuse has a stated
+killed and restarted under a running bridge, a fragmented sample far over the
+largest command, and configuration that cannot work. Each abuse has a stated
 memory ceiling: the bridge's peak RSS (VmHWM) grows by less than
 RSS_CEILING_KIB over its value before the abuse. Runs against the release and
 the ASan/UBSan bridge (make check-bridge)."""
 from __future__ import annotations
 
+import json
 import signal
 import time
 
 import pytest
+import zenoh
 from conftest import require_userspace, wait_for
 from test_bridge_host import Collector, start_candump, stop_candump
 
@@ -20,6 +22,7 @@ RSS_CEILING_KIB = 8 * 1024  # the tx queue is 2048 x 24 bytes; anything near thi
 STATS_ANSWER_S = 2.0        # a stats query on the session the commands arrive on, while they do
 BATCH = 1024                # ZN_BATCH_MAX_FRAMES
 TX_QUEUE = 2048             # the default tx_queue_frames
+BIG_SAMPLE = 16 << 20       # far over ZN_RX_MESSAGE_MAX (32 780 B): Zenoh fragments it
 
 
 def status_kib(pid: int, field: str) -> int:
@@ -100,27 +103,41 @@ def test_sigterm_during_a_stalled_batch_exits_cleanly(bus, bridge, session):
 
 
 def test_can_reopen_after_hub_restart_counts_it_and_sends_nothing_twice(bus, bridge, session, tmp_path):
+    """The real hub killed (SIGKILL: no goodbye on the socket) and started again under the running
+    bridge, twice: each reopen counted, frames and commands after each restart flow, every frame
+    published once with consecutive sequence numbers (nothing queued before a loss resent)."""
     require_userspace(bus, "the hub is killed and restarted under the running bridge")
     rx = Collector(session, "vehicle/can/rx")
     bridge.start("--can", "vcan0", "--publish-period-ms", "0")
     bridge.wait_ready(session)
     hwm_before = status_kib(bridge.proc.pid, "VmHWM")
-    bus.run(["cansend", "vcan0", "101#01"])
-    rx.wait_frames(1)
-    bus.stop_hub(signal.SIGKILL)
-    bus.start_hub(*bus.hub_args)
-    stats = wait_for(lambda: (s := bridge.try_stats(session)) and s["buses"][0]["can_reopens"] >= 1 and s,
-                     "the bridge reopening its CAN bus", timeout=30)
-    bus.wait_receivers(1)  # the bridge's socket bound on the new hub
-    assert stats["buses"][0]["can_reopens"] == 1
-    dump, out = start_candump(bus, tmp_path / "can.log")
-    bus.run(["cansend", "vcan0", "102#02"])
-    session.put("vehicle/can/tx", wire.encode(wire.Frame(0x201, 1, b"\x03")))
-    got = rx.wait_frames(2)
-    wait_for(lambda: bridge.stats(session)["buses"][0]["tx_frames"] == 1, "the command after the restart")
-    assert [f.candump("vcan0") for f, _, _ in got] == ["vcan0 101#01", "vcan0 102#02"]  # each once
-    assert [seq for _, seq, _ in got] == [0, 1]
-    assert stop_candump(dump, out) == ["vcan0 102#02", "vcan0 201#03"]  # the command once, nothing resent
+    sent: list[str] = []
+
+    def burst(first_id: int) -> None:
+        for i in range(5):
+            bus.run(["cansend", "vcan0", f"{first_id + i:03X}#{i:02X}"])
+            sent.append(f"vcan0 {first_id + i:03X}#{i:02X}")
+        rx.wait_frames(len(sent))
+
+    burst(0x101)
+    for restart in (1, 2):
+        bus.stop_hub(signal.SIGKILL)
+        bus.start_hub(*bus.hub_args)  # returns once the new hub listens on its socket
+        stats = wait_for(lambda n=restart: (s := bridge.try_stats(session)) and s["buses"][0]["can_reopens"] >= n and s,
+                         f"the bridge reopening its CAN bus (restart {restart})", timeout=30)
+        assert stats["buses"][0]["can_reopens"] == restart
+        bus.wait_receivers(1)  # the bridge's socket bound on the new hub
+        dump, out = start_candump(bus, tmp_path / f"can-{restart}.log")
+        burst(0x101 + 0x10 * restart)
+        command = f"vcan0 {0x200 + restart:03X}#{restart:02X}"
+        session.put("vehicle/can/tx", wire.encode(wire.Frame(0x200 + restart, 1, bytes([restart]))))
+        wait_for(lambda line=command, path=out.name: line in open(path).read(), "the command on the new bus")
+        assert bridge.stats(session)["buses"][0]["tx_frames"] == restart
+        # on the new bus: this restart's frames and its command, each once; nothing from before resent
+        assert stop_candump(dump, out) == sent[-5:] + [command]
+    got = rx.frames()
+    assert [f.candump("vcan0") for f, _, _ in got] == sent  # each frame once, in order
+    assert [seq for _, seq, _ in got] == list(range(len(sent)))
     assert status_kib(bridge.proc.pid, "VmHWM") - hwm_before < RSS_CEILING_KIB
 
 
@@ -133,3 +150,45 @@ def test_configuration_that_cannot_work_exits_2_with_one_line(bus, bridge, args,
     assert proc.wait(timeout=30) == 2
     lines = bridge.log.read_text().strip().splitlines()
     assert len(lines) == 1 and message in lines[0], lines
+
+
+def test_a_fragmented_16_mib_sample_on_the_tx_key_is_dropped_not_reassembled(bus, bridge, session):
+    """Zenoh's default rx max_message_size (1 GiB) let any publisher make the bridge reassemble
+    a sample of that size before on_command refused it: the port caps it at ZN_RX_MESSAGE_MAX."""
+    bridge.start("--can", "vcan0")
+    bridge.wait_ready(session)
+    dump, out = start_candump(bus, bus.workdir / "big.log")
+    hwm_before = status_kib(bridge.proc.pid, "VmHWM")
+    # blocking, so neither this session nor the router drops fragments: all of it reaches the bridge
+    session.put("vehicle/can/tx", bytes(BIG_SAMPLE), congestion_control=zenoh.CongestionControl.BLOCK)
+    # a valid command after it on the same session and priority: on the bus once the big one was handled
+    session.put("vehicle/can/tx", wire.encode(wire.Frame(0x7AC, 1, b"\x02")),
+                congestion_control=zenoh.CongestionControl.BLOCK)
+    wait_for(lambda: "vcan0 7AC#02" in open(out.name).read(), "the command after the big sample", timeout=60)
+    stats = bridge.stats(session)["buses"][0]
+    growth = status_kib(bridge.proc.pid, "VmHWM") - hwm_before
+    print(f"peak RSS growth under a {BIG_SAMPLE >> 20} MiB sample: {growth} KiB")
+    assert growth < RSS_CEILING_KIB, f"peak RSS grew {growth} KiB: the sample was reassembled"
+    # Zenoh dropped it at the cap (the defragmenter is cleared, later fragments lack a start):
+    # on_command never saw it, the bus saw nothing of it
+    assert stats["tx_samples"] == 1 and stats["tx_frames"] == 1, stats
+    assert stop_candump(dump, out) == ["vcan0 7AC#02"]
+    assert bridge.proc.poll() is None, bridge.log.read_text()[-3000:]
+
+
+def test_a_tls_file_that_cannot_be_read_exits_2_at_once_naming_key_and_path(bus, bridge, tmp_path):
+    """Zenoh reads TLS files only when a link opens and a client retries forever: the port reads
+    them first, so a wrong path is a configuration error (exit 2), not an absent router."""
+    missing = tmp_path / "no-such-ca.pem"
+    config = tmp_path / "zenoh.json5"
+    config.write_text(json.dumps({"transport": {"link": {"tls": {"root_ca_certificate": str(missing)}}}}) + "\n")
+    t0 = time.monotonic()
+    proc = bridge.start("--zenoh-config", str(config))
+    assert proc.wait(timeout=30) == 2, bridge.log.read_text()
+    took = time.monotonic() - t0
+    log = bridge.log.read_text()
+    assert "retrying" not in log, log  # one attempt: nothing here can heal by waiting
+    assert took < 5, f"exit 2 after {took:.1f} s"
+    # the reason in one line, key and path (the component adds one pointing to it)
+    reasons = [line for line in log.splitlines() if "transport/link/tls/root_ca_certificate" in line]
+    assert len(reasons) == 1 and str(missing) in reasons[0] and "No such file" in reasons[0], log
