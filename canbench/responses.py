@@ -251,10 +251,10 @@ def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracl
                                 f"{_seen(meeting, t0)}")
         elif meeting:
             late += 1
+            before = [m for m in mine if m[0].t_ns < meeting[0][0].t_ns]
             problems.append(f"{what}: {rule.response_text()} late, after {(meeting[0][0].t_ns - t0) / 1e6:.3f} ms "
                             f"(within {rule.within_ms:g} ms) ({_where(meeting[0][0])})"
-                            + (f"; before it: {_seen([m for m in mine if m[0].t_ns < meeting[0][0].t_ns], t0)}"
-                               if mine[0] is not meeting[0] else ""))
+                            + (f"; before it: {_seen(before, t0)}" if before else ""))
         else:
             missing += 1
             in_window = [m for m in mine if m[0].t_ns - t0 <= window_ns]

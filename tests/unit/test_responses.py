@@ -67,6 +67,8 @@ def test_a_late_answer_names_the_stimulus_and_its_latency():
     assert problem.startswith("torque: TorqueRequest {TorqueRequested = 50} put at commands.tsv:2: "
                               "TorqueResponse.TorqueActual == 50 late, after 35.000 ms (within 20 ms) (zenoh #1)")
     assert "before it: 49 at +4.000 ms (zenoh #0)" in problem
+    [only] = responses.evaluate(rule(), [put(0, 100, 50)], [], [answer(1, 135, 50)])["problems"]
+    assert only.endswith("late, after 35.000 ms (within 20 ms) (zenoh #1)")  # nothing before it
 
 
 def test_a_missing_answer_says_what_was_seen_instead():
