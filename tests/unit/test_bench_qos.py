@@ -26,6 +26,12 @@ def test_ratios_put_without_the_table_over_with_it_and_each_loss_over_reliable_b
     assert r["p50 no table / flood, table"] == 20.0 and r["p99 no table / flood, table"] == 100.0
     assert r["lost best-effort, drop / reliable, block"] == "inf"  # none lost with reliable + block
     assert r["lost reliable, drop / reliable, block"] == 1.0
+    assert "from the CAN stamp: p99 no table / flood, table" not in r  # only where both runs have the stamps
+    rows[1]["from_can_stamp"] = {"p50_us": 300, "p99_us": 8000}
+    rows[2]["from_can_stamp"] = {"p50_us": 100, "p99_us": 400}
+    r = qos.ratios(rows, lost)
+    assert r["from the CAN stamp: p50 no table / flood, table"] == 3.0
+    assert r["from the CAN stamp: p99 no table / flood, table"] == 20.0
     assert not any("alone" in k for k in r)
     md = qos.table_md(rows, lost, r)
     assert "| flood, table | `t` | 250 |" in md and "| best-effort, drop | 300/1000 | 30.0 |" in md
