@@ -73,6 +73,7 @@ struct csock {
 	struct can_filter filters[UCAN_MAX_FILTERS];
 	int ioctl_stamps;	    /* SIOCGSTAMP(NS) used: stamps stay on without SO_TIMESTAMP */
 	struct timespec last_stamp; /* of the last frame read, for SIOCGSTAMP(NS); 0 = none yet */
+	atomic_uint mmsg_last;	    /* frames the last recvmmsg returned: sizes the next one's first read */
 };
 
 /* ---- real libc functions ---- */
@@ -1194,6 +1195,7 @@ PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
  * skipped. The unix socket's own control data is not passed on: the library
  * asks for none (stamps come from the hub's header). */
 #define MMSG_CHUNK 64
+#define MMSG_FIRST_MIN 4 /* a first read sized twice the last call's frames, at least this */
 #define RX_MSG_MAX (sizeof(struct ucan_rxhdr) + CANFD_MTU)
 
 static void iov_scatter(const struct iovec *iov, size_t n, const void *in, size_t len)
@@ -1262,8 +1264,15 @@ static int can_recvmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 	struct iovec iov[MMSG_CHUNK];
 	struct mmsghdr raw[MMSG_CHUNK];
 	unsigned got = 0;
+	/* the first read asks for about what came last time: setting up 64 messages for the one
+	 * that is there cost more than the frame (callgrind: ~2400 instructions a call) */
+	unsigned first = 2 * atomic_load_explicit(&cs->mmsg_last, memory_order_relaxed);
+	first = first < MMSG_FIRST_MIN ? MMSG_FIRST_MIN : first > MMSG_CHUNK ? MMSG_CHUNK : first;
+	if (!(flags & (MSG_DONTWAIT | MSG_WAITFORONE)))
+		first = MMSG_CHUNK; /* it waits for vlen messages anyway */
 	while (got < vlen) {
-		unsigned ask = vlen - got < MMSG_CHUNK ? vlen - got : MMSG_CHUNK;
+		unsigned chunk = got ? MMSG_CHUNK : first;
+		unsigned ask = vlen - got < chunk ? vlen - got : chunk;
 		memset(raw, 0, ask * sizeof(raw[0]));
 		for (unsigned k = 0; k < ask; k++) {
 			iov[k] = (struct iovec){ .iov_base = buf[k], .iov_len = sizeof(buf[k]) };
@@ -1295,6 +1304,7 @@ static int can_recvmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 		if ((unsigned)r < ask || (timeout && timeout->tv_sec == 0 && timeout->tv_nsec == 0))
 			break; /* the kernel stopped early: nothing more now, or the timeout ran out */
 	}
+	atomic_store_explicit(&cs->mmsg_last, got, memory_order_relaxed);
 	return (int)got;
 }
 

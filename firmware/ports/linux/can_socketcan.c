@@ -34,7 +34,9 @@ struct zn_can {
 	int fd;
 	char name[IFNAMSIZ];
 	size_t rx_capacity;
-	/* zn_can_receive_burst's vectors: one reader per port */
+	/* zn_can_receive_burst's vectors: one reader per port; set up at open, and after a
+	 * call only the entries it filled are reset (a call costs what it returns, not 64) */
+	size_t rx_used;
 	struct mmsghdr mm[ZN_CAN_BURST_MAX];
 	struct iovec iov[ZN_CAN_BURST_MAX];
 	struct can_frame frames[ZN_CAN_BURST_MAX];
@@ -80,6 +82,12 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 	socklen_t len = sizeof(granted);
 	if (getsockopt(can->fd, SOL_SOCKET, SO_RCVBUF, &granted, &len) < 0 || granted <= 0)
 		granted = 0;
+	for (size_t i = 0; i < ZN_CAN_BURST_MAX; i++) {
+		can->iov[i] = (struct iovec){ .iov_base = &can->frames[i], .iov_len = sizeof(can->frames[i]) };
+		can->mm[i].msg_hdr = (struct msghdr){ .msg_iov = &can->iov[i], .msg_iovlen = 1,
+						      .msg_control = can->control[i],
+						      .msg_controllen = sizeof(can->control[i]) };
+	}
 	can->rx_capacity = (size_t)granted / CAN_FRAME_RCVBUF_COST;
 	if (can->rx_capacity > CAN_RX_CAPACITY_MAX)
 		can->rx_capacity = CAN_RX_CAPACITY_MAX;
@@ -180,14 +188,13 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		max = ZN_CAN_BURST_MAX;
 	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
 	for (int polled = 0;;) {
-		for (size_t i = 0; i < max; i++) {
-			can->iov[i] = (struct iovec){ .iov_base = &can->frames[i], .iov_len = sizeof(can->frames[i]) };
-			can->mm[i].msg_hdr = (struct msghdr){ .msg_iov = &can->iov[i], .msg_iovlen = 1,
-							      .msg_control = can->control[i],
-							      .msg_controllen = sizeof(can->control[i]) };
-		}
+		for (size_t i = 0; i < can->rx_used; i++) /* what the last call's messages changed */
+			can->mm[i].msg_hdr.msg_controllen = sizeof(can->control[i]);
+		can->rx_used = 0;
 		/* read first, poll only when nothing is queued: under load a burst costs one syscall */
 		int n = recvmmsg(can->fd, can->mm, (unsigned)max, MSG_DONTWAIT, NULL);
+		if (n > 0)
+			can->rx_used = (size_t)n;
 		if (n < 0) {
 			if (errno != EAGAIN && errno != EINTR)
 				return ESP_FAIL;
