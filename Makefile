@@ -101,7 +101,7 @@ firmware-asan: $(FW_RUST_DEP)
 
 # the builder image's port (same Rust sources: RUST_PORT_HASH is part of BENCH_TAG's input)
 $(CACHE)/rust-port-%/libzn_port_zenoh.a:
-	@mkdir -p $(CACHE) && tmp=$$(mktemp -d $(CACHE)/rust-port-tmp.XXXXXX) && id=$$(docker create canbench/builder:$(BENCH_TAG)) && \
+	@mkdir -p $(CACHE) && tmp=$$(mktemp -d $(CACHE)/rust-port-tmp.XXXXXX) && id=$$(docker create --pull never canbench/builder:$(BENCH_TAG)) && \
 	 docker cp $$id:/build/rust/release/libzn_port_zenoh.a $$tmp/ && docker cp $$id:/build/rust/release/zn-capture $$tmp/; \
 	 rc=$$?; docker rm $$id >/dev/null; [ $$rc = 0 ] && chmod 755 $$tmp && rm -rf $(@D) && mv $$tmp $(@D) || { rm -rf $$tmp; exit 1; }
 	@echo "Zenoh port: copied from canbench/builder:$(BENCH_TAG) into $(@D)"
@@ -111,7 +111,7 @@ $(CACHE)/rust-port-%/libzn_port_zenoh.a:
 $(CACHE)/zenohd-$(ZENOHD_VERSION)/bin/zenohd:
 	@if docker info >/dev/null 2>&1; then \
 	   $(MAKE) --no-print-directory images && mkdir -p $(@D) && \
-	   id=$$(docker create canbench/builder:$(BENCH_TAG)) && docker cp $$id:/opt/zenohd/bin/zenohd $@ && \
+	   id=$$(docker create --pull never canbench/builder:$(BENCH_TAG)) && docker cp $$id:/opt/zenohd/bin/zenohd $@ && \
 	   docker rm $$id >/dev/null && echo "zenohd: copied from canbench/builder:$(BENCH_TAG)"; \
 	 else \
 	   cargo install zenohd --version $(ZENOHD_VERSION) --locked --root $(CACHE)/zenohd-$(ZENOHD_VERSION); \
@@ -241,7 +241,7 @@ $(VENV)/.installed: pyproject.toml
 
 # canbench for scenario writing, right after make test or make check: from $(VENV)/ when it
 # exists, else in the orchestrator image with this checkout mounted at its own path.
-CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run --rm -u $$(id -u):$$(id -g) \
+CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run --rm --pull never -u $$(id -u):$$(id -g) \
            -v $(CURDIR):$(CURDIR) -w $(CURDIR) canbench/orchestrator:$(BENCH_TAG) canbench)
 CANBENCH_DEP = $(if $(wildcard $(VENV)/bin/canbench),,images)
 summarise: $(CANBENCH_DEP)
@@ -344,7 +344,7 @@ soak: images
 	@scripts/bench-run $(SOAK_SCENARIO)
 
 shell: images
-	docker run --rm -it -v $(CURDIR)/scenarios:/scenarios:ro -v $(CURDIR)/reports:/reports canbench/orchestrator:$(BENCH_TAG) bash
+	docker run --rm -it --pull never -v $(CURDIR)/scenarios:/scenarios:ro -v $(CURDIR)/reports:/reports canbench/orchestrator:$(BENCH_TAG) bash
 
 logs:
 	@cat reports/latest/containers.log

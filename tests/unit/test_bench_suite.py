@@ -21,6 +21,8 @@ REPO = Path(__file__).resolve().parents[2]
 FAKE_DOCKER = f"""#!{sys.executable}
 import os, subprocess, sys
 args, i, mounts, cwd, env = sys.argv[1:], 1, {{}}, None, dict(os.environ)
+if args[0] == "image":  # `docker image inspect`: every image is there
+    sys.exit(0)
 while args[i].startswith("-"):
     flag = args[i]
     if flag == "--rm":
@@ -63,7 +65,8 @@ SCENARIO = ("name: {name}\nduration_s: {duration}\nbuses: [{{name: vcan0}}]\n"
 def bench(tmp_path):
     root = tmp_path / "repo"
     (root / "scripts").mkdir(parents=True)
-    shutil.copy(REPO / "scripts" / "bench-suite", root / "scripts")
+    for script in ("bench-suite", "require-images"):
+        shutil.copy(REPO / "scripts" / script, root / "scripts")
     bins = tmp_path / "bin"
     bins.mkdir()
     for path, text in [(root / "scripts" / "bench-run", FAKE_BENCH_RUN), (bins / "docker", FAKE_DOCKER),
