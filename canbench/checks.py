@@ -493,11 +493,13 @@ _BRIDGE_CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
     "only_expected_keys": only_expected_keys,
     "ecus_sent_their_traces": ecus_sent_their_traces,
     "bridge_stats_agree": bridge_stats_agree,
-    "access_control": security.check,  # the security scenario (canbench.security)
     "no_stale_commands": no_stale_commands,
 }
 CHECKS: dict[str, Callable[[RunResult], list[str] | None]] = {
-    "valid_run": valid_run, **{name: _on_the_bridge(check) for name, check in _BRIDGE_CHECKS.items()}}
+    "valid_run": valid_run, **{name: _on_the_bridge(check) for name, check in _BRIDGE_CHECKS.items()},
+    # the router's access control (the security scenario, canbench.security): judged on every run,
+    # a late emulator does not make an intruder's session any less of one
+    "access_control": security.check}
 
 
 def failing(result: RunResult) -> dict[str, list[str]]:
