@@ -135,10 +135,8 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		.rx_message_max = ZN_RX_MESSAGE_MAX,
 	};
 	int open_rc = zn_open(&scfg, &zn_node.session);
-	if (open_rc == ZN_PORT_ERR_CONFIG) {
-		zn_log("E", "cannot open the Zenoh session: its configuration cannot work (above)");
-		return ESP_ERR_INVALID_ARG; /* a configuration error: exit code 2 */
-	}
+	if (open_rc == ZN_PORT_ERR_CONFIG)
+		return ESP_ERR_INVALID_ARG; /* a configuration error, its reason logged by the port: exit code 2 */
 	if (open_rc != 0) {
 		zn_log("E", "cannot open the Zenoh session");
 		return ESP_FAIL;
