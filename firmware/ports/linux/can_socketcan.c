@@ -37,6 +37,7 @@ struct zn_can {
 	/* zn_can_receive_burst's vectors: one reader per port; set up at open, and after a
 	 * call only the entries it filled are reset (a call costs what it returns, not 64) */
 	size_t rx_used;
+	int rx_emptied; /* the last call returned less than it asked: nothing was left queued */
 	struct mmsghdr mm[ZN_CAN_BURST_MAX];
 	struct iovec iov[ZN_CAN_BURST_MAX];
 	struct can_frame frames[ZN_CAN_BURST_MAX];
@@ -187,14 +188,25 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 	if (max > ZN_CAN_BURST_MAX)
 		max = ZN_CAN_BURST_MAX;
 	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
-	for (int polled = 0;;) {
+	/* read first under load (a burst costs one syscall); after a call that emptied the
+	 * socket, wait first: a read now would most likely find nothing */
+	int polled = 0;
+	if (can->rx_emptied && timeout_ms != 0) {
+		int rc = poll(&pfd, 1, timeout_ms);
+		if (rc == 0)
+			return ESP_ERR_TIMEOUT;
+		if (rc < 0)
+			return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+		polled = 1;
+	}
+	for (;;) {
 		for (size_t i = 0; i < can->rx_used; i++) /* what the last call's messages changed */
 			can->mm[i].msg_hdr.msg_controllen = sizeof(can->control[i]);
 		can->rx_used = 0;
-		/* read first, poll only when nothing is queued: under load a burst costs one syscall */
 		int n = recvmmsg(can->fd, can->mm, (unsigned)max, MSG_DONTWAIT, NULL);
 		if (n > 0)
 			can->rx_used = (size_t)n;
+		can->rx_emptied = n < (int)max;
 		if (n < 0) {
 			if (errno != EAGAIN && errno != EINTR)
 				return ESP_FAIL;
