@@ -76,18 +76,18 @@ def test_the_signals_scenario_passes_on_a_prompt_bridge(tmp_path):
 
 
 def test_a_bridge_with_a_fixed_delay_fails_the_response_check_and_nothing_else(tmp_path):
-    result = synthetic_signals_run(tmp_path, 150.0)
+    result = synthetic_signals_run(tmp_path, 300.0)
     failed = failing(result)
     assert set(failed) == {"responses"}, failed
     assert len(failed["responses"]) == 8  # every answer of both rules
-    assert all("commands.tsv:" in p and "late, after 152.400 ms (within 50 ms)" in p for p in failed["responses"])
+    assert all("commands.tsv:" in p and "late, after 302.400 ms (within 150 ms)" in p for p in failed["responses"])
 
 
 def test_report_html_shows_each_response_checks_counts_and_latency(tmp_path):
     from canbench import report
-    result = synthetic_signals_run(tmp_path, 150.0)
+    result = synthetic_signals_run(tmp_path, 300.0)
     report.write_html(result, tmp_path / "report.html")
     page = (tmp_path / "report.html").read_text()
     section = page.split("<h2>Responses</h2>", 1)[1].split("<h2>", 1)[0]
-    assert "<td>torque-50</td><td>vcan0</td><td>zenoh</td><td>50.0</td><td>3</td><td>0</td><td>3</td>" in section
-    assert "<td>152.400</td>" in section  # the late answers' latency (none answered in time)
+    assert "<td>torque-50</td><td>vcan0</td><td>zenoh</td><td>150.0</td><td>3</td><td>0</td><td>3</td>" in section
+    assert "<td>302.400</td>" in section  # the late answers' latency (none answered in time)
