@@ -15,6 +15,7 @@ checked against the truth. Modes of the analysis:
   whole   every frame read into lists, compare() and cycle_times(), as canbench.analysis does
 
   python3 -m bench.oracle_scale --frames 1000000 3000000 [--mode stream] [--out DIR] [--keep DIR]
+  python3 -m bench.oracle_scale --saturated 80    # the window's memory at 9000 frames/s, 80 s
 
 Writes oracle_scale.json (and prints a table) with the per-frame cost. Files go to a temporary
 directory, removed at the end (--keep DIR: written there and kept, e.g. to analyse them again
@@ -101,6 +102,31 @@ def analyse(where: Path, mode: str) -> dict:
             **{k: summary[k] for k in TRUTH}, "latency": summary["latency"], "problems": problems}
 
 
+def saturated(seconds: int) -> dict:
+    """compare_stream's memory at a saturated bus: 9000 frames/s for `seconds` (a counter frame
+    every fourth, 20 constant ones between), each delivered 0.3 ms later; no files, so what is
+    measured is the window itself (peak RSS above the interpreter and its imports)."""
+    from canbench import wire
+    from canbench.oracle import Observed, compare_stream
+    base = peak_rss_mib()
+    n, gap = 9000 * seconds, 1_000_000_000 // 9000
+    constant = [wire.Frame(0x100 + k, 8, bytes([k]) + bytes(7)) for k in range(20)]
+
+    def sent():
+        for i in range(n):
+            f = wire.Frame(0x200, 8, i.to_bytes(8, "little")) if i % 4 == 0 else constant[i % 20]
+            yield Observed(f, 1_700_000_000_000_000_000 + i * gap, i, line=i + 1)
+
+    def received():
+        for o in sent():
+            yield Observed(o.frame, o.t_ns + 300_000, o.index, key="k")
+    cpu0 = time.process_time()
+    s = compare_stream(sent(), received()).summary()
+    return {"seconds": seconds, "frames": n, "matched": s["matched"], "lost": s["lost"],
+            "cpu_s": round(time.process_time() - cpu0, 1),
+            "peak_rss_above_imports_mib": round(peak_rss_mib() - base, 1)}
+
+
 def measure(n: int, where: Path, mode: str) -> dict:
     made = write_captures(n, where)
     child = subprocess.run([sys.executable, "-m", "bench.oracle_scale", "--analyse", str(where), "--mode", mode],
@@ -118,7 +144,12 @@ def main() -> int:
     ap.add_argument("--out", type=Path, help="where oracle_scale.json goes (default: print only)")
     ap.add_argument("--keep", type=Path, help="write the captures under DIR/<frames> and keep them")
     ap.add_argument("--analyse", type=Path, help="analyse the captures in this directory (one JSON line)")
+    ap.add_argument("--saturated", type=int, metavar="SECONDS",
+                    help="only the window's memory at a saturated bus (9000 frames/s) for SECONDS (one JSON line)")
     args = ap.parse_args()
+    if args.saturated:
+        print(json.dumps(saturated(args.saturated)))
+        return 0
     if args.analyse:
         print(json.dumps(analyse(args.analyse, args.mode)))
         return 0
