@@ -3,7 +3,10 @@ zenoh-node-faulty (ZN_FAULT=...) runs a shipped scenario (smoke for CAN ->
 Zenoh, round-trip for Zenoh -> CAN and back) through the real orchestrator
 (pytest --pyargs canbench.scenario_checks, as in compose) with its ECUs on the host bus, and
 exactly the checks that guard against that fault must fail, naming the
-affected frames. The same binary without a fault must pass everything."""
+affected frames. The same binary without a fault must pass everything. Beside the
+shipped scenarios, small ones of this directory: signal-flip.yaml (signal gates for a
+flip inside EngineSpeed) and restbus-cycle.yaml / restbus-wrong-cycle.yaml (a restbus
+ECU at the DBC's cycles, and the same ECU with a wrong one: the ECU's fault)."""
 from __future__ import annotations
 
 import json
@@ -22,6 +25,9 @@ SMOKE = REPO / "scenarios" / "smoke.yaml"
 ROUND_TRIP = REPO / "scenarios" / "round-trip.yaml"
 STALE = REPO / "scenarios" / "stale-commands.yaml"  # run without its fault steps (they need Docker)
 SIGNALS = REPO / "scenarios" / "signals.yaml"
+SIGNAL_FLIP = Path(__file__).with_name("signal-flip.yaml")  # EngineSpeed and three other signals gated
+RESTBUS = Path(__file__).with_name("restbus-cycle.yaml")    # a restbus BODY node, cycle times from the DBC
+RESTBUS_WRONG = Path(__file__).with_name("restbus-wrong-cycle.yaml")  # the same, BodyStatus 80 ms (DBC: 50)
 RUN_TIMEOUT_S = 120
 
 # (scenario, fault, extra bridge options) -> the checks that must fail (and only those)
@@ -46,12 +52,19 @@ CASES = {
     (SIGNALS, "", ()): set(),
     # every answer reaches Zenoh 300 ms late: the stimulus-response check (within 150 ms), nothing else
     (SIGNALS, "delay:300", ()): {"responses"},
+    (SIGNAL_FLIP, "", ()): set(),
+    # bit 7 of byte 2 (EngineSpeed's top bit) in every 5th frame: that signal's Zenoh-side gate, and integrity
+    (SIGNAL_FLIP, "flip:5@2.7", ()): {"integrity", "signals_zenoh"},
+    (RESTBUS, "", ()): set(),
+    # the ECU's fault, not the bridge's: BodyStatus every 80 ms where the DBC says 50
+    (RESTBUS_WRONG, "", ()): {"cycle_time"},
 }
 
 
 def case_id(case) -> str:
     scenario, fault, options = case
-    return "-".join([scenario.stem, fault.replace(":", "") or "none", *[o.strip("-") for o in options]])
+    fault_id = fault.replace(":", "").replace("@", "at")  # flip5at2.7: -k cannot parse an @
+    return "-".join([scenario.stem, fault_id or "none", *[o.strip("-") for o in options]])
 
 
 @pytest.mark.parametrize("case", list(CASES), ids=[case_id(c) for c in CASES])
@@ -105,6 +118,14 @@ def test_seeded_fault_fails_exactly_its_checks(bus, router, tmp_path, case):
     for check in CASES[case] & {"integrity", "ordering", "zenoh_to_can", "round_trip"}:
         assert any("can.log:" in p or "commands.tsv:" in p or "seq" in p for p in metrics["problems"][check]), \
             metrics["problems"][check]
+    if "signals_zenoh" in CASES[case]:  # the flipped signal alone, at its values and frames
+        assert [p.split(":")[0] for p in metrics["problems"]["signals_zenoh"]] == ["vcan0 EngineData.EngineSpeed"], \
+            metrics["problems"]["signals_zenoh"]
+        assert " rpm outside [1000, 15000] at t=" in metrics["problems"]["signals_zenoh"][0]
+        assert "(sent as can.log:" in metrics["problems"]["signals_zenoh"][0]
+    if scenario_path == RESTBUS_WRONG:  # BodyStatus alone (0x320), named with the DBC's cycle
+        assert all("id 320" in p for p in metrics["problems"]["cycle_time"]), metrics["problems"]["cycle_time"]
+        assert any("(BodyStatus)" in p and "the DBC says 50.00 ms" in p for p in metrics["problems"]["cycle_time"])
     if "responses" in CASES[case]:  # each late answer names its stimulus's put
         assert all("commands.tsv:" in p and " late, after " in p for p in metrics["problems"]["responses"]), \
             metrics["problems"]["responses"]
