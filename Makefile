@@ -154,7 +154,7 @@ check-python:
 
 # The bridge with zenohd on the host bus: release build, then ASan/UBSan build.
 check-bridge: ucan firmware firmware-asan zenohd
-	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
+	ZN_CAPTURE=$(CURDIR)/$(FW_BUILD)/zn-capture UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
 	$(ASAN_ENV) UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_ASAN_BUILD)/zenoh-node $(PYTEST) -q tests/bridge
 
 # The hub's message validator, then the hub's state (sequences over many connections, in process).
@@ -209,7 +209,7 @@ check-kernel: ucan firmware zenohd
 
 # The bench must catch a broken bridge: each seeded fault fails exactly its checks.
 check-faults: ucan firmware zenohd
-	UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/faults
+	ZN_CAPTURE=$(CURDIR)/$(FW_BUILD)/zn-capture UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/faults
 
 # The bench itself in compose, as make test runs it.
 check-compose: images
