@@ -130,7 +130,9 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
         if tx is not None and stale:
             # stamped older than the deadline when put: the bridge must refuse them, no loss of zenoh_to_can's
             # (checks.no_stale_commands judges them)
-            tx.lost = [o for o in tx.lost if (bus, o.frame.can_id, o.frame.extended) not in stale]
+            kept = [o for o in tx.lost if (bus, o.frame.can_id, o.frame.extended) not in stale]
+            tx.counts["lost"] -= len(tx.lost) - len(kept)  # metrics.json's count, as the check's list
+            tx.lost = kept
         not_captured = sum((sent_by_ecus - Counter(oracle.frame_key(o.frame) for o in can_frames)).values())
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
                                _cycle_times(from_ecus, comparison.matched), can_frames, not_captured))

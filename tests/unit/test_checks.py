@@ -196,6 +196,7 @@ def test_stale_commands_scenario_fails_only_no_stale_commands_when_the_deadline_
                                                                                            write_stamped_stale):
     result, _ = stale_scenario_run(tmp_path, write_stamped_stale)
     assert checks.zenoh_to_can(result) == []  # the refused ones are not lost, the written ones in order
+    assert result.metrics["zenoh_to_can"]["vcan0"]["lost"] == 0
     assert checks.bridge_stats_agree(result) == []
     problems = checks.no_stale_commands(result)
     if write_stamped_stale:
