@@ -8,6 +8,10 @@
   canbench suite compare OLD_REPORTS NEW_REPORTS  `canbench compare` of every scenario run in the
                                                   suites under NEW against its passed run in OLD
                                                   (nightly CI: OLD is the last good night's)
+  canbench suite same SUITE_DIR... --as SUITE_DIR...
+                                                  the verdict of every check of every scenario in
+                                                  the first suites equals the second's (a serial
+                                                  run against JOBS=N, or against its shards)
 
 Shards are balanced by expected duration (longest first onto the least loaded shard) and
 depend only on the scenario files, so n runners given the same files split them exactly,
@@ -219,6 +223,35 @@ def compare_suites(old_reports: Path, new_reports: Path) -> int:
     return 1 if regressed else 0
 
 
+def check_verdicts(suite_dirs: list[Path]) -> dict[str, dict[str, str]]:
+    """scenario name -> {check: passed/failed/skipped} over the suites' summary.json files."""
+    verdicts: dict[str, dict[str, str]] = {}
+    for d in suite_dirs:
+        summary = d / "summary.json"
+        if not summary.is_file():
+            raise InputError(str(d), None, "no summary.json (a suite directory that make test wrote)")
+        for r in json.loads(summary.read_text()).get("runs", []):
+            name = Path(r["scenario"]).stem
+            if name in verdicts:
+                raise InputError(str(d), None, f"{name} is in more than one of these suites")
+            verdicts[name] = {**r.get("checks", {}), "(run)": r.get("verdict", "?")}
+    return verdicts
+
+
+def same_verdicts(a_dirs: list[Path], b_dirs: list[Path]) -> int:
+    """Exit 1 unless both sides ran the same scenarios with the same verdict for every check."""
+    a, b = check_verdicts(a_dirs), check_verdicts(b_dirs)
+    differences = [f"{name}: only in {'the first' if name in a else 'the second'}" for name in sorted(set(a) ^ set(b))]
+    for name in sorted(set(a) & set(b)):
+        for check in sorted(set(a[name]) | set(b[name])):
+            va, vb = a[name].get(check, "absent"), b[name].get(check, "absent")
+            if va != vb:
+                differences.append(f"{name}: {check} {va} -> {vb}")
+    print("\n".join(differences))
+    print(f"suite same: {len(set(a) & set(b))} scenarios compared, {len(differences)} differences")
+    return 1 if differences else 0
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="suite_cmd", required=True)
     q = sub.add_parser("plan", help="the scenarios of one shard, longest first, with expected seconds")
@@ -229,6 +262,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     q = sub.add_parser("compare", help="canbench compare of every scenario against the baseline suites")
     q.add_argument("old_reports", type=Path, help="reports of the last good run (their suite summary.json)")
     q.add_argument("new_reports", type=Path, help="reports of this run")
+    q = sub.add_parser("same", help="every check's verdict of every scenario equal in two sets of suites")
+    q.add_argument("suites", type=Path, nargs="+", help="suite directories (reports/suite-...)")
+    q.add_argument("--as", dest="other", type=Path, nargs="+", required=True, help="the suites to compare with")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -238,6 +274,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     if args.suite_cmd == "compare":
         return compare_suites(args.old_reports, args.new_reports)
+    if args.suite_cmd == "same":
+        return same_verdicts(args.suites, args.other)
     code = summarise(args.suite_dir)
     print(f"suite: {args.suite_dir}/index.html", file=sys.stderr)
     return code

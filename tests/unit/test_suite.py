@@ -127,3 +127,28 @@ def test_suite_compare_against_the_last_good_night(tmp_path, capsys):
     write_suite(new, "suite-e", {"burst": (metrics(1.5), 0)})  # newer run of burst: p50 x3
     assert cli.main(["suite", "compare", str(old), str(new)]) == 1
     assert "suite compare: 1 of 3 scenarios regressed: burst" in capsys.readouterr().out
+
+
+def write_verdicts(d: Path, runs: dict[str, dict[str, str]]) -> Path:
+    d.mkdir(parents=True)
+    entries = [{"scenario": f"scenarios/{n}.yaml", "verdict": "passed", "checks": c} for n, c in runs.items()]
+    (d / "summary.json").write_text(json.dumps({"runs": entries}))
+    return d
+
+
+def test_suite_same_serial_against_shards(tmp_path, capsys):
+    ok = {"test_check[integrity]": "passed", "test_check[recovery]": "skipped"}
+    serial = write_verdicts(tmp_path / "serial", {"smoke": ok, "burst": ok, "peer": ok})
+    shard1 = write_verdicts(tmp_path / "s1", {"smoke": ok, "peer": ok})
+    shard2 = write_verdicts(tmp_path / "s2", {"burst": ok})
+    assert cli.main(["suite", "same", str(serial), "--as", str(shard1), str(shard2)]) == 0
+    assert "3 scenarios compared, 0 differences" in capsys.readouterr().out
+    # one check's verdict differs, one scenario missing: both named
+    shard2b = write_verdicts(tmp_path / "s2b", {"burst": {**ok, "test_check[integrity]": "failed"}})
+    assert cli.main(["suite", "same", str(serial), "--as", str(shard2b)]) == 1
+    out = capsys.readouterr().out
+    assert "burst: test_check[integrity] passed -> failed" in out
+    assert "peer: only in the first" in out and "smoke: only in the first" in out
+    # a scenario in two suites of one side is an error, not a silent pick
+    with pytest.raises(InputError, match="more than one"):
+        suite.same_verdicts([serial, shard1], [shard2])
