@@ -332,6 +332,26 @@ static void test_stale_in_queue(void)
 	zn_node_stop();
 }
 
+/* A command taken fresh from the queue waits for a busy bus at most what is left of its
+ * deadline: refused as stale when it runs out (not written late), the bus not counted as failed. */
+static void test_stale_waiting_for_the_bus(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	cfg.tx_max_age_ms = 60;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_stall("vcan0", 1); /* busy: each transmit waits its timeout, then fails */
+	uint8_t w[16];
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, one_frame(w, 0x10, 0, 1), NULL, 0, (uint64_t)realtime_ns()) == 0);
+	CHECK(stats_soon_has("\"stale\": 1}"));
+	CHECK(stats_soon_has("\"can_tx_errors\": 0"));
+	mock_can_stall("vcan0", 0);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, one_frame(w, 0x20, 0, 2), NULL, 0, (uint64_t)realtime_ns()) == 0);
+	CHECK(stats_soon_has("\"tx_frames\": 1"));
+	CHECK(mock_can_tx_count("vcan0") == 1 && mock_can_tx("vcan0", 0).data[0] == 2); /* the stale one never */
+	zn_node_stop();
+}
+
 /* Runs every test, or the one named by argv[1] (to run one against other code). */
 int main(int argc, char **argv)
 {
@@ -348,6 +368,7 @@ int main(int argc, char **argv)
 		{ "arbitration_key", test_arbitration_key },
 		{ "stale_arrival", test_stale_refused_on_arrival },
 		{ "stale_queue", test_stale_in_queue },
+		{ "stale_waiting", test_stale_waiting_for_the_bus },
 	};
 	for (size_t i = 0; i < sizeof(tests) / sizeof(tests[0]); i++)
 		if (argc < 2 || strcmp(argv[1], tests[i].name) == 0)

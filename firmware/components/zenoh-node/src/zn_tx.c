@@ -239,6 +239,16 @@ void zn_tx_close(struct bus *b)
 /* Writes one command's frames, up to ZN_CAN_BURST_MAX per zn_can_send_burst (Linux: one
  * sendmmsg), copied to burst; returns whether the bus took them all. The slots are the
  * transmitter's until released (the callback only fills free ones). */
+/* What is left of a command's deadline (ms, at least 1), or -1 when it has none. */
+static int64_t lifetime_left_ms(const struct tx_cmd *c)
+{
+	uint32_t max_age_ms = zn_node.cfg.tx_max_age_ms;
+	if (!max_age_ms || !c->source_ns)
+		return -1;
+	int64_t left = ((int64_t)max_age_ms * 1000000 - (zn_realtime_ns() - c->source_ns)) / 1000000;
+	return left > 0 ? left : 1;
+}
+
 static int transmit_command(struct bus *b, const struct tx_cmd *c, can_message_t *burst)
 {
 	uint32_t slot = c->first, done = 0;
@@ -248,9 +258,14 @@ static int transmit_command(struct bus *b, const struct tx_cmd *c, can_message_t
 			burst[k] = b->txq[after].msg;
 			after = b->txq[after].next;
 		}
+		/* a busy bus may hold a frame: never past the command's deadline, so a command
+		 * that goes stale waiting for the bus is refused, not written late */
+		int64_t left_ms = lifetime_left_ms(c), age_ms = 0;
+		int timeout_ms = left_ms >= 0 && left_ms < CAN_TRANSMIT_TIMEOUT_MS ? (int)left_ms : CAN_TRANSMIT_TIMEOUT_MS;
 		size_t sent = 0;
 		zn_mutex_lock(b->can_lock);
-		esp_err_t rc = zn_can_send_burst(b->can, burst, k, &sent, CAN_TRANSMIT_TIMEOUT_MS);
+		esp_err_t rc = stale(c->source_ns, &age_ms) ? ESP_ERR_TIMEOUT
+							     : zn_can_send_burst(b->can, burst, k, &sent, timeout_ms);
 		zn_mutex_unlock(b->can_lock);
 		zn_mutex_lock(b->tx_lock);
 		for (size_t i = 0; i < sent; i++) { /* the slots written, in chain order */
@@ -265,6 +280,11 @@ static int transmit_command(struct bus *b, const struct tx_cmd *c, can_message_t
 		done += (uint32_t)sent;
 		if (rc == ESP_OK)
 			continue;
+		if (rc == ESP_ERR_TIMEOUT && timeout_ms < CAN_TRANSMIT_TIMEOUT_MS) { /* the deadline bounded the wait */
+			stale(c->source_ns, &age_ms);
+			refuse_stale(b, age_ms, c->count - done, "waiting for the bus");
+			return 1; /* the deadline ran out, not the bus */
+		}
 		COUNT_N(b->n.tx_abandoned, c->count - done - 1);
 		if (COUNT(b->n.can_tx_errors) == 0)
 			zn_log("W",
