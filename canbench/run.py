@@ -174,14 +174,23 @@ class Execution:
                 raise TimeoutError(f"echo ECUs {sorted(self.echo_names - set(self.done))} did not stop within "
                                    f"{ECHO_STOP_TIMEOUT_S} s; see their container logs")
 
+        # In batching mode the bridge reads its socket once per period: frames can wait there,
+        # not yet in can_rx_frames. Drained = all it read is published and nothing new was read
+        # for a whole period.
+        last = {"read": -1, "since": 0.0}
+
         def drained() -> bool:
             stats = query_stats(self.session, self.prefix)
             if not stats:
                 return False
             read = sum(b["can_rx_frames"] - b["filtered"] - b["rx_queue_drops"] for b in stats["buses"])
             published = sum(b["published_frames"] + b["publish_errors"] for b in stats["buses"])
-            return published >= read
-        _bounded(drained, DRAIN_TIMEOUT_S + self.period_s, "the bridge to publish what it read")
+            now = time.monotonic()
+            if read != last["read"]:
+                last.update(read=read, since=now)
+            period_s = stats.get("publish_period_ms", 0) / 1000  # the bridge's own, whatever it was given
+            return published >= read and now - last["since"] >= 2 * period_s
+        _bounded(drained, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1), "the bridge to publish what it read")
         self.bridge_stats = query_stats(self.session, self.prefix)
         published = sum(b["published_frames"] for b in self.bridge_stats["buses"]) if self.bridge_stats else 0
         _bounded(lambda: self.zenoh_capture.frames_on(self.rx_keys) >= published, 2 + self.period_s,
