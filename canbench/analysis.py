@@ -89,8 +89,28 @@ def _flood_frames(scenario: Scenario, bus: str, can_frames: list[oracle.Observed
 
 def _cycle_times(can_frames: list[oracle.Observed], matched: list[tuple[oracle.Observed, oracle.Observed]]) -> dict:
     can_side = oracle.cycle_times(can_frames)
-    zenoh_side = oracle.cycle_times(sorted((r for _, r in matched), key=lambda o: o.index))
+    in_order = sorted(matched, key=lambda pair: pair[1].index)
+    zenoh_side = oracle.cycle_times(r for _, r in in_order)
+    for ident, added in _gaps_added(in_order).items():
+        zenoh_side[ident]["gap_added_max_ms"] = added
     return {ident: {"can": stats, "zenoh": zenoh_side.get(ident)} for ident, stats in can_side.items()}
+
+
+def _gaps_added(in_order: list[tuple[oracle.Observed, oracle.Observed]]) -> dict[str, float]:
+    """Per id, the most the bridge widened a gap: of two frames one after the other on Zenoh, their
+    gap there minus their gap on the bus. A gap the bus already had (an ECU late, a frame lost
+    before the bridge) is not the bridge's."""
+    last: dict[tuple, tuple[int, int]] = {}
+    out: dict[str, float] = {}
+    for sent, received in in_order:
+        key = (sent.frame.can_id, sent.frame.extended)
+        if key in last:
+            bus_t, zen_t = last[key]
+            ident = wire.id_hex(*key)
+            added = ((received.t_ns - zen_t) - (sent.t_ns - bus_t)) / 1e6
+            out[ident] = max(out.get(ident, added), added)
+        last[key] = (sent.t_ns, received.t_ns)
+    return {ident: round(v, 3) for ident, v in out.items()}
 
 
 def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: dict[str, dict],

@@ -21,6 +21,11 @@ BRIDGE_LISTEN = f"{SCHEME}/127.0.0.1:7448"
 ROUTER = f"{SCHEME}/router:7447"
 USER = "${BENCH_UID:-10000}:${BENCH_GID:-10000}"
 HARDENING = {"user": USER, "cap_drop": ["ALL"], "security_opt": ["no-new-privileges:true"], "read_only": True}
+# The bus and the emulated ECUs are the bench's reference: when the services share too few cores,
+# their cgroups' CPU weight (4x Docker's 1024) wakes them first, so the traffic keeps to its trace
+# (validity: invalid: emulator) and a scheduling delay lands on the bridge under test, as it would
+# on its own hardware, not on the stimulus. Needs no capability; compose.yaml sets it on the bus.
+REFERENCE_CPU_SHARES = 4096
 IDENTITIES = "${BENCH_IDENTITIES:?the run's identities directory (scripts/bench-run makes it)}"
 
 
@@ -108,6 +113,7 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
         services[f"ecu-{e.name}"] = hardened({
             "image": "canbench/ecu:${BENCH_TAG:-latest}",
             "network_mode": "service:bus",
+            "cpu_shares": REFERENCE_CPU_SHARES,
             "depends_on": {"bus": {"condition": "service_healthy"}, "router": {"condition": "service_healthy"}},
             "environment": ["BENCH_CAN_MODE", "RUN_ID", "ZENOH_CONFIG=/run/zenoh/zenoh.json5"],
             "volumes": ["canbus:/run/ucan", "./reports:/reports", "${SCENARIO_DIR:-./scenarios}:/scenarios:ro",

@@ -36,7 +36,8 @@ ECHO_POLL_S = 0.05  # how often the echo loop looks at its stop flag while the b
 
 
 def fidelity(errors_ms) -> dict:
-    return {"p50": round(percentile(errors_ms, 0.5) or 0.0, 3), "p99": round(percentile(errors_ms, 0.99) or 0.0, 3),
+    return {"p50": round(percentile(errors_ms, 0.5) or 0.0, 3), "p95": round(percentile(errors_ms, 0.95) or 0.0, 3),
+            "p99": round(percentile(errors_ms, 0.99) or 0.0, 3),
             "max": round(max(errors_ms, default=0.0), 3),
             "mean": round(statistics.fmean(errors_ms), 3) if errors_ms else 0.0}
 

@@ -5,9 +5,11 @@
   invalid: capture   a capture could not keep up: candump's DROPCOUNT lines (the kernel's
                      SO_RXQ_OVFL counter), the hub's drops for candump's sockets, or zn-capture
                      wrote fewer samples than it counted
-  invalid: emulator  a replay/periodic ECU fell behind its trace (p99 of its own send error over
-                     expect.emulator_max_send_error_ms) or its frames reached the bus out of the
-                     order it sent them
+  invalid: emulator  a replay/periodic ECU fell behind its trace (more than 5 % of its frames
+                     sent later than expect.emulator_max_send_error_ms: the p95 of its own send
+                     error, robust to the odd scheduler stall of a loaded machine, which no
+                     bridge check depends on) or its frames reached the bus out of the order it
+                     sent them
 
 An invalid run is judged on neither side: the bridge's checks are skipped, the run fails with
 the outcome and its numbers (checks.valid_run; metrics.json `validity`)."""
@@ -112,9 +114,9 @@ def emulator_problems(result: RunResult) -> list[str]:
         if summary.get("role", "replay") == "echo" or summary.get("killed"):
             continue
         error = summary.get("own_send_error_ms") or summary.get("fidelity_ms")
-        if error and error["p99"] > limit:
-            out.append(f"ECU {name}: p99 send error {error['p99']:.3f} ms > {limit} ms (p50 {error['p50']:.3f}, "
-                       f"max {error['max']:.3f} ms): it fell behind its trace")
+        if error and error["p95"] > limit:
+            out.append(f"ECU {name}: p95 send error {error['p95']:.3f} ms > {limit} ms (p50 {error['p50']:.3f}, "
+                       f"p99 {error['p99']:.3f}, max {error['max']:.3f} ms): it fell behind its trace")
         log = result.run_dir / f"ecu-{name}.sent.tsv"
         if log.exists():
             records = oracle.read_sent_log(log)

@@ -33,7 +33,7 @@ def seeded(tmp_path: Path, *, latency_ns=lambda i: 400_000, seq=lambda i: i, sta
     log = send_log(frames) if send_log else "".join(f"{o.line}\t{o.t_ns - 50_000}\t{o.frame.candump('vcan0')}\n"
                                                     for o in frames)
     (tmp_path / "ecu-engine.sent.tsv").write_text("# trace_line\tsend_time_ns\tframe (candump form)\n" + log)
-    fid = {"p50": 0.1, "p99": 0.4, "max": 0.9, "mean": 0.12}
+    fid = {"p50": 0.1, "p95": 0.3, "p99": 0.4, "max": 0.9, "mean": 0.12}
     ecus = {"engine": {"name": "engine", "role": "replay", "bus": "vcan0", "sent": len(frames),
                        "fidelity_ms": fid, "own_send_error_ms": fid, **(ecu or {})}}
     return run.analyse(sc, "seeded", tmp_path, "vehicle/can", ecus, None, 2.0)
@@ -69,15 +69,22 @@ def test_a_frame_received_before_it_was_sent_is_a_bench_error_not_a_verdict(tmp_
 
 
 def test_an_emulator_behind_its_trace_makes_the_run_invalid_with_its_numbers(tmp_path):
-    late = {"p50": 1.0, "p99": 12.5, "max": 30.0, "mean": 2.0}
+    late = {"p50": 1.0, "p95": 6.5, "p99": 12.5, "max": 30.0, "mean": 2.0}
     r = seeded(tmp_path, ecu={"own_send_error_ms": late})
     assert checks.assess(r)["outcome"] == "invalid: emulator"
-    assert checks.valid_run(r) == ["invalid: emulator: ECU engine: p99 send error 12.500 ms > 5.0 ms (p50 1.000, "
-                                   "max 30.000 ms): it fell behind its trace"]
+    assert checks.valid_run(r) == ["invalid: emulator: ECU engine: p95 send error 6.500 ms > 5.0 ms (p50 1.000, "
+                                   "p99 12.500, max 30.000 ms): it fell behind its trace"]
     assert checks.CHECKS["integrity"](r) is None
     # the scenario's own threshold
     assert checks.assess(seeded(tmp_path, ecu={"own_send_error_ms": late},
                                 expect={"emulator_max_send_error_ms": 20}))["outcome"] == "valid"
+
+
+def test_a_few_stalled_wakeups_leave_the_run_valid(tmp_path):
+    # a loaded machine's scheduler: under 5 % of the frames late (security scenario in CI: p99 18.9 ms,
+    # max 28.8, p50 0.19) is no fault of the emulator's trace and no bridge check depends on it
+    stalls = {"p50": 0.19, "p95": 1.2, "p99": 18.9, "max": 28.8, "mean": 0.6}
+    assert checks.assess(seeded(tmp_path, ecu={"own_send_error_ms": stalls}))["outcome"] == "valid"
 
 
 def test_frames_sent_out_of_trace_order_make_the_run_invalid(tmp_path):
