@@ -49,17 +49,19 @@ COMMAND_FRAMES = 16  # frames per command Zenoh -> CAN
 SETTLE_S = 10.0
 
 
-def ctx_switches(pid: int) -> int:
-    """Voluntary + involuntary context switches of every thread of a process so far."""
-    total = 0
-    for status in Path(f"/proc/{pid}/task").glob("*/status"):
+def ctx_switches(pid: int) -> dict[str, int]:
+    """Voluntary + involuntary context switches so far of every thread of a process, by thread
+    name (Zenoh's runtimes name theirs, e.g. tx-0, rx-1, app-0; the bridge's are the process's)."""
+    by_name: dict[str, int] = {}
+    for task in Path(f"/proc/{pid}/task").glob("*"):
         try:
-            for line in status.read_text().splitlines():
-                if line.startswith(("voluntary_ctxt_switches:", "nonvoluntary_ctxt_switches:")):
-                    total += int(line.split()[1])
+            name = (task / "comm").read_text().strip()
+            switches = sum(int(line.split()[1]) for line in (task / "status").read_text().splitlines()
+                           if line.startswith(("voluntary_ctxt_switches:", "nonvoluntary_ctxt_switches:")))
         except OSError:  # a thread that just ended
-            pass
-    return total
+            continue
+        by_name[name] = by_name.get(name, 0) + switches
+    return by_name
 
 
 def run_ns(pid: int) -> int:
@@ -78,12 +80,16 @@ class Probe:
 
     def __init__(self, pid: int):
         self.pid = pid
-        self.start = (run_ns(pid), *cpu_split_s(pid), ctx_switches(pid))
+        self.start = (run_ns(pid), *cpu_split_s(pid))
+        self.start_threads = ctx_switches(pid)
 
     def end(self, frames: int) -> dict:
-        ns, user, system, ctx = (a - b for a, b in zip((run_ns(self.pid), *cpu_split_s(self.pid),
-                                                         ctx_switches(self.pid)), self.start, strict=True))
-        return {"ctx_per_frame": round(ctx / max(frames, 1), 3),
+        ns, user, system = (a - b for a, b in zip((run_ns(self.pid), *cpu_split_s(self.pid)), self.start,
+                                                  strict=True))
+        threads = {name: n - self.start_threads.get(name, 0) for name, n in ctx_switches(self.pid).items()}
+        per_frame = {name: round(n / max(frames, 1), 3) for name, n in sorted(threads.items(), key=lambda kv: -kv[1])
+                     if n}
+        return {"ctx_per_frame": round(sum(threads.values()) / max(frames, 1), 3), "ctx_per_frame_by_thread": per_frame,
                 "cpu_us_per_frame": round(ns / max(frames, 1) / 1e3, 2),
                 "kernel_share": round(system / (user + system), 2) if user + system else None}
 
@@ -102,6 +108,8 @@ class Run(Rig):
     def __init__(self, args, workdir: Path):
         super().__init__(Path(args.ucan_build), workdir)
         self.args = args
+        # Zenoh's thread pools of the bridge alone (zenoh-runtime: ZENOH_RUNTIME), never the router's
+        self.bridge_env = {**self.env, **({"ZENOH_RUNTIME": args.zenoh_runtime} if args.zenoh_runtime else {})}
 
     def one(self, direction: str, mode: str, rate: int) -> dict:
         self.hub.start(["vcan0"])
@@ -115,7 +123,7 @@ class Run(Rig):
                        "bench/capture")
         period = str(BATCH_MS) if mode == "batching" else "0"
         bridge = start_bridge(self.procs, [self.args.bridge, "--router", endpoint, "--can", "vcan0",
-                                           "--publish-period-ms", period], self.env, self.workdir / "bridge.log",
+                                           "--publish-period-ms", period], self.bridge_env, self.workdir / "bridge.log",
                               session, "vehicle/can/bridges/*/vcan0/**")
         frames = int(rate * LOAD_S)
         if direction == "zenoh-to-can":
@@ -185,13 +193,14 @@ class Run(Rig):
 
 
 def table(results: list[dict]) -> str:
-    rows = ["| direction | mode | frames/s | received | context switches per frame | CPU µs per frame | "
-            "of it in the kernel | syscalls per frame |", "|---|---|---|---|---|---|---|---|"]
+    rows = ["| direction | mode | frames/s | received | context switches per frame | by thread (top 4) | "
+            "CPU µs per frame | of it in the kernel | syscalls per frame |", "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         calls = (f"{r['syscalls_per_frame']} ({', '.join(f'{k} {v}' for k, v in r['syscalls'].items())})"
                  if "syscalls" in r else "")
+        threads = ", ".join(f"{name} {n}" for name, n in list(r["ctx_per_frame_by_thread"].items())[:4])
         rows.append(f"| {r['direction']} | {r['mode']} | {r['rate']} | {r['received']}/{r['frames']} | "
-                    f"{r['ctx_per_frame']} | {r['cpu_us_per_frame']} | {r['kernel_share']} | {calls} |")
+                    f"{r['ctx_per_frame']} | {threads} | {r['cpu_us_per_frame']} | {r['kernel_share']} | {calls} |")
     return "\n".join(rows)
 
 
@@ -202,6 +211,8 @@ def main() -> int:
     ap.add_argument("--label", default="", help="what build this is (printed with the table)")
     ap.add_argument("--can-side", action="store_true", help="--bridge is zenoh-node-memzenoh: the CAN side alone")
     ap.add_argument("--strace", action="store_true", help="--can-side: syscalls per frame (strace -c)")
+    ap.add_argument("--zenoh-runtime", default="", help="ZENOH_RUNTIME for the bridge only, e.g. "
+                    "'(rx: (handover: tx), app: (handover: tx), net: (handover: tx), acc: (handover: tx))'")
     args = ap.parse_args()
     run_id, out = run_id_and_output(args)
     results = []
