@@ -22,6 +22,7 @@ import statistics
 import threading
 import time
 from array import array
+from collections.abc import Callable
 from pathlib import Path
 
 import can
@@ -103,12 +104,14 @@ def _wait_own_copies(bus: can.BusABC, last: can.Message, expected: int, seen: in
         seen += msg.arbitration_id == last.arbitration_id and not msg.is_rx
 
 
-def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
-    """Answers every request until stop is set and the socket holds nothing more. Bound to
-    the bus before it says ready (a liveliness token the orchestrator waits for)."""
+def _answer_requests(ecu: Ecu, filters: list[dict], run_dir: Path, stop: threading.Event, session, run_id: str,
+                     timeout_s: float, is_request: Callable[[can.Message], bool],
+                     answer_of: Callable[[can.Message], can.Message | None]) -> tuple[int, int, list[float]]:
+    """The answering roles' loop (echo, responder): bound to the bus before it says ready (a
+    liveliness token the orchestrator waits for), it answers every data frame is_request takes
+    with answer_of's frame (None: counted, not answered), logged as sent, until stop is set and
+    the socket holds nothing more. Returns (requests received, answers sent, turnaround in ms)."""
     sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
-    filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if i > 0x7FF else 0x7FF, "extended": i > 0x7FF}
-               for i in sorted(ecu.echo_ids)]
     received = answered = 0
     turnaround_ms: list[float] = []
     with can.Bus(interface="socketcan", channel=ecu.bus, can_filters=filters) as bus, \
@@ -122,63 +125,61 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
                 if stop.is_set():
                     break
                 continue
-            if msg.is_remote_frame or msg.is_error_frame or msg.arbitration_id not in ecu.echo_ids:
+            if msg.is_remote_frame or msg.is_error_frame or not is_request(msg):
                 continue
             received += 1
-            can_id, data = ecu.answer(msg.arbitration_id, bytes(msg.data))
-            answer = can.Message(arbitration_id=can_id, is_extended_id=msg.is_extended_id, data=data,
-                                 dlc=msg.dlc, channel=ecu.bus)
+            answer = answer_of(msg)
+            if answer is None:
+                continue
             now_ns = time.time_ns()
             log.write(sent_line(0, now_ns, frame_of(answer), ecu.bus))
             bus.send(answer, timeout=SEND_TIMEOUT_S)
             answered += 1
             turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)
         ready.undeclare()
+    return received, answered, turnaround_ms
+
+
+def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
+    """Answers every request (ids in echo_ids) until stop is set and the socket holds nothing more."""
+    filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if i > 0x7FF else 0x7FF, "extended": i > 0x7FF}
+               for i in sorted(ecu.echo_ids)]
+
+    def answer_of(msg: can.Message) -> can.Message:
+        can_id, data = ecu.answer(msg.arbitration_id, bytes(msg.data))
+        return can.Message(arbitration_id=can_id, is_extended_id=msg.is_extended_id, data=data,
+                           dlc=msg.dlc, channel=ecu.bus)
+
+    received, answered, turnaround_ms = _answer_requests(
+        ecu, filters, run_dir, stop, session, run_id, timeout_s,
+        lambda msg: msg.arbitration_id in ecu.echo_ids, answer_of)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
             "turnaround_ms": fidelity(turnaround_ms)}
 
 
 def responder(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
     """Answers each frame of a rule's request message with the rule's answer (canbench.restbus.Rule),
-    until stop is set and the socket holds nothing more. Bound before it says ready, as echo."""
-    sent_log = run_dir / f"ecu-{ecu.name}.sent.tsv"
+    until stop is set and the socket holds nothing more, as echo."""
     rules = {(r.on.frame_id, r.on.is_extended_frame): r for r in ecu.rules}
     filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if ext else 0x7FF, "extended": ext} for i, ext in sorted(rules)]
-    received = answered = undecodable = 0
     answers: dict[tuple[int, bool], int] = {}
-    turnaround_ms: list[float] = []
-    with can.Bus(interface="socketcan", channel=ecu.bus, can_filters=filters) as bus, \
-            open(sent_log, "w", buffering=1) as log:
-        log.write(SENT_LOG_HEADER)
-        ready = session.liveliness().declare_token(runkeys.ecu_ready(run_id, ecu.name))
-        runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
-        while True:
-            msg = bus.recv(timeout=ECHO_POLL_S)
-            if msg is None:
-                if stop.is_set():
-                    break
-                continue
-            rule = rules.get((msg.arbitration_id, msg.is_extended_id))
-            if msg.is_remote_frame or msg.is_error_frame or rule is None:
-                continue
-            received += 1
-            try:
-                message, data = rule.answer(bytes(msg.data), answers.get((msg.arbitration_id, msg.is_extended_id), 0))
-            except Exception:  # noqa: BLE001 - a request the DBC cannot decode is counted, not answered
-                undecodable += 1
-                continue
-            answers[(msg.arbitration_id, msg.is_extended_id)] = answers.get((msg.arbitration_id,
-                                                                             msg.is_extended_id), 0) + 1
-            answer = can.Message(arbitration_id=message.frame_id, is_extended_id=message.is_extended_frame,
-                                 data=data, dlc=message.length, channel=ecu.bus)
-            now_ns = time.time_ns()
-            log.write(sent_line(0, now_ns, frame_of(answer), ecu.bus))
-            bus.send(answer, timeout=SEND_TIMEOUT_S)
-            answered += 1
-            turnaround_ms.append((now_ns / 1e9 - msg.timestamp) * 1000)
-        ready.undeclare()
+
+    def answer_of(msg: can.Message) -> can.Message | None:
+        key = (msg.arbitration_id, msg.is_extended_id)
+        try:
+            message, data = rules[key].answer(bytes(msg.data), answers.get(key, 0))
+        except Exception:  # noqa: BLE001 - a request the DBC cannot decode is counted, not answered
+            return None
+        answers[key] = answers.get(key, 0) + 1
+        return can.Message(arbitration_id=message.frame_id, is_extended_id=message.is_extended_frame,
+                           data=data, dlc=message.length, channel=ecu.bus)
+
+    received, answered, turnaround_ms = _answer_requests(
+        ecu, filters, run_dir, stop, session, run_id, timeout_s,
+        lambda msg: (msg.arbitration_id, msg.is_extended_id) in rules, answer_of)
+    # every request is answered or undecodable (a failed send ends the role)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
-            "undecodable": undecodable, "turnaround_ms": fidelity(turnaround_ms)}
+            "undecodable": received - answered, "turnaround_ms": fidelity(turnaround_ms)}
 
 
 def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, timeout_s: float) -> dict:
