@@ -102,6 +102,38 @@ fail:
 	return ESP_FAIL;
 }
 
+static void from_frame(const struct can_frame *frame, can_message_t *msg)
+{
+	memset(msg, 0, sizeof(*msg));
+	msg->extd = !!(frame->can_id & CAN_EFF_FLAG);
+	msg->rtr = !!(frame->can_id & CAN_RTR_FLAG);
+	msg->identifier = frame->can_id & (msg->extd ? CAN_EFF_MASK : CAN_SFF_MASK);
+	msg->data_length_code = frame->len > CAN_MAX_DLEN ? CAN_MAX_DLEN : frame->len;
+	if (!msg->rtr)
+		memcpy(msg->data, frame->data, msg->data_length_code);
+}
+
+static void to_frame(const can_message_t *msg, struct can_frame *frame)
+{
+	memset(frame, 0, sizeof(*frame));
+	frame->can_id = msg->identifier | (msg->extd ? CAN_EFF_FLAG : 0) | (msg->rtr ? CAN_RTR_FLAG : 0);
+	frame->len = msg->data_length_code;
+	if (!msg->rtr)
+		memcpy(frame->data, msg->data, msg->data_length_code);
+}
+
+/* The frame's kernel receive stamp (SO_TIMESTAMPNS, the moment it was on the bus), else fallback. */
+static int64_t stamp_of(struct msghdr *mh, int64_t fallback)
+{
+	for (struct cmsghdr *c = CMSG_FIRSTHDR(mh); c; c = CMSG_NXTHDR(mh, c))
+		if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
+			struct timespec ts;
+			memcpy(&ts, CMSG_DATA(c), sizeof(ts));
+			return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+		}
+	return fallback;
+}
+
 esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
 {
 	struct can_frame frame;
@@ -131,53 +163,10 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 			return ESP_FAIL; /* end of file: not a CAN socket any more */
 		if (n != sizeof(frame) || (frame.can_id & CAN_ERR_FLAG))
 			continue; /* error frames and anything unexpected are not bridged */
-		*rx_time_ns = zn_realtime_ns();
-		for (struct cmsghdr *c = CMSG_FIRSTHDR(&mh); c; c = CMSG_NXTHDR(&mh, c))
-			if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
-				struct timespec ts;
-				memcpy(&ts, CMSG_DATA(c), sizeof(ts));
-				*rx_time_ns = (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-			}
-		memset(msg, 0, sizeof(*msg));
-		msg->extd = !!(frame.can_id & CAN_EFF_FLAG);
-		msg->rtr = !!(frame.can_id & CAN_RTR_FLAG);
-		msg->identifier = frame.can_id & (msg->extd ? CAN_EFF_MASK : CAN_SFF_MASK);
-		msg->data_length_code = frame.len > CAN_MAX_DLEN ? CAN_MAX_DLEN : frame.len;
-		if (!msg->rtr)
-			memcpy(msg->data, frame.data, msg->data_length_code);
+		*rx_time_ns = stamp_of(&mh, zn_realtime_ns());
+		from_frame(&frame, msg);
 		return ESP_OK;
 	}
-}
-
-static void from_frame(const struct can_frame *frame, can_message_t *msg)
-{
-	memset(msg, 0, sizeof(*msg));
-	msg->extd = !!(frame->can_id & CAN_EFF_FLAG);
-	msg->rtr = !!(frame->can_id & CAN_RTR_FLAG);
-	msg->identifier = frame->can_id & (msg->extd ? CAN_EFF_MASK : CAN_SFF_MASK);
-	msg->data_length_code = frame->len > CAN_MAX_DLEN ? CAN_MAX_DLEN : frame->len;
-	if (!msg->rtr)
-		memcpy(msg->data, frame->data, msg->data_length_code);
-}
-
-static void to_frame(const can_message_t *msg, struct can_frame *frame)
-{
-	memset(frame, 0, sizeof(*frame));
-	frame->can_id = msg->identifier | (msg->extd ? CAN_EFF_FLAG : 0) | (msg->rtr ? CAN_RTR_FLAG : 0);
-	frame->len = msg->data_length_code;
-	if (!msg->rtr)
-		memcpy(frame->data, msg->data, msg->data_length_code);
-}
-
-static int64_t stamp_of(struct msghdr *mh, int64_t fallback)
-{
-	for (struct cmsghdr *c = CMSG_FIRSTHDR(mh); c; c = CMSG_NXTHDR(mh, c))
-		if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SO_TIMESTAMPNS) {
-			struct timespec ts;
-			memcpy(&ts, CMSG_DATA(c), sizeof(ts));
-			return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
-		}
-	return fallback;
 }
 
 esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size_t *count, int timeout_ms)
@@ -278,11 +267,7 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
 {
 	struct can_frame frame;
-	memset(&frame, 0, sizeof(frame));
-	frame.can_id = msg->identifier | (msg->extd ? CAN_EFF_FLAG : 0) | (msg->rtr ? CAN_RTR_FLAG : 0);
-	frame.len = msg->data_length_code;
-	if (!msg->rtr)
-		memcpy(frame.data, msg->data, msg->data_length_code);
+	to_frame(msg, &frame);
 	int64_t deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000;
 	for (;;) {
 		ssize_t n = send(can->fd, &frame, sizeof(frame), MSG_DONTWAIT);
