@@ -4,18 +4,8 @@
 #include <string.h>
 
 #include "check.h"
+#include "config_args.h"
 #include "zn_config_parse.h"
-
-static int parse(zn_node_config_t *cfg, char *err, const char *const *args)
-{
-	char *argv[32];
-	int argc = 0;
-	argv[argc++] = "zenoh-node";
-	for (; *args; args++)
-		argv[argc++] = (char *)*args;
-	argv[argc] = NULL;
-	return zn_config_from_env_and_args(cfg, argc, argv, err, 256);
-}
 
 static void clear_env(void)
 {
@@ -31,7 +21,7 @@ static void test_defaults_are_linux_safe(void)
 	char err[256];
 	const char *none[] = { NULL };
 	clear_env();
-	CHECK(parse(&cfg, err, none) == ZN_CONFIG_OK);
+	CHECK(parse_args(&cfg, err, none) == ZN_CONFIG_OK);
 	/* never a vehicle network address on the bench */
 	CHECK(strcmp(cfg.router_address, "tcp/127.0.0.1:7447") == 0);
 	CHECK(cfg.mode == ZN_MODE_CLIENT && cfg.publish_period_ms == 100 && cfg.enabled);
@@ -48,7 +38,7 @@ static void test_precedence(void)
 	setenv("ZENOH_ROUTER_ADDRESS", "tcp/127.0.0.1:7000", 1);
 	const char *args[] = { "--publish-period-ms", "0", "--can", "vcan0,vcan1", "--rx-congestion", "drop",
 			       "--allow-ids", "100-1FF,e:18DA0000-18DAFFFF", "--mode=router", NULL };
-	CHECK(parse(&cfg, err, args) == ZN_CONFIG_OK);
+	CHECK(parse_args(&cfg, err, args) == ZN_CONFIG_OK);
 	CHECK(cfg.publish_period_ms == 0); /* flag beats environment */
 	CHECK(cfg.mode == ZN_MODE_ROUTER);
 	CHECK(strcmp(cfg.router_address, "tcp/127.0.0.1:7000") == 0); /* environment beats default */
@@ -58,7 +48,7 @@ static void test_precedence(void)
 	clear_env();
 	const char *endpoints[] = { "--router", "tls/[::1]:7447, tcp/router.local:7447#iface=lo,", "--deny-ids",
 				    "e:1FFFFFFF", "--tx-queue-frames", "4096", NULL };
-	CHECK(parse(&cfg, err, endpoints) == ZN_CONFIG_OK);
+	CHECK(parse_args(&cfg, err, endpoints) == ZN_CONFIG_OK);
 	CHECK(cfg.deny_count == 1 && cfg.deny[0].first == 0x1FFFFFFF && cfg.tx_queue_frames == 4096);
 }
 
@@ -66,7 +56,7 @@ static void expect_error(const char *const *args, const char *fragment)
 {
 	zn_node_config_t cfg;
 	char err[256] = "";
-	int rc = parse(&cfg, err, args);
+	int rc = parse_args(&cfg, err, args);
 	CHECK(rc == ZN_CONFIG_ERROR);
 	if (!strstr(err, fragment)) {
 		fprintf(stderr, "error '%s' does not mention '%s'\n", err, fragment);
@@ -103,7 +93,7 @@ static void test_errors(void)
 	clear_env();
 	zn_node_config_t cfg;
 	char err[256];
-	CHECK(parse(&cfg, err, (const char *[]){ "--help", NULL }) == ZN_CONFIG_HELP);
+	CHECK(parse_args(&cfg, err, (const char *[]){ "--help", NULL }) == ZN_CONFIG_HELP);
 }
 
 int main(void)

@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "check.h"
+#include "config_args.h"
 #include "zn_config_parse.h"
 #include "zn_mock.h"
 #include "zn_node.h"
@@ -146,17 +147,6 @@ static void test_vectors(void)
 	}
 	fclose(f);
 	CHECK(lines >= 20);
-}
-
-static int parse_args(zn_node_config_t *cfg, char *err, const char *const *args)
-{
-	char *argv[16];
-	int argc = 0;
-	argv[argc++] = "zenoh-node";
-	for (; *args; args++)
-		argv[argc++] = (char *)*args;
-	argv[argc] = NULL;
-	return zn_config_from_env_and_args(cfg, argc, argv, err, 256);
 }
 
 static void expect_error(const char *table, const char *fragment)
