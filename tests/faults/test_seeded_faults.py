@@ -9,14 +9,13 @@ flip inside EngineSpeed) and restbus-cycle.yaml / restbus-wrong-cycle.yaml (a re
 ECU at the DBC's cycles, and the same ECU with a wrong one: the ECU's fault)."""
 from __future__ import annotations
 
-import json
 import os
-import sys
 from pathlib import Path
 
 import pytest
 import yaml
-from conftest import BRIDGE, REPO, Bridge, zenoh_session
+from conftest import BRIDGE, REPO
+from fault_run import run_case
 
 from canbench import scenario
 
@@ -28,7 +27,6 @@ SIGNALS = REPO / "scenarios" / "signals.yaml"
 SIGNAL_FLIP = Path(__file__).with_name("signal-flip.yaml")  # EngineSpeed and three other signals gated
 RESTBUS = Path(__file__).with_name("restbus-cycle.yaml")    # a restbus BODY node, cycle times from the DBC
 RESTBUS_WRONG = Path(__file__).with_name("restbus-wrong-cycle.yaml")  # the same, BodyStatus 80 ms (DBC: 50)
-RUN_TIMEOUT_S = 120
 
 # (scenario, fault, extra bridge options) -> the checks that must fail (and only those)
 CASES = {
@@ -78,42 +76,11 @@ def test_seeded_fault_fails_exactly_its_checks(bus, router, tmp_path, case):
         doc.pop("faults")
         scenario_path = tmp_path / scenario_path.name
         scenario_path.write_text(yaml.safe_dump(doc, sort_keys=False))
-        sc = scenario.load(scenario_path)
-    bridge = Bridge(bus, router)
-    bridge.binary = FAULTY
-    bus.env["ZN_FAULT"] = fault
-    bus.env["PATH"] = f"{bus.tool('')}:{bus.env['PATH']}"  # ucanctl for the capture's readiness check
-    ecus = []
-    try:
-        period = sc.bridge.get("publish_period_ms", 0)
-        bridge.start("--can", ",".join(sc.bus_names), "--publish-period-ms", str(period),
-                     "--tx-max-age-ms", str(sc.tx_max_age_ms), *options)
-        with_session = zenoh_session(router.endpoint)
-        bridge.wait_ready(with_session)
-        with_session.close()
-        run_dir = tmp_path / "run"
-        common = ["--scenario", str(scenario_path), "--run-id", f"fault-{case_id(case)}", "--run-dir", str(run_dir),
-                  "--router", router.endpoint]
-        ecus = [bus.popen([sys.executable, "-m", "canbench.cli", "ecu", "--name", e.name, *common])
-                for e in sc.ecus]
-        orchestrator = bus.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                                "--pyargs", "canbench.scenario_checks", *common], check=False, timeout=RUN_TIMEOUT_S,
-                               cwd=REPO)
-        for ecu in ecus:
-            assert ecu.wait(timeout=RUN_TIMEOUT_S) == 0, ecu.stderr.read()
-        metrics = json.loads((run_dir / "metrics.json").read_text())
-    finally:
-        for ecu in ecus:
-            if ecu.poll() is None:
-                ecu.kill()
-        if bridge.proc and bridge.proc.poll() is None:
-            bridge.stop()
-        print(bridge.log.read_text()[-3000:] if bridge.log.exists() else "")
-    failed = {check.split("[")[1].rstrip("]") for check, outcome in metrics["verdicts"].items()
-              if outcome == "failed"}
-    print(orchestrator.stdout[-6000:], orchestrator.stderr[-3000:])
-    assert failed == CASES[case], metrics["problems"]
-    assert (orchestrator.returncode == 0) == (not CASES[case])
+    run = run_case(bus, router, tmp_path, FAULTY, scenario_path, fault, f"fault-{case_id(case)}", options)
+    metrics = run.metrics
+    print(run.orchestrator.stdout[-6000:], run.orchestrator.stderr[-3000:])
+    assert run.failed == CASES[case], metrics["problems"]
+    assert (run.orchestrator.returncode == 0) == (not CASES[case])
     # failures point at the frames: bus capture or command log lines, or sequence numbers on the Zenoh side
     for check in CASES[case] & {"integrity", "ordering", "zenoh_to_can", "round_trip"}:
         assert any("can.log:" in p or "commands.tsv:" in p or "seq" in p for p in metrics["problems"][check]), \
