@@ -129,10 +129,8 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
                 fail(where, f"no message {message_name} in the DBC of {', '.join(with_dbc)} "
                      f"({_listing(names)})")
             continue
-        if isinstance(wanted, list):
-            for b in with_dbc:
-                if b not in on:
-                    fail([*where, "buses"], f"the DBC of {b} has no message {message_name}")
+        for b in _named_without(wanted, with_dbc, on):
+            fail([*where, "buses"], f"the DBC of {b} has no message {message_name}")
         # the signal as each bus's DBC has it: judged where it is, missing where it was asked for
         found = {b: next((s for s in _message(dbs[b], message_name).signals if s.name == signal_name), None)
                  for b in on}
@@ -142,15 +140,19 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
             fail(where, f"message {message_name} has no signal {signal_name} "
                  f"({_listing([s.name for s in message.signals])})")
             continue
-        if isinstance(wanted, list):
-            for b in on:
-                if b not in having:
-                    fail([*where, "buses"], f"message {message_name} in the DBC of {b} has no signal {signal_name}")
+        for b in _named_without(wanted, on, having):
+            fail([*where, "buses"], f"message {message_name} in the DBC of {b} has no signal {signal_name}")
         signal = found[having[0]]
         gate = _gate(key, message_name, signal, tuple(having), spec, where, fail)
         if gate is not None:
             out.append(gate)
     return tuple(out)
+
+
+def _named_without(wanted, candidates: list[str], having: list[str]) -> list[str]:
+    """The candidate buses without what the others have, when the gate named its buses (buses: [...]):
+    a named bus missing it is a problem; without buses, a gate judges wherever the DBC has it."""
+    return [b for b in candidates if b not in having] if isinstance(wanted, list) else []
 
 
 def _message(db, name: str):
