@@ -30,6 +30,8 @@ from typing import Any
 import can
 from crccheck.crc import Crc8SaeJ1850
 
+from .dbc import cycle_time_ms
+
 
 def xor8(data: bytes) -> int:
     out = 0
@@ -139,17 +141,6 @@ def checksum_byte(message, name: str) -> int:
 
 
 # --- plans ----------------------------------------------------------------------------------
-
-def cycle_ms(message) -> float | None:
-    """The message's GenMsgCycleTime when it is above 0 and its send type (where the DBC gives
-    one) is cyclic; else None (an event message: a restbus does not send it)."""
-    if not message.cycle_time or message.cycle_time <= 0:
-        return None
-    send_type = message.send_type
-    if send_type is not None and "cyclic" not in str(send_type).lower():
-        return None
-    return float(message.cycle_time)
-
 
 def frame_count(plan: MessagePlan, run_s: float) -> int:
     assert plan.cycle_ms
@@ -371,7 +362,7 @@ def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_
             fail([*where, "checksums", key], f"{message.name}.{name} is a counter or has a value in signals too")
         else:
             checksum = (name, algorithm)
-    return MessagePlan(message, sources, counter, checksum, cycle_ms(message))
+    return MessagePlan(message, sources, counter, checksum, cycle_time_ms(message))  # None: an event message
 
 
 def _split(key: str) -> tuple[str, str] | None:
