@@ -182,21 +182,31 @@ esp_err_t zn_can_open(const char *name, zn_can_t **out)
 	return ESP_OK;
 }
 
+/* With the lock held: waits until the handle's bus has a frame queued (ESP_OK), the bus was
+ * reopened behind the handle (ESP_FAIL) or the deadline passed (ESP_ERR_TIMEOUT; at once with
+ * no_wait). Returns with the lock held. */
+static esp_err_t wait_rx(zn_can_t *can, const struct timespec *deadline, int no_wait)
+{
+	struct mock_bus *b = can->bus;
+	while (b->rx_len == 0 || can->generation != b->generation) {
+		if (can->generation != b->generation)
+			return ESP_FAIL;
+		if (no_wait || pthread_cond_timedwait(&arrived, &lock, deadline) != 0)
+			return ESP_ERR_TIMEOUT;
+	}
+	return ESP_OK;
+}
+
 esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
 {
 	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
-	struct mock_bus *b = can->bus;
-	while (b->rx_len == 0 || can->generation != b->generation) {
-		if (can->generation != b->generation) {
-			pthread_mutex_unlock(&lock);
-			return ESP_FAIL;
-		}
-		if (pthread_cond_timedwait(&arrived, &lock, &ts) != 0) {
-			pthread_mutex_unlock(&lock);
-			return ESP_ERR_TIMEOUT;
-		}
+	esp_err_t err = wait_rx(can, &ts, 0);
+	if (err != ESP_OK) {
+		pthread_mutex_unlock(&lock);
+		return err;
 	}
+	struct mock_bus *b = can->bus;
 	*msg = b->rx[b->rx_head];
 	*rx_time_ns = b->rx_time[b->rx_head];
 	b->rx_head = (b->rx_head + 1) % MOCK_FRAMES;
@@ -215,17 +225,12 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		max = ZN_CAN_BURST_MAX;
 	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
-	struct mock_bus *b = can->bus;
-	while (b->rx_len == 0 || can->generation != b->generation) {
-		if (can->generation != b->generation) {
-			pthread_mutex_unlock(&lock);
-			return ESP_FAIL;
-		}
-		if (timeout_ms == 0 || pthread_cond_timedwait(&arrived, &lock, &ts) != 0) {
-			pthread_mutex_unlock(&lock);
-			return ESP_ERR_TIMEOUT;
-		}
+	esp_err_t err = wait_rx(can, &ts, timeout_ms == 0);
+	if (err != ESP_OK) {
+		pthread_mutex_unlock(&lock);
+		return err;
 	}
+	struct mock_bus *b = can->bus;
 	while (*count < max && b->rx_len) {
 		out[*count].msg = b->rx[b->rx_head];
 		out[*count].rx_time_ns = b->rx_time[b->rx_head];
