@@ -218,12 +218,18 @@ void zn_close(zn_session_t *s)
 	free(s);
 }
 
-size_t mock_zenoh_put_count(void)
+/* A log's length, read under the lock its writers hold. */
+static size_t locked_count(const size_t *count)
 {
 	pthread_mutex_lock(&lock);
-	size_t n = nputs;
+	size_t n = *count;
 	pthread_mutex_unlock(&lock);
 	return n;
+}
+
+size_t mock_zenoh_put_count(void)
+{
+	return locked_count(&nputs);
 }
 
 const struct mock_put *mock_zenoh_put(size_t i)
@@ -292,10 +298,7 @@ size_t mock_zenoh_query(const char *key, char *buf, size_t cap)
 
 size_t mock_zenoh_publisher_count(void)
 {
-	pthread_mutex_lock(&lock);
-	size_t n = npubs;
-	pthread_mutex_unlock(&lock);
-	return n;
+	return locked_count(&npubs);
 }
 
 const struct mock_publisher *mock_zenoh_publisher(size_t i)
