@@ -134,13 +134,36 @@ static int64_t stamp_of(struct msghdr *mh, int64_t fallback)
 	return fallback;
 }
 
+/* Waits up to timeout_ms for something to read: ESP_OK, ESP_ERR_TIMEOUT (a signal ends the
+ * wait as a timeout does: the caller comes back), ESP_FAIL. */
+static esp_err_t wait_readable(int fd, int timeout_ms)
+{
+	struct pollfd pfd = { .fd = fd, .events = POLLIN };
+	int rc = poll(&pfd, 1, timeout_ms);
+	if (rc == 0)
+		return ESP_ERR_TIMEOUT;
+	if (rc < 0)
+		return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+	return ESP_OK;
+}
+
+/* The tx queue is full: waits for room until deadline (monotonic ns); 0 once it has passed. */
+static int wait_writable(int fd, int64_t deadline)
+{
+	int left_ms = (int)((deadline - zn_monotonic_ns()) / 1000000);
+	if (left_ms <= 0)
+		return 0;
+	struct pollfd pfd = { .fd = fd, .events = POLLOUT };
+	poll(&pfd, 1, left_ms);
+	return 1;
+}
+
 esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
 {
 	struct can_frame frame;
 	char control[CMSG_SPACE(sizeof(struct timespec))];
 	struct iovec iov = { .iov_base = &frame, .iov_len = sizeof(frame) };
 	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = control };
-	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
 
 	for (int polled = 0;;) {
 		/* read first, poll only when nothing is queued: under load a frame costs one syscall */
@@ -151,11 +174,9 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 				return ESP_FAIL;
 			if (polled)
 				return ESP_ERR_TIMEOUT;
-			int rc = poll(&pfd, 1, timeout_ms);
-			if (rc == 0)
-				return ESP_ERR_TIMEOUT;
-			if (rc < 0)
-				return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+			esp_err_t err = wait_readable(can->fd, timeout_ms);
+			if (err != ESP_OK)
+				return err;
 			polled = 1;
 			continue;
 		}
@@ -176,16 +197,13 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		return ESP_ERR_INVALID_ARG;
 	if (max > ZN_CAN_BURST_MAX)
 		max = ZN_CAN_BURST_MAX;
-	struct pollfd pfd = { .fd = can->fd, .events = POLLIN };
 	/* read first under load (a burst costs one syscall); after a call that emptied the
 	 * socket, wait first: a read now would most likely find nothing */
 	int polled = 0;
 	if (can->rx_emptied && timeout_ms != 0) {
-		int rc = poll(&pfd, 1, timeout_ms);
-		if (rc == 0)
-			return ESP_ERR_TIMEOUT;
-		if (rc < 0)
-			return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+		esp_err_t err = wait_readable(can->fd, timeout_ms);
+		if (err != ESP_OK)
+			return err;
 		polled = 1;
 	}
 	for (;;) {
@@ -201,11 +219,9 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 				return ESP_FAIL;
 			if (polled || timeout_ms == 0)
 				return ESP_ERR_TIMEOUT;
-			int rc = poll(&pfd, 1, timeout_ms);
-			if (rc == 0)
-				return ESP_ERR_TIMEOUT;
-			if (rc < 0)
-				return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
+			esp_err_t err = wait_readable(can->fd, timeout_ms);
+			if (err != ESP_OK)
+				return err;
 			polled = 1;
 			continue;
 		}
@@ -254,12 +270,8 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 		}
 		if (r < 0 && errno != ENOBUFS && errno != EAGAIN)
 			return ESP_FAIL;
-		/* tx queue full: wait for room, bounded */
-		int left_ms = (int)((deadline - zn_monotonic_ns()) / 1000000);
-		if (left_ms <= 0)
+		if (!wait_writable(can->fd, deadline))
 			return ESP_ERR_TIMEOUT;
-		struct pollfd pfd = { .fd = can->fd, .events = POLLOUT };
-		poll(&pfd, 1, left_ms);
 	}
 	return ESP_OK;
 }
@@ -275,12 +287,8 @@ esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_m
 			return ESP_OK;
 		if (n < 0 && errno != ENOBUFS && errno != EAGAIN)
 			return ESP_FAIL;
-		/* tx queue full: wait for room, bounded */
-		int left_ms = (int)((deadline - zn_monotonic_ns()) / 1000000);
-		if (left_ms <= 0)
+		if (!wait_writable(can->fd, deadline))
 			return ESP_ERR_TIMEOUT;
-		struct pollfd pfd = { .fd = can->fd, .events = POLLOUT };
-		poll(&pfd, 1, left_ms);
 	}
 }
 
