@@ -147,6 +147,18 @@ static esp_err_t wait_readable(int fd, int timeout_ms)
 	return ESP_OK;
 }
 
+/* After a read that found nothing: ESP_OK once a wait (one per call: *waited) says there is
+ * something to read, else what the call returns (ESP_ERR_TIMEOUT; ESP_FAIL on a socket error). */
+static esp_err_t wait_after_empty_read(int fd, int timeout_ms, int *waited)
+{
+	if (errno != EAGAIN && errno != EINTR)
+		return ESP_FAIL;
+	if (*waited)
+		return ESP_ERR_TIMEOUT;
+	*waited = 1;
+	return wait_readable(fd, timeout_ms);
+}
+
 /* The tx queue is full: waits for room until deadline (monotonic ns); 0 once it has passed. */
 static int wait_writable(int fd, int64_t deadline)
 {
@@ -170,14 +182,9 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 		mh.msg_controllen = sizeof(control);
 		ssize_t n = recvmsg(can->fd, &mh, MSG_DONTWAIT);
 		if (n < 0) {
-			if (errno != EAGAIN && errno != EINTR)
-				return ESP_FAIL;
-			if (polled)
-				return ESP_ERR_TIMEOUT;
-			esp_err_t err = wait_readable(can->fd, timeout_ms);
+			esp_err_t err = wait_after_empty_read(can->fd, timeout_ms, &polled);
 			if (err != ESP_OK)
 				return err;
-			polled = 1;
 			continue;
 		}
 		if (n == 0)
@@ -199,8 +206,8 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		max = ZN_CAN_BURST_MAX;
 	/* read first under load (a burst costs one syscall); after a call that emptied the
 	 * socket, wait first: a read now would most likely find nothing */
-	int polled = 0;
-	if (can->rx_emptied && timeout_ms != 0) {
+	int polled = timeout_ms == 0; /* a call without a timeout never waits */
+	if (can->rx_emptied && !polled) {
 		esp_err_t err = wait_readable(can->fd, timeout_ms);
 		if (err != ESP_OK)
 			return err;
@@ -215,14 +222,9 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 			can->rx_used = (size_t)n;
 		can->rx_emptied = n < (int)max;
 		if (n < 0) {
-			if (errno != EAGAIN && errno != EINTR)
-				return ESP_FAIL;
-			if (polled || timeout_ms == 0)
-				return ESP_ERR_TIMEOUT;
-			esp_err_t err = wait_readable(can->fd, timeout_ms);
+			esp_err_t err = wait_after_empty_read(can->fd, timeout_ms, &polled);
 			if (err != ESP_OK)
 				return err;
-			polled = 1;
 			continue;
 		}
 		int64_t now = 0;
