@@ -2,11 +2,14 @@
 formatter (format_line) of the format, used for traces, the bus capture (can.log), the
 send logs and the benchmarks. Stamps stay integer nanoseconds (python-can's reader makes
 them floats, 0.2 us apart at today's epoch). Other formats (.asc .blf .csv .trc .mf4) are
-read with python-can's LogReader."""
+read with python-can's readers, text ones with the line each frame came from; every format
+passes the same checks (iter_trace): CAN 2.0 data and remote frames only (a CAN FD or error
+frame is refused, never truncated or replayed as data), ids in range, time never going back."""
 from __future__ import annotations
 
+import logging
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,7 +31,21 @@ FRAME_TEXT = re.compile(CANDUMP_LINE.pattern.replace(r"^\((?P<sec>\d+)\.(?P<frac
 DROPCOUNT = re.compile(r"^DROPCOUNT: dropped (\d+) CAN frames? on '([^']*)' socket \(total drops (\d+)\)")
 CAN_ERR_FLAG = 0x20000000
 MAX_TRACE_FRAMES = 10_000_000
+CANDUMP_SUFFIXES = (".log", ".candump", "")
+TEXT_READERS = {".asc": can.ASCReader, ".trc": can.TRCReader, ".csv": can.CSVReader}  # line = the file's line
+BINARY_SUFFIXES = (".blf", ".mf4")  # python-can's LogReader; "line" = the frame's number
+FORMATS_SAID = "candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc .mf4 (python-can)"
 FRAME_CACHE = 1 << 20  # distinct frame texts kept for sharing (then it starts again: only memory is at stake)
+
+
+ERROR_FRAME = "an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames)"
+
+
+def fd_refusal(size: int, brs: bool, esi: bool) -> str:
+    """Why a CAN FD frame is refused: the bridge, its wire format and the bus are CAN 2.0."""
+    flags = "".join(f", {name}" for name, on in (("BRS", brs), ("ESI", esi)) if on)
+    return (f"a CAN FD frame ({size} data bytes{flags}): the bridge carries CAN 2.0 frames only "
+            "(remove FD frames from the trace)")
 
 
 @dataclass(frozen=True)
@@ -44,11 +61,14 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
     if not extended and can_id > STD_ID_MAX:
         raise TraceError(path, lineno, f"11-bit id {ident} is above 7FF")
     if extended and can_id > EXT_ID_MAX:
-        what = "an error frame" if can_id & CAN_ERR_FLAG else f"29-bit id {ident} is above 1FFFFFFF"
-        raise TraceError(path, lineno, f"{what}: the bridge carries CAN 2.0 data and remote frames only")
-    if body.startswith("#"):
-        raise TraceError(path, lineno, "a CAN FD frame: the bridge carries CAN 2.0 frames only")
+        raise TraceError(path, lineno, ERROR_FRAME if can_id & CAN_ERR_FLAG else
+                         f"29-bit id {ident} is above 1FFFFFFF: the bridge carries CAN 2.0 data and remote frames only")
+    if body.startswith("#"):  # "##<flags nibble><data>": flags 1 BRS, 2 ESI
+        flags = int(body[1], 16)
+        raise TraceError(path, lineno, fd_refusal((len(body) - 2) // 2, bool(flags & 1), bool(flags & 2)))
     if body.startswith("R"):
+        if int(body[1:] or 0) > 8:
+            raise TraceError(path, lineno, f"remote frame dlc {body[1:]}: classic CAN's is 0..8")
         return Frame(can_id, int(body[1:] or 0), b"", extended, True)
     if len(body) > 16:
         raise TraceError(path, lineno, f"{len(body) // 2} data bytes: classic CAN carries at most 8")
@@ -94,19 +114,33 @@ def format_line(t_ns: int, iface: str, frame: Frame) -> str:
 
 
 def iter_candump(path: str | Path, interface: str | None = None, drops: dict[str, int] | None = None,
-                 growing: bool = False, cache_size: int = FRAME_CACHE) -> Iterator[tuple[int, int, str, Frame]]:
+                 growing: bool = False, cache_size: int = FRAME_CACHE, strict: bool = False,
+                 on_error: Callable[[TraceError], None] | None = None) -> Iterator[tuple[int, int, str, Frame]]:
     """(line number, t_ns, interface, frame) of every frame line of a candump -L file.
     drops: filled with the frames candump says the kernel dropped, per interface (DROPCOUNT).
     growing: candump may still be writing, so a last line without its newline is skipped.
-    cache_size: distinct frame texts kept for sharing (a reader in bounded memory keeps fewer)."""
+    cache_size: distinct frame texts kept for sharing (a reader in bounded memory keeps fewer).
+    strict: a trace someone wrote: a line that is not a frame, blank, a '#' comment or DROPCOUNT
+    is an error (not skipped as canplayer would: it may be a frame a tool mangled).
+    on_error: a bad line is handed to it and the scan goes on (else it raises TraceError).
+    A UTF-8 byte order mark (an editor's) is not part of the first line."""
     cache: dict[tuple[str, str], Frame] = {}
-    with open(path, errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         for lineno, raw in enumerate(f, 1):
             if growing and not raw.endswith("\n"):
                 return
             if len(cache) > cache_size:
                 cache.clear()
-            parsed = parse_line(raw.lstrip(), str(path), lineno, cache)
+            try:
+                parsed = parse_line(raw.lstrip(), str(path), lineno, cache)
+                if parsed is None and strict and not DROPCOUNT.match(raw) and raw.strip() \
+                        and not raw.lstrip().startswith("#"):
+                    raise TraceError(str(path), lineno, f"not a candump -L frame: {raw.strip()[:80]!r}")
+            except TraceError as e:
+                if on_error is None:
+                    raise
+                on_error(e)
+                continue
             if parsed is None:
                 if drops is not None and (m := DROPCOUNT.match(raw)):
                     drops[m[2]] = drops.get(m[2], 0) + int(m[1])
@@ -114,42 +148,186 @@ def iter_candump(path: str | Path, interface: str | None = None, drops: dict[str
                 yield (lineno, *parsed)
 
 
-def _read_candump_trace(path: Path, interfaces: set[str] | None) -> tuple[list[int], list[can.Message]]:
-    lines: list[int] = []
-    messages: list[can.Message] = []
-    last_ns = None
-    for lineno, t_ns, iface, frame in iter_candump(path):
-        if interfaces is not None and iface not in interfaces:
-            raise TraceError(str(path), lineno, f"interface '{iface}' is not one of "
-                             f"{sorted(interfaces)} (remap it in the scenario)")
-        if last_ns is not None and t_ns < last_ns:
-            raise TraceError(str(path), lineno, "timestamp earlier than the line before")
-        last_ns = t_ns
-        if len(messages) >= MAX_TRACE_FRAMES:
-            raise TraceError(str(path), lineno, f"more than {MAX_TRACE_FRAMES} frames: split the trace")
-        lines.append(lineno)
-        messages.append(can.Message(timestamp=t_ns / 1e9, arbitration_id=frame.can_id, is_extended_id=frame.extended,
-                                    is_remote_frame=frame.remote, dlc=frame.dlc, data=frame.data, channel=iface))
-    return lines, messages
+class _LineCounter:
+    """A text file as python-can's text readers take it, counting the lines they read: a frame
+    they yield came from the line read last (each reads one frame per line)."""
+
+    def __init__(self, f):
+        self.f, self.line, self.text = f, 0, ""
+
+    def __iter__(self):
+        return self
+
+    def __next__(self) -> str:
+        self.text = next(self.f)
+        self.line += 1
+        return self.text
+
+    def close(self) -> None:
+        self.f.close()
 
 
-def read_trace(path: str | Path, interfaces: set[str] | None = None) -> list[TraceFrame]:
-    """All frames of a trace, in order, each with the line it came from.
-    interfaces: names the trace may use (None: any)."""
+class _ReaderLog(logging.Handler):
+    """What python-can's TRC reader only logs, with the line it was reading: a line it could not
+    parse (WARNING) and the record types it does not read (INFO 'Unsupported type')."""
+
+    def __init__(self, counter: _LineCounter):
+        super().__init__(logging.INFO)
+        self.counter = counter
+        self.records: list[tuple[int, str, logging.LogRecord]] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append((self.counter.line, self.counter.text.strip()[:80], record))
+
+
+# PCAN's TRC record types that are not frames (status, error counters, events, 1.x warnings):
+# skipped; an error frame ('ER', 1.x 'Error') is refused; any other type is not a TRC line.
+TRC_NOT_FRAMES = {"ST", "EC", "EV", "Warng"}
+TRC_ERROR_FRAMES = {"ER", "Error"}
+UNSUPPORTED_TYPE = re.compile(r"^TRCReader: Unsupported type '(.*)'$")
+
+
+def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) -> Iterator[tuple[int, can.Message]]:
+    """(line, message) of a trace python-can reads: text formats with the file's line, binary ones
+    with the frame's number; what its readers skip with only a log line is a problem here."""
+    suffix = path.suffix.lower()
+    if suffix in TEXT_READERS:
+        counter = _LineCounter(open(path, encoding="utf-8-sig", errors="replace"))
+        log = _ReaderLog(counter)
+        trc_log = logging.getLogger("can.io.trc")
+        trc_log.addHandler(log)
+        level = trc_log.level
+        trc_log.setLevel(logging.INFO)
+        try:
+            for msg in TEXT_READERS[suffix](counter):
+                line = counter.line
+                _reader_problems(log, fail)
+                yield line, msg
+            _reader_problems(log, fail)
+        except TraceError:
+            raise
+        except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad lines
+            raise TraceError(str(path), counter.line or None, f"python-can cannot read it: {e}") from None
+        finally:
+            trc_log.removeHandler(log)
+            trc_log.setLevel(level)
+            counter.close()
+        return
+    if suffix not in BINARY_SUFFIXES and not (suffix == ".gz" and len(path.suffixes) > 1):
+        hint = ""
+        try:
+            with open(path, encoding="utf-8-sig", errors="replace") as f:
+                first = next((text for text in f if text.strip() and not text.startswith("#")), "")
+            if CANDUMP_LINE.match(first.lstrip()):
+                hint = f": its lines read as candump -L, rename it {path.stem}.log"
+        except OSError:
+            pass
+        raise TraceError(str(path), None, f"unknown trace format '{path.suffix}'{hint} (the bench reads "
+                         f"{FORMATS_SAID})")
+    try:
+        yield from enumerate(can.LogReader(str(path)), 1)
+    except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
+        raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
+
+
+def _reader_problems(log: _ReaderLog, fail: Callable[[int | None, str], None]) -> None:
+    for line, text, record in log.records:
+        unsupported = UNSUPPORTED_TYPE.match(record.getMessage())
+        if record.levelno >= logging.WARNING:
+            fail(line, f"python-can cannot read it: {text!r}")
+        elif unsupported and unsupported[1] in TRC_ERROR_FRAMES:
+            fail(line, ERROR_FRAME)
+        elif unsupported and unsupported[1] not in TRC_NOT_FRAMES:
+            fail(line, f"not a TRC frame (record type '{unsupported[1]}'): {text!r}")
+    log.records.clear()
+
+
+def _frame_of_message(msg: can.Message) -> Frame:
+    """The CAN 2.0 frame of a python-can message, or ValueError saying why it is none."""
+    if msg.is_error_frame:
+        raise ValueError(ERROR_FRAME)
+    if msg.is_fd:
+        raise ValueError(fd_refusal(len(msg.data), msg.bitrate_switch, msg.error_state_indicator))
+    can_id, extended = msg.arbitration_id, msg.is_extended_id
+    if not 0 <= can_id <= (EXT_ID_MAX if extended else STD_ID_MAX):
+        raise ValueError(f"{'29' if extended else '11'}-bit id {can_id:X} is above "
+                         f"{EXT_ID_MAX if extended else STD_ID_MAX:X}")
+    if not 0 <= msg.dlc <= 8:
+        raise ValueError(f"dlc {msg.dlc}: classic CAN's is 0..8 (a CAN FD frame? the bridge carries CAN 2.0 only)")
+    if msg.is_remote_frame:
+        return Frame(can_id, msg.dlc, b"", extended, True)
+    data = bytes(msg.data)
+    if len(data) > 8:
+        raise ValueError(f"{len(data)} data bytes: classic CAN carries at most 8")
+    if msg.dlc != len(data):
+        raise ValueError(f"dlc {msg.dlc} with {len(data)} data bytes")
+    return Frame(can_id, len(data), data, extended)
+
+
+def _stamp_ns(timestamp: float) -> int:
+    """A python-can float stamp in integer ns, rounded to the microsecond: at today's epoch a float
+    is 0.24 us coarse and python-can's sums (start time + offset) err by as much (a TRC's 10.000 ms
+    read as 9.99999); no format it reads resolves a CAN frame finer than that."""
+    return round(timestamp * 1e6) * 1000
+
+
+def iter_trace(path: str | Path, interfaces: set[str] | None = None,
+               on_problem: Callable[[TraceError], None] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
+    """(line, t_ns, interface or None, frame) of every frame of a trace in any format the bench
+    reads, checked alike: CAN 2.0 data and remote frames only, ids in range, dlc 0..8, time never
+    going back, interfaces among `interfaces` (None: any). line: the file's line (text formats),
+    the frame's number (.blf, .mf4: said as 'frame N'). A problem raises TraceError, or with
+    on_problem is handed to it and the frame left out (validate: every problem at once)."""
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
-    is_candump = path.suffix in (".log", ".candump", "")
-    try:
-        if is_candump:
-            lines, messages = _read_candump_trace(path, interfaces)
-        else:
-            messages = list(can.LogReader(str(path)))
-            lines = list(range(1, len(messages) + 1))
-    except TraceError:
-        raise
-    except Exception as e:  # python-can raises many kinds for bad files
-        raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
-    if not messages:
+    numbered = path.suffix.lower() in BINARY_SUFFIXES or path.suffix.lower() == ".gz"
+
+    def fail(line: int | None, message: str) -> None:
+        error = (TraceError(str(path), None, f"frame {line}: {message}") if numbered and line
+                 else TraceError(str(path), line, message))
+        if on_problem is None:
+            raise error
+        on_problem(error)
+
+    last_ns = None
+    if path.suffix.lower() in CANDUMP_SUFFIXES:
+        for lineno, t_ns, iface, frame in iter_candump(path, strict=True, on_error=on_problem):
+            if interfaces is not None and iface not in interfaces:
+                fail(lineno, f"interface '{iface}' is not one of {sorted(interfaces)} (remap it in the scenario)")
+                continue
+            if last_ns is not None and t_ns < last_ns:
+                fail(lineno, "timestamp earlier than the line before")
+            last_ns = t_ns
+            yield lineno, t_ns, iface, frame
+        return
+    for line, msg in _python_can_messages(path, fail):
+        try:
+            frame = _frame_of_message(msg)
+        except ValueError as e:
+            fail(line, str(e))
+            continue
+        channel = None if msg.channel is None else str(msg.channel)
+        if interfaces is not None and channel is not None and channel not in interfaces:
+            fail(line, f"interface '{channel}' is not one of {sorted(interfaces)} (remap it in the scenario)")
+            continue
+        t_ns = _stamp_ns(msg.timestamp)
+        if last_ns is not None and t_ns < last_ns:
+            fail(line, f"timestamp earlier than the {'frame' if numbered else 'line'} before")
+        last_ns = t_ns
+        yield line, t_ns, channel, frame
+
+
+def read_trace(path: str | Path, interfaces: set[str] | None = None) -> list[TraceFrame]:
+    """All frames of a trace, in order, each with the line it came from (iter_trace's checks).
+    interfaces: names the trace may use (None: any)."""
+    frames: list[TraceFrame] = []
+    for line, t_ns, iface, frame in iter_trace(path, interfaces):
+        if len(frames) >= MAX_TRACE_FRAMES:
+            raise TraceError(str(path), line, f"more than {MAX_TRACE_FRAMES} frames: split the trace")
+        frames.append(TraceFrame(line, can.Message(
+            timestamp=t_ns / 1e9, arbitration_id=frame.can_id, is_extended_id=frame.extended,
+            is_remote_frame=frame.remote, dlc=frame.dlc, data=frame.data, channel=iface)))
+    if not frames:
         raise TraceError(str(path), None, "no frames in trace")
-    return [TraceFrame(line, msg) for line, msg in zip(lines, messages, strict=True)]
+    return frames

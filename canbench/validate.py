@@ -4,50 +4,41 @@ scripts/bench-run runs it (in the orchestrator image) before anything starts."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 from . import scenario
 from .errors import InputError, ScenarioError, TraceError
-from .trace import parse_line, read_trace
+from .trace import MAX_TRACE_FRAMES, iter_trace
 
-MAX_PER_TRACE = 20  # a trace in another format would give one line per frame: the rest are counted
-
-
-def _line_problems(path: Path) -> Iterator[TraceError]:
-    """Every bad line of a candump -L trace: the scan goes on after each (read_trace stops at the first)."""
-    last_ns = None
-    with open(path, errors="replace") as f:
-        for lineno, raw in enumerate(f, 1):
-            try:
-                parsed = parse_line(raw.lstrip(), str(path), lineno)
-            except TraceError as e:
-                yield e
-                continue
-            if parsed is not None:
-                if last_ns is not None and parsed[0] < last_ns:
-                    yield TraceError(str(path), lineno, "timestamp earlier than the line before")
-                last_ns = parsed[0]
+MAX_PER_TRACE = 20  # a trace of FD frames would give one line per frame: the rest are counted
 
 
 def trace_problems(path: Path) -> list[InputError]:
-    try:
-        read_trace(path, None)
-        return []
-    except TraceError as error:
-        e = error
-        if e.line is None:  # the whole file (empty, python-can cannot read it): nothing more to find
-            return [e]
+    """Every problem of a trace (iter_trace's checks, in every format): the scan goes on after each
+    bad frame (read_trace stops at the first); one that stops its reader ends the list."""
     found: list[InputError] = []
-    more = 0
-    for problem in _line_problems(path):
+    more = frames = 0
+
+    def problem(error: TraceError) -> None:
+        nonlocal more
         if len(found) < MAX_PER_TRACE:
-            found.append(problem)
+            found.append(error)
         else:
             more += 1
+
+    try:
+        for _ in iter_trace(path, None, problem):
+            frames += 1
+    except TraceError as error:
+        found.append(error)
+    else:
+        if not frames and not found:
+            found.append(TraceError(str(path), None, "no frames in trace"))
+        elif frames > MAX_TRACE_FRAMES:
+            found.append(TraceError(str(path), None, f"more than {MAX_TRACE_FRAMES} frames: split the trace"))
     if more:
         found.append(TraceError(str(path), None, f"{more} more problems like the ones above"))
-    return found or [e]  # a limit of the whole file (its frame count): read_trace's own error
+    return found
 
 
 def named_traces(path: Path) -> list[Path]:

@@ -73,8 +73,10 @@ def test_a_trace_in_another_format_is_cut_short(tmp_path):
     trace.write_text("".join(f"{i} 0x123 8 00 00 00 00 00 00 00 00\n" for i in range(100)) +
                      "(1700000000.000000) vcan0 123#00\n")
     found = validate.trace_problems(trace)
-    # lines not starting with '(' are skipped as canplayer does: the file is candump with one frame
-    assert found == []
+    # a trace's line that is not a frame, blank or a comment is a problem (canplayer would skip it,
+    # and the file would be read as candump with one frame)
+    assert str(found[0]) == f"{trace}:1: not a candump -L frame: '0 0x123 8 00 00 00 00 00 00 00 00'"
+    assert len(found) == validate.MAX_PER_TRACE + 1
     trace.write_text("".join(f"(1700000000.{i:06d}) vcan0 12#00\n" for i in range(100)))
     found = validate.trace_problems(trace)
     assert len(found) == validate.MAX_PER_TRACE + 1

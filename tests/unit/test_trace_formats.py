@@ -1,0 +1,144 @@
+"""Recordings in every format the bench reads, written by python-can's writers or by hand as
+an integration engineer's tools leave them: each is read right or refused with file:line
+(text formats) or 'frame N' (binary ones), never read as something else: a CAN FD frame is
+not cut to 8 bytes, an error frame is not a data frame, a mangled line is not skipped."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from canbench import cli, validate
+from canbench.errors import TraceError
+from canbench.trace import iter_trace, read_trace
+
+pytestmark = pytest.mark.unit
+
+T0 = 1_700_000_000.0
+
+
+def classic(n: int = 5) -> list[can.Message]:
+    return [can.Message(timestamp=T0 + k * 0.01, arbitration_id=0x123, is_extended_id=False, data=bytes([k, 1]),
+                        channel=0) for k in range(n)]
+
+
+def written(path: Path, messages: list[can.Message]) -> Path:
+    with can.Logger(str(path)) as log:
+        for m in sorted(messages, key=lambda m: m.timestamp):
+            log.on_message_received(m)
+    return path
+
+
+def problems(path: Path) -> list[str]:
+    found: list[TraceError] = []
+    list(iter_trace(path, on_problem=found.append))
+    return [str(e) for e in found]
+
+
+FD = can.Message(timestamp=T0 + 0.015, arbitration_id=0x456, is_extended_id=False, is_fd=True, bitrate_switch=True,
+                 data=bytes(range(12)), channel=0)
+ERROR = can.Message(timestamp=T0 + 0.025, arbitration_id=0x4, is_error_frame=True, dlc=8, data=bytes(8), channel=0)
+
+
+@pytest.mark.parametrize("suffix,where", [(".asc", "{path}:8: "), (".blf", "{path}: frame 3: ")])
+def test_a_can_fd_frame_is_refused_not_cut_to_eight_bytes(tmp_path, suffix, where):
+    path = written(tmp_path / f"fd{suffix}", [*classic(), FD])
+    with pytest.raises(TraceError) as err:
+        read_trace(path)
+    assert str(err.value) == (where.format(path=path) + "a CAN FD frame (12 data bytes, BRS): the bridge carries "
+                              "CAN 2.0 frames only (remove FD frames from the trace)")
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".blf", ".csv"])
+def test_an_error_frame_is_refused_not_replayed_as_a_data_frame(tmp_path, suffix):
+    path = written(tmp_path / f"err{suffix}", [*classic(), ERROR])
+    found = problems(path)
+    assert len(found) == 1 and "an error frame: the bridge carries CAN 2.0 data and remote frames only" in found[0]
+
+
+def test_a_csv_frame_of_more_than_eight_bytes_is_refused(tmp_path):
+    path = written(tmp_path / "fd.csv", [*classic(), FD])  # python-can's CSV has no FD flag: 12 bytes, dlc 12
+    assert problems(path) == [f"{path}:4: dlc 12: classic CAN's is 0..8 (a CAN FD frame? the bridge carries "
+                              "CAN 2.0 only)"]
+
+
+TRC = """;$FILEVERSION=2.0
+;$STARTTIME=45244.92592592593
+;$COLUMNS=N,O,T,I,d,l,D
+      1         0.000 DT     0123 Rx 8  00 01 02 03 04 05 06 07
+      2        10.000 DT     0123 Rx 8  00 01 02 03 04 05 06 07
+      3        15.000 ER     0000 Rx 0
+      4        17.000 ST     0000 Rx 0
+      5        18.000 RR     07E0 Rx 3
+      6        20.000 DT     0123 Rx 8  00 01 02 03 04 05 06 07
+garbage at the end
+"""
+
+
+def test_trc_error_frames_and_unreadable_lines_are_named_with_their_line(tmp_path):
+    path = tmp_path / "drive.trc"
+    path.write_text(TRC)
+    assert problems(path) == [
+        f"{path}:6: an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames)",
+        f"{path}:10: not a TRC frame (record type 'the'): 'garbage at the end'",
+    ]
+    frames = [(line, t_ns, frame.candump()) for line, t_ns, _, frame in iter_trace(path, on_problem=lambda e: None)]
+    # the bus status record (ST) is no frame; the stamps are the file's, to the microsecond
+    assert [(line, frame) for line, _, frame in frames] == [
+        (4, "vcan0 123#0001020304050607"), (5, "vcan0 123#0001020304050607"), (8, "vcan0 7E0#R3"),
+        (9, "vcan0 123#0001020304050607")]
+    assert [t_ns - frames[0][1] for _, t_ns, _ in frames] == [0, 10_000_000, 18_000_000, 20_000_000]
+
+
+def test_text_formats_name_the_file_line_of_each_problem(tmp_path):
+    path = written(tmp_path / "two.asc", [*classic(), FD, ERROR])
+    lines = path.read_text().splitlines()
+    found = problems(path)
+    assert [int(p.split(":")[1]) for p in found] == [
+        n for n, text in enumerate(lines, 1) if "CANFD" in text or "ErrorFrame" in text]
+
+
+def test_python_can_formats_going_back_in_time_are_refused(tmp_path):
+    path = tmp_path / "back.csv"
+    path.write_text("timestamp,arbitration_id,extended,remote,error,dlc,data\n"
+                    "1700000000.0,0x123,0,0,0,1,AQ==\n1700000000.01,0x123,0,0,0,1,AQ==\n"
+                    "1699999999.0,0x123,0,0,0,1,AQ==\n")
+    assert problems(path) == [f"{path}:4: timestamp earlier than the line before"]
+
+
+GOOD = "(1700000000.000000) can0 123#11\n(1700000000.010000) can0 123#22\n"
+
+
+def test_a_byte_order_mark_does_not_hide_the_first_frame(tmp_path):
+    path = tmp_path / "bom.log"
+    path.write_bytes(b"\xef\xbb\xbf" + GOOD.replace("\n", "\r\n").encode())
+    assert [(line, frame.data) for line, _, _, frame in iter_trace(path)] == [(1, b"\x11"), (2, b"\x22")]
+
+
+def test_a_candump_line_that_is_not_a_frame_is_refused_not_skipped(tmp_path):
+    path = tmp_path / "tail.log"
+    path.write_text("# recorded on the test track\n\n" + GOOD + "this is garbage\nDROPCOUNT: dropped 2 CAN frames on "
+                    "'can0' socket (total drops 2)\n")
+    assert problems(path) == [f"{path}:5: not a candump -L frame: 'this is garbage'"]
+
+
+def test_a_remote_frame_of_dlc_nine_is_refused(tmp_path):
+    path = tmp_path / "rtr.log"
+    path.write_text(GOOD + "(1700000000.020000) can0 123#R9\n(1700000000.030000) can0 123#R8\n")
+    assert problems(path) == [f"{path}:3: remote frame dlc 9: classic CAN's is 0..8"]
+
+
+def test_an_unknown_suffix_names_the_formats_and_spots_candump(tmp_path, capsys):
+    path = tmp_path / "drive.txt"
+    path.write_text(GOOD)
+    assert cli.main(["summarise", str(path)]) == 2
+    assert capsys.readouterr().err == (
+        f"canbench: {path}: unknown trace format '.txt': its lines read as candump -L, rename it drive.log (the "
+        "bench reads candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc .mf4 (python-can))\n")
+
+
+def test_validate_names_every_bad_frame_of_a_python_can_trace(tmp_path):
+    path = written(tmp_path / "many.blf", [*classic(), FD, ERROR])
+    assert [str(p).removeprefix(f"{path}: ").split(":")[0] for p in validate.trace_problems(path)] == [
+        "frame 3", "frame 5"]
