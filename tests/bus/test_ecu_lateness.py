@@ -80,10 +80,6 @@ def emulator_problems(run_dir, summary: dict) -> list[str]:
     return validity.emulator_problems(result)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "replay() measures each frame's own error from the end of the previous send, so the backlog a stopped "
-    "ECU sends at once counts as on time: 3 x 100 ms stopped gave own p95 0.2 ms, 66 ms against the trace; "
-    "only the time a send waited for a full bus is the bus's"))
 def test_an_ecu_stopped_3_times_100_ms_is_behind_its_trace(bus, tmp_path):
     run_dir = tmp_path / "run"
     summary, stopped = replay_with_stops(bus, run_dir, [(0.3, 0.1), (0.8, 0.1), (1.3, 0.1)])
