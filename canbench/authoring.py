@@ -5,15 +5,19 @@ statistics and proposed signal ranges and DBC cycle times, marked for review."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import statistics
+from array import array
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
-from .trace import read_trace
+from . import scenario
+from .errors import TraceError
+from .trace import STREAM_CACHE, format_line, iter_trace
 from .wire import id_hex
 
 # An id is periodic when nearly all its gaps sit near the median gap: a median alone
@@ -40,6 +44,7 @@ class IdSummary:
     jitter_ms: float | None  # median absolute deviation of the gaps
     remote: int
     steady_pct: float | None = None  # share of the gaps within STEADY_PCT of the cycle
+    interface: str | None = None  # the trace's interface (channel) it was recorded on
 
 
 @dataclass
@@ -47,44 +52,82 @@ class TraceSummary:
     path: Path
     frames: int
     span_s: float
-    interfaces: list[str]
-    ids: list[IdSummary]
-    load_pct: float
+    interfaces: list[str]  # as the trace names them (none: a format without channels)
+    ids: list[IdSummary]  # per interface and id: each interface is a bus of its own
+    load_pct: float  # the busiest interface's
     bitrate: int
+    loads: dict[str, float] = field(default_factory=dict)  # per interface, of a trace of several
+    longest_gap_s: float = 0.0  # between two frames of the trace (any ids)
+    longest_gap_line: int = 0  # the frame after it
 
     def table(self) -> str:
-        lines = [f"{self.path}: {self.frames} frames over {self.span_s:.3f} s on {', '.join(self.interfaces)}; "
-                 f"bus load {self.load_pct:.1f}% of {self.bitrate // 1000} kbit/s (worst-case stuffing)",
-                 f"  {'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  {'jitter ms':>9}  {'steady %':>8}  remote"]
+        several = len(self.interfaces) > 1
+        where = ", ".join(self.interfaces) if self.interfaces else "one interface the trace does not name"
+        load = (", ".join(f"{i} {pct:.1f}%" for i, pct in self.loads.items()) if several
+                else f"{self.load_pct:.1f}%")
+        lines = [f"{self.path}: {self.frames} frames over {self.span_s:.3f} s on {where}; "
+                 f"bus load {load} of {self.bitrate // 1000} kbit/s (worst-case stuffing); longest gap "
+                 f"{self.longest_gap_s:.3f} s (before line {self.longest_gap_line})",
+                 f"  {'interface  ' if several else ''}{'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  "
+                 f"{'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:
             cycle = f"{s.cycle_ms:9.2f}" if s.cycle_ms is not None else f"{'-':>9}"
             jitter = f"{s.jitter_ms:9.3f}" if s.jitter_ms is not None else f"{'-':>9}"
             steady = f"{s.steady_pct:8.0f}" if s.steady_pct is not None else f"{'-':>8}"
-            lines.append(f"  {s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
+            iface = f"{s.interface or '-':<9}  " if several else ""
+            lines.append(f"  {iface}{s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
         return "\n".join(lines)
 
 
+@dataclass
+class _IdState:
+    """One id's running state in one pass: its gaps (ms, 8 bytes each: a 1M-frame trace 8 MiB)."""
+    count: int = 0
+    dlc: int = 0
+    remote: int = 0
+    last_ns: int | None = None
+    gaps: array = field(default_factory=lambda: array("d"))
+
+
 def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
-    frames = read_trace(path)
-    by_id: dict[tuple, list] = defaultdict(list)
-    bits = 0
-    for tf in frames:
-        m = tf.message
-        by_id[(m.arbitration_id, m.is_extended_id)].append(m)
-        bits += frame_bits_worst(m.dlc, m.is_extended_id, m.is_remote_frame)
-    span = frames[-1].message.timestamp - frames[0].message.timestamp
+    """Per interface and id: count, dlc, cycle (median gap), jitter, steadiness; bus load per
+    interface. One pass over the trace, state per id only (not its frames)."""
+    by_id: dict[tuple[str | None, int, bool], _IdState] = defaultdict(_IdState)
+    bits: dict[str | None, int] = defaultdict(int)
+    frames = 0
+    first_ns = last_ns = None
+    gap_ns, gap_line = 0, 0
+    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE):
+        frames += 1
+        state = by_id[(iface, frame.can_id, frame.extended)]
+        if state.last_ns is not None:
+            state.gaps.append((t_ns - state.last_ns) / 1e6)
+        state.last_ns = t_ns
+        state.count += 1
+        state.dlc = max(state.dlc, frame.dlc)
+        state.remote += frame.remote
+        bits[iface] += frame_bits_worst(frame.dlc, frame.extended, frame.remote)
+        if last_ns is not None and t_ns - last_ns > gap_ns:
+            gap_ns, gap_line = t_ns - last_ns, line
+        first_ns = t_ns if first_ns is None else first_ns
+        last_ns = t_ns
+    if first_ns is None or last_ns is None:
+        raise TraceError(str(path), None, "no frames in trace")
+    span = (last_ns - first_ns) / 1e9
     ids = []
-    for (can_id, extended), msgs in sorted(by_id.items()):
-        gaps = [(b.timestamp - a.timestamp) * 1000 for a, b in zip(msgs, msgs[1:], strict=False)]
+    for (iface, can_id, extended), state in sorted(by_id.items(), key=lambda kv: (str(kv[0][0]), *kv[0][1:])):
+        gaps = state.gaps
         cycle = statistics.median(gaps) if gaps else None
         jitter = statistics.median(abs(g - cycle) for g in gaps) if gaps and cycle is not None else None
         steady = (100 * sum(abs(g - cycle) <= cycle * STEADY_PCT / 100 for g in gaps) / len(gaps)
                   if gaps and cycle else None)
-        ids.append(IdSummary(id_hex(can_id, extended), extended, len(msgs),
-                             max(m.dlc for m in msgs), cycle, jitter, sum(m.is_remote_frame for m in msgs), steady))
-    interfaces = sorted({str(tf.message.channel) for tf in frames if tf.message.channel is not None})
-    return TraceSummary(path, len(frames), span, interfaces or ["vcan0"], ids,
-                        100 * bits / bitrate / span if span > 0 else 0.0, bitrate)
+        ids.append(IdSummary(id_hex(can_id, extended), extended, state.count, state.dlc,
+                             None if cycle is None else round(cycle, 6), jitter, state.remote, steady, iface))
+    loads = {str(i): 100 * b / bitrate / span if span > 0 else 0.0 for i, b in sorted(bits.items(), key=str)
+             if i is not None}
+    total_load = 100 * sum(bits.values()) / bitrate / span if span > 0 else 0.0
+    return TraceSummary(path, frames, span, sorted(loads), ids, max(loads.values(), default=total_load), bitrate,
+                        loads, gap_ns / 1e9, gap_line)
 
 
 # ---- signals of a trace, with a DBC (canbench summarise --dbc, canbench scaffold --dbc) ----
@@ -159,18 +202,15 @@ def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
     (physical values, as cantools decodes them) and the value-table names seen. One pass, state
     per signal only."""
     from .dbc import cycle_time_ms, load_dbc, message_of
-    from .wire import Frame
     db = load_dbc(dbc_path)
     stats: dict[str, MessageStats] = {}
     unknown: dict[str, int] = defaultdict(int)
-    for tf in read_trace(path):
-        m = tf.message
-        frame = Frame(m.arbitration_id, m.dlc, bytes(m.data), m.is_extended_id, m.is_remote_frame)
+    for _, _, _, frame in iter_trace(path, cache_size=STREAM_CACHE):
         message = message_of(db, frame)
         if message is None:
             unknown[id_hex(frame.can_id, frame.extended)] += 1
             continue
-        if m.is_remote_frame:
+        if frame.remote:
             continue
         ms = stats.get(message.name)
         if ms is None:
@@ -252,12 +292,74 @@ def _signals_yaml(summary: SignalSummary) -> str:
     return "\n".join(lines) + "\n"
 
 
+DURATION_MARGIN_S = 5  # a scaffolded duration_s: 1.5 x the trace's span + this, at least 10 s
+BUS_NAME = re.compile(r"^vcan[0-9]+$")
+
+
+def _bus_number(bus: str) -> int:
+    return int(bus.removeprefix("vcan"))
+
+
+def bus_names(interfaces: list[str]) -> dict[str, str]:
+    """The scenario bus of each interface a trace records: its own name when it is one the
+    bench takes (vcanN), else the lowest vcanN no other interface has, in the interfaces' order."""
+    taken = {i for i in interfaces if BUS_NAME.match(i)}
+    free = (f"vcan{n}" for n in range(len(interfaces) + len(taken)) if f"vcan{n}" not in taken)
+    return {i: i if i in taken else next(free) for i in interfaces}
+
+
+def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> dict[str, Path]:
+    """A trace of several interfaces as one candump -L file per interface (its frames only, in
+    order, the frame on the interface's bus): what each bus's replay ECU sends. One pass."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {iface: folder / f"{trace.stem}.{iface}.log" for iface in buses}
+    outs = {iface: open(path, "w") for iface, path in paths.items()}
+    try:
+        for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE):
+            outs[str(iface)].write(format_line(t_ns, buses[str(iface)], frame) + "\n")
+    finally:
+        for out in outs.values():
+            out.close()
+    return paths
+
+
+def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
+    """cycle_time.ids from the trace: each id periodic (>= 5 frames, PERIODIC_STEADY_PCT of its
+    gaps steady) on every interface where it has 5 frames or more, with one cycle (within
+    STEADY_PCT) on all of them; and the periodic ids left out because their interfaces disagree."""
+    judged: dict[str, list[IdSummary]] = defaultdict(list)
+    for i in s.ids:
+        if i.count >= 5:
+            judged[i.ident].append(i)
+    cycles: dict[str, float] = {}
+    disagree: list[str] = []
+    for ident, on in judged.items():
+        steady = [i for i in on if i.cycle_ms and i.steady_pct is not None and i.steady_pct >= PERIODIC_STEADY_PCT]
+        if not steady:
+            continue
+        first = steady[0].cycle_ms or 0.0
+        if len(steady) < len(on) or any(abs((i.cycle_ms or 0.0) - first) > first * STEADY_PCT / 100 for i in steady):
+            disagree.append(ident)
+            continue
+        cycles[ident] = round(statistics.median(i.cycle_ms or 0.0 for i in steady), 3)
+    return cycles, disagree
+
+
 def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000, dbc: Path | None = None) -> str:
     """A scenario replaying the trace, with gates a first run should pass; YAML text.
     The bench mounts only the scenario's directory into its containers, so a trace from
     elsewhere is copied to <scenario dir>/traces/ (and a DBC to <scenario dir>/dbc/). With a
     DBC: cycle times from it (from_dbc) and proposed signal ranges, marked for review."""
     s = summarise(trace, bitrate)
+    limit = scenario.schema()["properties"]["duration_s"]["maximum"]
+    if s.span_s + DURATION_MARGIN_S > limit:
+        raise TraceError(str(trace), None, f"spans {s.span_s:.0f} s (its longest gap {s.longest_gap_s:.0f} s, before "
+                         f"line {s.longest_gap_line}): a scenario runs at most {limit} s; cut the trace")
+    buses = bus_names(s.interfaces)
+    bus_limit = scenario.schema()["properties"]["buses"]["maxItems"]
+    if len(buses) > bus_limit:
+        raise TraceError(str(trace), None, f"{len(buses)} interfaces ({', '.join(s.interfaces)}): a scenario has at "
+                         f"most {bus_limit} buses; split the trace")
     signal_summary = summarise_signals(trace, dbc) if dbc is not None else None
     home = scenario_path.resolve().parent
     if dbc is not None and not dbc.resolve().is_relative_to(home):
@@ -265,37 +367,44 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
         dbc_copy.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(dbc, dbc_copy)
         dbc = dbc_copy
-    if not trace.resolve().is_relative_to(home):
-        copy = home / "traces" / trace.name
-        copy.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(trace, copy)
-        trace = copy
-    # The replay ECU sends every frame of its trace on its one bus: a trace of several
-    # interfaces is replayed merged, and its cycles are inferred from the merged stream.
-    bus = s.interfaces[0] if len(s.interfaces) == 1 and s.interfaces[0].startswith("vcan") else "vcan0"
-    merged = (f"# The trace's interfaces {', '.join(s.interfaces)} are replayed merged onto {bus} "
-              f"(one replay ECU, one bus).\n" if len(s.interfaces) > 1 else "")
-    periodic = [i for i in s.ids if i.cycle_ms and i.count >= 5 and i.steady_pct is not None
-                and i.steady_pct >= PERIODIC_STEADY_PCT]
+    notes = ""
+    if len(buses) > 1:  # one bus per recorded interface, each replayed from its own part of the trace
+        traces = split_trace(trace, buses, home / "traces")
+        ecus = [{"name": f"recorded-{bus}", "bus": bus, "trace": os.path.relpath(traces[iface], home)}
+                for iface, bus in buses.items()]
+        notes += (f"# The trace's interfaces {', '.join(f'{i} -> {b}' for i, b in buses.items())}: one bus and one "
+                  f"replay ECU each (traces/{trace.stem}.<interface>.log, candump -L).\n")
+    else:
+        if not trace.resolve().is_relative_to(home):
+            copy = home / "traces" / trace.name
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(trace, copy)
+            trace = copy
+        ecus = [{"name": "recorded", "bus": next(iter(buses.values()), "vcan0"),
+                 "trace": os.path.relpath(trace.resolve(), home)}]
+    cycles, disagree = gated_cycles(s)
+    if disagree:
+        notes += (f"# Not gated in cycle_time.ids: {', '.join(disagree[:10])}{', ...' if len(disagree) > 10 else ''} "
+                  "(periodic on one interface, not with that cycle on another: the gate is per id on every bus).\n")
+    load = (", ".join(f"{buses[i]} {pct:.0f}%" for i, pct in s.loads.items()) if len(buses) > 1
+            else f"{s.load_pct:.0f}%")
     doc = {
         "name": name,
         "description": f"Replay of {trace.name} ({s.frames} frames, {s.span_s:.1f} s, "
-                       f"{len(s.ids)} ids, {s.load_pct:.0f}% load at {bitrate // 1000} kbit/s).",
-        "duration_s": max(10, int(s.span_s * 1.5) + 5),
-        "buses": [{"name": bus}],
-        "ecus": [{"name": "recorded", "bus": bus,
-                  "trace": os.path.relpath(trace.resolve(), home)}],
+                       f"{len({(i.ident, i.extended) for i in s.ids})} ids, {load} load at {bitrate // 1000} kbit/s).",
+        "duration_s": min(limit, max(10, int(s.span_s * 1.5) + DURATION_MARGIN_S)),
+        "buses": [{"name": bus} for bus in (sorted(set(buses.values()), key=_bus_number) or ["vcan0"])],
+        "ecus": ecus,
         "bridge": {"mode": "client", "publish_period_ms": 0},
         "expect": {
             "integrity": True, "ordering": True, "loss_budget": 0,
             "latency": {"can_to_zenoh": {"p50_ms": 5, "max_regression_pct": 50}},
-            "cycle_time": {"tolerance_pct": 20,
-                           "ids": {i.ident: round(i.cycle_ms, 3) for i in periodic if i.cycle_ms is not None}},
+            "cycle_time": {"tolerance_pct": 20, "ids": cycles},
         },
     }
     header = (f"# Scaffolded by `canbench scaffold` from {trace.name}: review the gates, then run\n"
               f"#   make test SCENARIO={scenario_path}\n"
-              f"{merged}"
+              f"{notes}"
               f"# Periodic ids (cycle inferred from the trace, >= {PERIODIC_STEADY_PCT}% of the gaps within "
               f"+-{STEADY_PCT}% of it) are gated in cycle_time.ids.\n")
     if dbc is not None and signal_summary is not None:

@@ -36,6 +36,7 @@ TEXT_READERS = {".asc": can.ASCReader, ".trc": can.TRCReader, ".csv": can.CSVRea
 BINARY_SUFFIXES = (".blf", ".mf4")  # python-can's LogReader; "line" = the frame's number
 FORMATS_SAID = "candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc .mf4 (python-can)"
 FRAME_CACHE = 1 << 20  # distinct frame texts kept for sharing (then it starts again: only memory is at stake)
+STREAM_CACHE = 1 << 14  # the same for a pass that keeps no frames (summarise, validate): ~4 MiB
 
 
 ERROR_FRAME = "an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames)"
@@ -272,12 +273,14 @@ def _stamp_ns(timestamp: float) -> int:
 
 
 def iter_trace(path: str | Path, interfaces: set[str] | None = None,
-               on_problem: Callable[[TraceError], None] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
+               on_problem: Callable[[TraceError], None] | None = None,
+               cache_size: int = FRAME_CACHE) -> Iterator[tuple[int, int, str | None, Frame]]:
     """(line, t_ns, interface or None, frame) of every frame of a trace in any format the bench
     reads, checked alike: CAN 2.0 data and remote frames only, ids in range, dlc 0..8, time never
     going back, interfaces among `interfaces` (None: any). line: the file's line (text formats),
     the frame's number (.blf, .mf4: said as 'frame N'). A problem raises TraceError, or with
-    on_problem is handed to it and the frame left out (validate: every problem at once)."""
+    on_problem is handed to it and the frame left out (validate: every problem at once).
+    cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames)."""
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
@@ -292,7 +295,7 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
 
     last_ns = None
     if path.suffix.lower() in CANDUMP_SUFFIXES:
-        for lineno, t_ns, iface, frame in iter_candump(path, strict=True, on_error=on_problem):
+        for lineno, t_ns, iface, frame in iter_candump(path, strict=True, on_error=on_problem, cache_size=cache_size):
             if interfaces is not None and iface not in interfaces:
                 fail(lineno, f"interface '{iface}' is not one of {sorted(interfaces)} (remap it in the scenario)")
                 continue

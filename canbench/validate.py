@@ -8,7 +8,7 @@ from pathlib import Path
 
 from . import scenario
 from .errors import InputError, ScenarioError, TraceError
-from .trace import MAX_TRACE_FRAMES, iter_trace
+from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, iter_trace
 
 MAX_PER_TRACE = 20  # a trace of FD frames would give one line per frame: the rest are counted
 
@@ -27,7 +27,7 @@ def trace_problems(path: Path) -> list[InputError]:
             more += 1
 
     try:
-        for _ in iter_trace(path, None, problem):
+        for _ in iter_trace(path, None, problem, STREAM_CACHE):
             frames += 1
     except TraceError as error:
         found.append(error)

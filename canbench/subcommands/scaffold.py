@@ -6,19 +6,30 @@ import argparse
 from pathlib import Path
 
 from .. import authoring, scenario
-from ..errors import InputError
+from ..errors import InputError, ScenarioError
 
 
 def cmd_scaffold(args) -> int:
     out = args.out or Path("scenarios") / f"{args.name}.yaml"
     if out.exists() and not args.force:
         raise InputError(str(out), None, "exists already (--force to overwrite)")
-    text = authoring.scaffold(args.trace, args.name, out, args.bitrate, args.dbc)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
-    scenario.load(out)  # what we write must be valid
+    text = authoring.scaffold(args.trace, args.name, out, args.bitrate, args.dbc)
+    draft = out.with_name(f".{out.name}.draft")  # next to it: its paths are relative to the scenario
+    draft.write_text(text)
+    try:
+        scenario.load(draft)  # what we write must be valid: an invalid scenario is not left behind
+    except ScenarioError as e:
+        draft.unlink()
+        raise InputError(str(out), None, f"not written: the scaffold does not validate: {e}") from None
+    draft.replace(out)
+    for note in (line for line in text.splitlines() if line.startswith(NOTES)):
+        print(note.removeprefix("# "))
     print(f"{out}: written; review its gates, then: make test SCENARIO={out}")
     return 0
+
+
+NOTES = ("# The trace's interfaces", "# Not gated in cycle_time.ids")  # header lines said on the terminal too
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from canbench import authoring, cli, scenario, tracegen
+from canbench.trace import read_trace
 
 pytestmark = pytest.mark.unit
 
@@ -34,23 +35,33 @@ def test_scaffold_copies_the_trace_and_validates(tmp_path):
     assert cli.main(["scaffold", str(trace), "--name", "drive", "--out", str(out)]) == 2  # no silent overwrite
 
 
-def test_scaffold_merges_interfaces_and_gates_only_steady_cycles(tmp_path):
-    # id 100 every 10 ms on each of two interfaces, 1 ms apart: merged, its gaps are 1, 9, 1, 9 ms
-    # (median 1 ms, median deviation 0): no cycle to gate; id 200 every 20 ms on vcan0 is periodic
+def test_scaffold_gives_each_interface_its_bus_and_gates_only_steady_cycles(tmp_path, capsys):
+    # id 100 every 10 ms on each of two interfaces, 1 ms apart: merged, its gaps would be 1, 9, 1, 9 ms
+    # (median 1 ms); each interface is a bus of its own, where it is periodic; id 200 every 20 ms on
+    # can0 is periodic; id 300 every 10 ms on can0 and every 30 ms on can1: one gate cannot hold both
     trace = tmp_path / "two.log"
     lines = []
     for i in range(100):
         t = 1_700_000_000 + i * 0.01
-        lines += [f"({t:.6f}) vcan0 100#{i:02X}", f"({t + 0.001:.6f}) vcan1 100#{i:02X}"]
+        lines += [f"({t:.6f}) can0 100#{i:02X}", f"({t + 0.001:.6f}) can1 100#{i:02X}",
+                  f"({t + 0.002:.6f}) can0 300#00"]
         if i % 2 == 0:
-            lines.append(f"({t + 0.005:.6f}) vcan0 200#00")
+            lines.append(f"({t + 0.005:.6f}) can0 200#00")
+        if i % 3 == 0:
+            lines.append(f"({t + 0.006:.6f}) can1 300#00")
     trace.write_text("\n".join(lines) + "\n")
     out = tmp_path / "two.yaml"
     assert cli.main(["scaffold", str(trace), "--name", "two", "--out", str(out)]) == 0
     sc = scenario.load(out)
-    assert sc.bus_names == ["vcan0"] and sc.ecus[0].bus == "vcan0"  # no bus left without traffic
-    assert sc.expect["cycle_time"]["ids"] == {"200": pytest.approx(20.0)}
-    assert "vcan0, vcan1 are replayed merged onto vcan0" in out.read_text()
+    assert sc.bus_names == ["vcan0", "vcan1"] and [(e.name, e.bus) for e in sc.ecus] == [
+        ("recorded-vcan0", "vcan0"), ("recorded-vcan1", "vcan1")]
+    assert [len(read_trace(e.trace)) for e in sc.ecus] == [250, 134]
+    assert {str(m.channel) for m in (tf.message for tf in read_trace(sc.ecus[1].trace))} == {"vcan1"}
+    assert sc.expect["cycle_time"]["ids"] == {"100": pytest.approx(10.0), "200": pytest.approx(20.0)}
+    said = capsys.readouterr().out
+    assert "The trace's interfaces can0 -> vcan0, can1 -> vcan1: one bus and one replay ECU each" in said
+    assert "Not gated in cycle_time.ids: 300 (periodic on one interface" in said
+    assert "can0 -> vcan0, can1 -> vcan1" in out.read_text()
 
 
 def metrics(p50=0.5, lost=0, verdict="passed") -> dict:
