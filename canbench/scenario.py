@@ -4,6 +4,7 @@ and report problems as file:line: field: message."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,7 @@ import yaml
 
 from . import rxqos
 from .errors import ScenarioError
+from .wire import EXT_ID_MAX
 
 SCHEMA_PATH = Path(__file__).with_name("scenario.schema.json")
 
@@ -22,6 +24,14 @@ class _LineLoader(yaml.SafeLoader):
 
 
 def _construct_mapping(loader: _LineLoader, node: yaml.MappingNode) -> dict:
+    first: dict[Any, int] = {}
+    for key_node, _ in node.value:  # before merge keys (<<) are flattened in: an override is no duplicate
+        if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
+            if key_node.value in first:  # YAML would keep the last silently: a whole `expect:` lost
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key '{key_node.value}' (first at line {first[key_node.value]})",
+                    key_node.start_mark)
+            first[key_node.value] = key_node.start_mark.line + 1
     mapping = loader.construct_mapping(node, deep=True)
     lines = {key_node.value: key_node.start_mark.line + 1 for key_node, _ in node.value
              if isinstance(key_node, yaml.ScalarNode)}
@@ -47,6 +57,11 @@ class _LocatedList(list):
 
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
+
+
+def line_of(doc: Any, path: list) -> int:
+    """The line of a key path of a parsed scenario (parse()), for problems found outside load()."""
+    return _line_of(doc, path)
 
 
 def _line_of(doc: Any, path: list) -> int:
@@ -175,7 +190,10 @@ def parse(path: str | Path) -> Any:
         doc = yaml.load(text, Loader=_LineLoader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
-        raise ScenarioError(str(path), mark.line + 1 if mark else None, f"not valid YAML: {e}") from None
+        # one line: the mark says where, as every problem is said
+        said = "; ".join(part for part in (getattr(e, "context", None), getattr(e, "problem", None)) if part)
+        raise ScenarioError(str(path), mark.line + 1 if mark else None,
+                            f"not valid YAML: {said or str(e).splitlines()[0]}") from None
     if not isinstance(doc, dict):
         raise ScenarioError(str(path), 1, "a scenario is a mapping of keys (name, ecus, expect, ...)")
     return doc
@@ -192,8 +210,20 @@ def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
             line_path += [k for k in error.instance if k not in allowed][:1]
         if "propertyNames" in error.schema_path and isinstance(error.instance, str):
             line_path.append(error.instance)  # the key whose name is wrong
-        problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}"))
+        hint = ""
+        if error.validator == "type" and isinstance(error.instance, str) and EXPONENT_ONLY.match(error.instance) \
+                and "number" in (error.validator_value if isinstance(error.validator_value, list)
+                                 else [error.validator_value]):
+            mantissa, exponent = re.split("[eE]", error.instance)
+            hint = (f" (YAML reads {error.instance} as text: write {mantissa}.0e"
+                    f"{exponent if exponent[0] in '+-' else '+' + exponent})")
+        problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}{hint}"))
     return problems
+
+
+# what YAML 1.1 (PyYAML) takes for a string, a user for a number: 1e3, -2E-5 (no dot). Not resolved as
+# numbers: an unquoted hex id such as 1E3 would become 1000.0
+EXPONENT_ONLY = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
 
 
 def problems_error(problems: list[ScenarioError]) -> ScenarioError:
@@ -259,6 +289,9 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
                 if key not in spec:
                     fail(["ecus", i], f"role {role} needs {key}")
             remap = {int(k, 16): int(v, 16) for k, v in spec.get("id_remap", {}).items()}
+            for key, target in spec.get("id_remap", {}).items():
+                if int(target, 16) > EXT_ID_MAX:  # the schema's 8 hex digits hold more than 29 bits
+                    fail(["ecus", i, "id_remap", key], f"{target} is above 1FFFFFFF, the largest CAN id")
             ecus.append(Ecu(spec["name"], spec["bus"], role, trace, spec.get("speed", 1.0), spec.get("loops", 1),
                             spec.get("start_offset_s", 0.0), remap,
                             frozenset(int(x, 16) for x in spec.get("echo_ids", [])),

@@ -9,6 +9,7 @@ from pathlib import Path
 from . import scenario
 from .errors import InputError, ScenarioError, TraceError
 from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, iter_trace
+from .wire import EXT_ID_MAX, STD_ID_MAX
 
 MAX_PER_TRACE = 20  # a trace of FD frames would give one line per frame: the rest are counted
 
@@ -58,6 +59,37 @@ def named_traces(path: Path) -> list[Path]:
     return traces
 
 
+def remap_problems(path: Path) -> list[InputError]:
+    """An id_remap that gives an 11-bit frame of its trace an id above 7FF (the frame keeps its
+    format): one problem per remapped id, at the remap's line, naming the trace line."""
+    try:
+        doc = scenario.parse(path)
+    except ScenarioError:
+        return []
+    found: list[InputError] = []
+    for i, spec in enumerate(doc.get("ecus") or []):
+        remap = spec.get("id_remap") if isinstance(spec, dict) else None
+        trace = spec.get("trace") if isinstance(spec, dict) else None
+        if not isinstance(remap, dict) or not isinstance(trace, str) or not (path.parent / trace).is_file():
+            continue
+        try:
+            wide = {int(k, 16): (k, v) for k, v in remap.items() if STD_ID_MAX < int(v, 16) <= EXT_ID_MAX}
+        except (TypeError, ValueError):
+            continue  # the schema's problem
+        seen: set[int] = set()
+        try:
+            for line, _, _, frame in iter_trace(path.parent / trace, None, lambda e: None, STREAM_CACHE):
+                if not frame.extended and frame.can_id in wide and frame.can_id not in seen:
+                    seen.add(frame.can_id)
+                    key, target = wide[frame.can_id]
+                    found.append(ScenarioError(str(path), scenario.line_of(doc, ["ecus", i, "id_remap", key]),
+                                               f"ecus.{i}.id_remap.{key}: the 11-bit frames of {key} ({trace}:{line}) "
+                                               f"would get id {target}, above 7FF"))
+        except TraceError:
+            continue  # trace_problems says it
+    return found
+
+
 def problems(path: Path) -> list[InputError]:
     """Every problem of one scenario file and its traces, scenario first, each in line order."""
     found: list[InputError] = []
@@ -65,6 +97,7 @@ def problems(path: Path) -> list[InputError]:
         scenario.load(path)
     except ScenarioError as e:
         found += getattr(e, "problems", [e])
+    found += remap_problems(path)
     for trace in named_traces(path):
         found += trace_problems(trace)
     return found
