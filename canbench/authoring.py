@@ -17,7 +17,7 @@ import yaml
 
 from . import scenario
 from .errors import TraceError
-from .trace import STREAM_CACHE, format_line, iter_trace
+from .trace import STREAM_CACHE, format_line, iter_trace, where_in
 from .wire import id_hex
 
 # An id is periodic when nearly all its gaps sit near the median gap: a median alone
@@ -67,7 +67,7 @@ class TraceSummary:
                 else f"{self.load_pct:.1f}%")
         lines = [f"{self.path}: {self.frames} frames over {self.span_s:.3f} s on {where}; "
                  f"bus load {load} of {self.bitrate // 1000} kbit/s (worst-case stuffing); longest gap "
-                 f"{self.longest_gap_s:.3f} s (before line {self.longest_gap_line})",
+                 f"{self.longest_gap_s:.3f} s (before {where_in(self.path, self.longest_gap_line)})",
                  f"  {'interface  ' if several else ''}{'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  "
                  f"{'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:
@@ -354,7 +354,7 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
     limit = scenario.schema()["properties"]["duration_s"]["maximum"]
     if s.span_s + DURATION_MARGIN_S > limit:
         raise TraceError(str(trace), None, f"spans {s.span_s:.0f} s (its longest gap {s.longest_gap_s:.0f} s, before "
-                         f"line {s.longest_gap_line}): a scenario runs at most {limit} s; cut the trace")
+                         f"{where_in(trace, s.longest_gap_line)}): a scenario runs at most {limit} s; cut the trace")
     buses = bus_names(s.interfaces)
     bus_limit = scenario.schema()["properties"]["buses"]["maxItems"]
     if len(buses) > bus_limit:

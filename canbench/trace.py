@@ -226,7 +226,14 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         raise TraceError(str(path), None, f"unknown trace format '{path.suffix}'{hint} (the bench reads "
                          f"{FORMATS_SAID})")
     try:
-        yield from enumerate(can.LogReader(str(path)), 1)
+        reader = can.LogReader(str(path))
+        recorded = getattr(reader, "file_size", 0) if suffix == ".blf" else 0
+        if recorded > path.stat().st_size:  # python-can reads a cut BLF to its cut, silently
+            fail(None, f"truncated: its header says {recorded} bytes, the file has {path.stat().st_size} "
+                       "(a recording cut short, or an incomplete copy)")
+        yield from enumerate(reader, 1)
+    except TraceError:
+        raise
     except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
         raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
 
@@ -234,7 +241,7 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
 def _reader_problems(log: _ReaderLog, fail: Callable[[int | None, str], None]) -> None:
     for line, text, record in log.records:
         unsupported = UNSUPPORTED_TYPE.match(record.getMessage())
-        if record.levelno >= logging.WARNING:
+        if record.levelno >= logging.WARNING and text:  # not the end of a file without frames
             fail(line, f"python-can cannot read it: {text!r}")
         elif unsupported and unsupported[1] in TRC_ERROR_FRAMES:
             fail(line, ERROR_FRAME)
@@ -265,6 +272,16 @@ def _frame_of_message(msg: can.Message) -> Frame:
     return Frame(can_id, len(data), data, extended)
 
 
+def numbered(path: Path) -> bool:
+    """Whether a trace's frames are numbered (binary formats) rather than at lines of the file."""
+    return path.suffix.lower() in BINARY_SUFFIXES or path.suffix.lower() == ".gz"
+
+
+def where_in(path: Path, line: int) -> str:
+    """'line N' or 'frame N' of a trace, as iter_trace numbers its frames."""
+    return f"{'frame' if numbered(path) else 'line'} {line}"
+
+
 def _stamp_ns(timestamp: float) -> int:
     """A python-can float stamp in integer ns, rounded to the microsecond: at today's epoch a float
     is 0.24 us coarse and python-can's sums (start time + offset) err by as much (a TRC's 10.000 ms
@@ -284,10 +301,10 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
-    numbered = path.suffix.lower() in BINARY_SUFFIXES or path.suffix.lower() == ".gz"
+    by_number = numbered(path)
 
     def fail(line: int | None, message: str) -> None:
-        error = (TraceError(str(path), None, f"frame {line}: {message}") if numbered and line
+        error = (TraceError(str(path), None, f"frame {line}: {message}") if by_number and line
                  else TraceError(str(path), line, message))
         if on_problem is None:
             raise error
@@ -316,7 +333,7 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
             continue
         t_ns = _stamp_ns(msg.timestamp)
         if last_ns is not None and t_ns < last_ns:
-            fail(line, f"timestamp earlier than the {'frame' if numbered else 'line'} before")
+            fail(line, f"timestamp earlier than the {'frame' if by_number else 'line'} before")
         last_ns = t_ns
         yield line, t_ns, channel, frame
 

@@ -142,3 +142,22 @@ def test_validate_names_every_bad_frame_of_a_python_can_trace(tmp_path):
     path = written(tmp_path / "many.blf", [*classic(), FD, ERROR])
     assert [str(p).removeprefix(f"{path}: ").split(":")[0] for p in validate.trace_problems(path)] == [
         "frame 3", "frame 5"]
+
+
+def test_a_cut_blf_is_refused_not_read_to_its_cut(tmp_path):
+    whole = written(tmp_path / "whole.blf", [can.Message(timestamp=T0 + k * 0.001, arbitration_id=k % 64,
+                                                         is_extended_id=False, data=k.to_bytes(8, "little"), channel=0)
+                                             for k in range(100_000)])
+    cut = tmp_path / "cut.blf"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    assert len(read_trace(whole)) == 100_000
+    with pytest.raises(TraceError) as err:
+        read_trace(cut)
+    assert str(err.value) == (f"{cut}: truncated: its header says {whole.stat().st_size} bytes, the file has "
+                              f"{cut.stat().st_size} (a recording cut short, or an incomplete copy)")
+
+
+def test_an_empty_trc_has_no_frames(tmp_path):
+    path = tmp_path / "empty.trc"
+    path.write_text("")
+    assert [str(p) for p in validate.trace_problems(path)] == [f"{path}: no frames in trace"]
