@@ -175,10 +175,12 @@ class SignalSummary:
     dbc: Path
     messages: list[MessageStats]
     unknown_ids: dict[str, int]  # frames of ids the DBC lacks
+    interfaces: list[str] = field(default_factory=list)  # the trace's: statistics over all of them together
 
     def table(self) -> str:
-        lines = [f"{self.path}: signals decoded with {self.dbc} (cantools): {len(self.messages)} messages of the DBC "
-                 f"seen, {sum(self.unknown_ids.values())} frames of {len(self.unknown_ids)} ids it lacks"
+        together = f" (over {', '.join(self.interfaces)} together)" if len(self.interfaces) > 1 else ""
+        lines = [f"{self.path}: signals decoded with {self.dbc} (cantools){together}: {len(self.messages)} messages "
+                 f"of the DBC seen, {sum(self.unknown_ids.values())} frames of {len(self.unknown_ids)} ids it lacks"
                  + (f" ({', '.join(sorted(self.unknown_ids)[:10])}{', ...' if len(self.unknown_ids) > 10 else ''})"
                     if self.unknown_ids else "")]
         for m in self.messages:
@@ -205,7 +207,10 @@ def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
     db = load_dbc(dbc_path)
     stats: dict[str, MessageStats] = {}
     unknown: dict[str, int] = defaultdict(int)
-    for _, _, _, frame in iter_trace(path, cache_size=STREAM_CACHE):
+    interfaces: set[str] = set()
+    for _, _, iface, frame in iter_trace(path, cache_size=STREAM_CACHE):
+        if iface is not None:
+            interfaces.add(iface)
         message = message_of(db, frame)
         if message is None:
             unknown[id_hex(frame.can_id, frame.extended)] += 1
@@ -232,7 +237,8 @@ def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
                     raw = signals[name].conversion.scaled_to_raw(value)
                     choice = signals[name].choices.get(raw)
                 ms.signals[name].add(float(value), None if choice is None else str(choice))
-    return SignalSummary(path, dbc_path, sorted(stats.values(), key=lambda x: x.ident), dict(unknown))
+    return SignalSummary(path, dbc_path, sorted(stats.values(), key=lambda x: x.ident), dict(unknown),
+                         sorted(interfaces))
 
 
 def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list], str]]:

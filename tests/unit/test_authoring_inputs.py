@@ -4,6 +4,7 @@ scenario that would not validate is never left behind."""
 from __future__ import annotations
 
 import tracemalloc
+from pathlib import Path
 
 import pytest
 
@@ -74,3 +75,12 @@ def test_summarise_keeps_no_frames(tmp_path):
         tracemalloc.stop()
     assert s.frames == 50_000 and s.ids[0].cycle_ms == pytest.approx(8.0, abs=1e-3)
     assert peak < 8 * 2**20, f"{peak / 2**20:.1f} MiB"
+
+
+def test_signal_statistics_say_they_are_over_every_interface(tmp_path):
+    trace = tmp_path / "two.log"  # MM5_10_TX1 (0x070) of cantools' abs.dbc on can0 and can1
+    trace.write_text("(1700000000.000000) can0 070#0000000000000000\n(1700000000.000500) can1 070#0000000000000000\n")
+    dbc = Path(__file__).resolve().parents[1] / "data" / "dbc" / "cantools" / "abs.dbc"
+    table = authoring.summarise_signals(trace, dbc).table()
+    assert table.startswith(f"{trace}: signals decoded with {dbc} (cantools) (over can0, can1 together): 1 messages")
+    assert "MM5_10_TX1 (070): 2 frames" in table
