@@ -3,16 +3,26 @@ with a DBC, cycle times from it (from_dbc) and proposed signal ranges, marked fo
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
 from .. import authoring, scenario
 from ..errors import InputError, ScenarioError
+from .summarise import bitrate
 
 
 def cmd_scaffold(args) -> int:
     out = args.out or Path("scenarios") / f"{args.name}.yaml"
+    if not NAME.match(args.name):
+        raise InputError("--name", None, f"{args.name!r}: a scenario's name is lowercase letters, digits, - and _ "
+                         "(it names the test and the report)")
+    if out.is_dir():
+        raise InputError(str(out), None, "is a folder: --out names the scenario file (e.g. scenarios/my-drive.yaml)")
     if out.exists() and not args.force:
         raise InputError(str(out), None, "exists already (--force to overwrite)")
+    for what, given in (("trace", args.trace), ("DBC", args.dbc)):
+        if given is not None and out.exists() and given.exists() and out.samefile(given):
+            raise InputError(str(out), None, f"is the {what} itself: --out names the scenario file to write")
     out.parent.mkdir(parents=True, exist_ok=True)
     text = authoring.scaffold(args.trace, args.name, out, args.bitrate, args.dbc)
     draft = out.with_name(f".{out.name}.draft")  # next to it: its paths are relative to the scenario
@@ -21,7 +31,8 @@ def cmd_scaffold(args) -> int:
         scenario.load(draft)  # what we write must be valid: an invalid scenario is not left behind
     except ScenarioError as e:
         draft.unlink()
-        raise InputError(str(out), None, f"not written: the scaffold does not validate: {e}") from None
+        said = str(e).replace(str(draft), str(out))
+        raise InputError(str(out), None, f"not written: the scaffold does not validate: {said}") from None
     draft.replace(out)
     for note in (line for line in text.splitlines() if line.startswith(NOTES)):
         print(note.removeprefix("# "))
@@ -29,6 +40,7 @@ def cmd_scaffold(args) -> int:
     return 0
 
 
+NAME = re.compile(scenario.schema()["properties"]["name"]["pattern"])
 NOTES = ("# The trace's interfaces", "# Not gated in cycle_time.ids")  # header lines said on the terminal too
 
 
@@ -37,7 +49,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("trace", type=Path)
     p.add_argument("--name", required=True, help="scenario name (lowercase, digits, - and _)")
     p.add_argument("--out", type=Path, help="default scenarios/<name>.yaml")
-    p.add_argument("--bitrate", type=int, default=500_000)
+    p.add_argument("--bitrate", type=bitrate, default=500_000, help="for the bus load (default 500000)")
     p.add_argument("--dbc", type=Path, help="propose signal ranges and DBC cycle times from this DBC (review them)")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_scaffold)

@@ -16,9 +16,20 @@ def cmd_summarise(args) -> int:
     return 0
 
 
+def bitrate(text: str) -> int:
+    """--bitrate: bit/s above 0 (the bus load is bits over bitrate)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the bus's bit/s, a whole number above 0 (e.g. 500000)")
+    return value
+
+
 def add_subparser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("summarise", aliases=["summarize"], help="per-id summary of traces")
     p.add_argument("traces", nargs="+", type=Path)
-    p.add_argument("--bitrate", type=int, default=500_000, help="for the bus load (default 500000)")
+    p.add_argument("--bitrate", type=bitrate, default=500_000, help="for the bus load (default 500000)")
     p.add_argument("--dbc", type=Path, help="also per-message signal statistics, decoded with this DBC (cantools)")
     p.set_defaults(func=cmd_summarise)

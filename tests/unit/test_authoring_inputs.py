@@ -84,3 +84,44 @@ def test_signal_statistics_say_they_are_over_every_interface(tmp_path):
     table = authoring.summarise_signals(trace, dbc).table()
     assert table.startswith(f"{trace}: signals decoded with {dbc} (cantools) (over can0, can1 together): 1 messages")
     assert "MM5_10_TX1 (070): 2 frames" in table
+
+
+GOOD = "(1700000000.000000) can0 123#11\n(1700000000.010000) can0 123#22\n"
+
+
+@pytest.mark.parametrize("dbc_text,said", [
+    ("garbage\n", "cannot load it as a DBC (cantools): DBC: \"Invalid syntax at line 1, column 1: \">>!<<garbage\"\""),
+    (None, "no such DBC file"),
+])
+@pytest.mark.parametrize("command", ["summarise", "scaffold"])
+def test_a_dbc_cantools_cannot_read_is_one_line_and_exit_code_2(tmp_path, capsys, dbc_text, said, command):
+    trace, dbc = tmp_path / "t.log", tmp_path / "car.dbc"
+    trace.write_text(GOOD)
+    if dbc_text is not None:
+        dbc.write_text(dbc_text)
+    extra = ["--name", "x", "--out", str(tmp_path / "sc" / "x.yaml")] if command == "scaffold" else []
+    assert cli.main([command, str(trace), "--dbc", str(dbc), *extra]) == 2
+    assert capsys.readouterr().err == f"canbench: {dbc}: {said}\n"
+    assert not (tmp_path / "sc" / "x.yaml").exists()
+
+
+@pytest.mark.parametrize("command", ["summarise", "scaffold"])
+def test_a_bitrate_of_zero_is_refused_by_the_command_line(tmp_path, command):
+    trace = tmp_path / "t.log"
+    trace.write_text(GOOD)
+    extra = ["--name", "x", "--out", str(tmp_path / "x.yaml")] if command == "scaffold" else []
+    with pytest.raises(SystemExit) as exit_:
+        cli.main([command, str(trace), "--bitrate", "0", *extra])
+    assert exit_.value.code == 2
+
+
+def test_scaffold_does_not_write_over_its_trace_or_take_a_bad_name(tmp_path, capsys):
+    trace = tmp_path / "t.log"
+    trace.write_text(GOOD)
+    assert cli.main(["scaffold", str(trace), "--name", "x", "--out", str(trace), "--force"]) == 2
+    said = f"canbench: {trace}: is the trace itself: --out names the scenario file to write\n"
+    assert capsys.readouterr().err == said
+    assert trace.read_text() == GOOD
+    assert cli.main(["scaffold", str(trace), "--name", "My Drive", "--out", str(tmp_path / "sc" / "x.yaml")]) == 2
+    assert "--name: 'My Drive': a scenario's name is lowercase letters, digits, - and _" in capsys.readouterr().err
+    assert not (tmp_path / "sc").exists()
