@@ -302,6 +302,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
     by_number = numbered(path)
+    # python-can numbers ASC and BLF channels from 0; the file, CANalyzer and CANoe from 1: said as the file has them
+    zero_based = path.suffix.lower() in (".asc", ".blf")
 
     def fail(line: int | None, message: str) -> None:
         error = (TraceError(str(path), None, f"frame {line}: {message}") if by_number and line
@@ -327,7 +329,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         except ValueError as e:
             fail(line, str(e))
             continue
-        channel = None if msg.channel is None else str(msg.channel)
+        channel = (None if msg.channel is None else
+                   str(msg.channel + 1 if zero_based and isinstance(msg.channel, int) else msg.channel))
         if interfaces is not None and channel is not None and channel not in interfaces:
             fail(line, f"interface '{channel}' is not one of {sorted(interfaces)} (remap it in the scenario)")
             continue

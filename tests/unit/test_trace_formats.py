@@ -161,3 +161,13 @@ def test_an_empty_trc_has_no_frames(tmp_path):
     path = tmp_path / "empty.trc"
     path.write_text("")
     assert [str(p) for p in validate.trace_problems(path)] == [f"{path}: no frames in trace"]
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".blf"])
+def test_channels_are_numbered_as_the_file_numbers_them(tmp_path, suffix):
+    # python-can reads the file's channel 1 as 0; CANalyzer, CANoe and the file itself say 1
+    path = written(tmp_path / f"two{suffix}", [*classic(), *(can.Message(timestamp=m.timestamp + 0.001,
+                   arbitration_id=m.arbitration_id, is_extended_id=False, data=m.data, channel=1) for m in classic())])
+    if suffix == ".asc":
+        assert {line.split()[1] for line in path.read_text().splitlines() if " 123 " in line} == {"1", "2"}
+    assert sorted({iface for _, _, iface, _ in iter_trace(path)}) == ["1", "2"]
