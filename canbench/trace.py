@@ -192,6 +192,9 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
     """(line, message) of a trace python-can reads: text formats with the file's line, binary ones
     with the frame's number; what its readers skip with only a log line is a problem here."""
     suffix = path.suffix.lower()
+    hint = ""
+    if suffix == ".trc" and _trc_version(path) is None:
+        hint = " (the file has no ;$FILEVERSION line: read as TRC 1.0)"
     if suffix in TEXT_READERS:
         counter = _LineCounter(open(path, encoding="utf-8-sig", errors="replace"))
         log = _ReaderLog(counter)
@@ -208,7 +211,7 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         except TraceError:
             raise
         except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad lines
-            raise TraceError(str(path), counter.line or None, f"python-can cannot read it: {e}") from None
+            raise TraceError(str(path), counter.line or None, f"python-can cannot read it: {e}{hint}") from None
         finally:
             trc_log.removeHandler(log)
             trc_log.setLevel(level)
@@ -236,6 +239,25 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         raise
     except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
         raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
+
+
+TRC_VERSIONS = ("1.0", "1.1", "1.3", "2.0", "2.1")  # what python-can's TRC reader reads (no FILEVERSION: 1.0)
+
+
+def _trc_version(path: Path) -> str | None:
+    """A TRC file's version (None: its header has none). One python-can does not read is refused
+    at its header line (it would read the lines in another version's columns)."""
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
+        for lineno, text in enumerate(f, 1):
+            if not text.startswith(";"):
+                return None
+            if text.startswith(";$FILEVERSION="):
+                version = text.strip().split("=", 1)[1]
+                if version not in TRC_VERSIONS:
+                    raise TraceError(str(path), lineno, f"TRC file version {version}: python-can reads "
+                                     f"{', '.join(TRC_VERSIONS)} (PCAN-View saves 2.1)")
+                return version
+    return None
 
 
 def _reader_problems(log: _ReaderLog, fail: Callable[[int | None, str], None]) -> None:

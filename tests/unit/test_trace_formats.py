@@ -171,3 +171,15 @@ def test_channels_are_numbered_as_the_file_numbers_them(tmp_path, suffix):
     if suffix == ".asc":
         assert {line.split()[1] for line in path.read_text().splitlines() if " 123 " in line} == {"1", "2"}
     assert sorted({iface for _, _, iface, _ in iter_trace(path)}) == ["1", "2"]
+
+
+def test_a_trc_version_python_can_does_not_read_is_refused_at_its_header(tmp_path):
+    path = tmp_path / "v12.trc"
+    path.write_text(";$FILEVERSION=1.2\n;$STARTTIME=45244.9\n     1)         0.0  1    Rx         0123  8  00 01\n")
+    with pytest.raises(TraceError) as err:
+        read_trace(path)
+    assert str(err.value) == (f"{path}:1: TRC file version 1.2: python-can reads 1.0, 1.1, 1.3, 2.0, 2.1 "
+                              "(PCAN-View saves 2.1)")
+    path.write_text("     1)         0.0  1    Rx         0123  8  00 01\n")  # no version: read as 1.0, which fails
+    with pytest.raises(TraceError, match=r"v12.trc:1: python-can cannot read it: .* \(the file has no ;\$FILEVERSION"):
+        read_trace(path)
