@@ -324,19 +324,24 @@ def bus_names(interfaces: list[str]) -> dict[str, str]:
     return {i: i if i in taken else next(free) for i in interfaces}
 
 
-def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> dict[str, Path]:
+def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[str, Path], dict[str, float]]:
     """A trace of several interfaces as one candump -L file per interface (its frames only, in
-    order, the frame on the interface's bus): what each bus's replay ECU sends. One pass."""
+    order, the frame on the interface's bus): what each bus's replay ECU sends; and each one's
+    first frame after the trace's first (s): its start_offset_s, so the buses keep their
+    recorded timing to one another (a replay starts at its own first frame). One pass."""
     folder.mkdir(parents=True, exist_ok=True)
     paths = {iface: folder / f"{trace.stem}.{iface}.log" for iface in buses}
     outs = {iface: open(path, "w") for iface, path in paths.items()}
+    first: dict[str, int] = {}
     try:
         for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE):
+            first.setdefault(str(iface), t_ns)
             outs[str(iface)].write(format_line(t_ns, buses[str(iface)], frame) + "\n")
     finally:
         for out in outs.values():
             out.close()
-    return paths
+    start = min(first.values())
+    return paths, {iface: round((t_ns - start) / 1e9, 6) for iface, t_ns in first.items()}
 
 
 def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
@@ -385,9 +390,9 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
         dbc = dbc_copy
     notes = ""
     if len(buses) > 1:  # one bus per recorded interface, each replayed from its own part of the trace
-        traces = split_trace(trace, buses, home / "traces")
+        traces, offsets = split_trace(trace, buses, home / "traces")
         ecus = [{"name": f"recorded-{bus}", "bus": bus, "trace": os.path.relpath(traces[iface], home)}
-                for iface, bus in buses.items()]
+                | ({"start_offset_s": offsets[iface]} if offsets[iface] else {}) for iface, bus in buses.items()]
         notes += (f"# The trace's interfaces {', '.join(f'{i} -> {b}' for i, b in buses.items())}: one bus and one "
                   f"replay ECU each (traces/{trace.stem}.<interface>.log, candump -L).\n")
     else:

@@ -56,6 +56,7 @@ def test_scaffold_gives_each_interface_its_bus_and_gates_only_steady_cycles(tmp_
     assert sc.bus_names == ["vcan0", "vcan1"] and [(e.name, e.bus) for e in sc.ecus] == [
         ("recorded-vcan0", "vcan0"), ("recorded-vcan1", "vcan1")]
     assert [len(read_trace(e.trace)) for e in sc.ecus] == [250, 134]
+    assert [e.start_offset_s for e in sc.ecus] == [0.0, 0.001]  # can1's first frame 1 ms after the trace's
     assert {str(m.channel) for m in (tf.message for tf in read_trace(sc.ecus[1].trace))} == {"vcan1"}
     assert sc.expect["cycle_time"]["ids"] == {"100": pytest.approx(10.0), "200": pytest.approx(20.0)}
     said = capsys.readouterr().out
