@@ -20,6 +20,7 @@ from pathlib import Path
 
 import can
 
+from .errors import InputError
 from .periodic import payload
 from .trace import format_line
 from .wire import Frame
@@ -88,15 +89,32 @@ def write(path: Path, frames: list[can.Message]) -> None:
 KINDS = ("powertrain", "mixed", "burst")
 
 
+def _above_zero(kind: type):
+    """An argparse type: a finite number above 0 (a trace of no frames is one the bench refuses)."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            value = 0
+        if not 0 < value < float("inf"):
+            raise argparse.ArgumentTypeError(f"{text!r}: a {'whole ' if kind is int else ''}number above 0")
+        return value
+    return parse
+
+
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--kind", choices=KINDS, default="powertrain")
-    ap.add_argument("--seconds", type=float, default=2.0, help="powertrain, mixed: length of the trace")
-    ap.add_argument("--frames", type=int, default=2000, help="burst: frames offered at once")
+    ap.add_argument("--seconds", type=_above_zero(float), default=2.0, help="powertrain, mixed: length of the trace")
+    ap.add_argument("--frames", type=_above_zero(int), default=2000, help="burst: frames offered at once")
     ap.add_argument("--out", type=Path, required=True)
 
 
 def generate_file(kind: str, seconds: float, count: int, out: Path) -> str:
+    if out.is_dir():
+        raise InputError(str(out), None, "is a folder: --out names the trace file (e.g. scenarios/traces/drive.log)")
     frames = {"powertrain": lambda: generate(seconds), "mixed": lambda: mixed(seconds),
               "burst": lambda: burst(count)}[kind]()
+    if not frames:
+        raise InputError(str(out), None, f"not written: {seconds} s of {kind} traffic has no frame (give more)")
     write(out, frames)
     return f"{out}: {len(frames)} {kind} frames"
