@@ -4,6 +4,8 @@ scripts/bench-run runs it (in the orchestrator image) before anything starts."""
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 from . import scenario
@@ -90,11 +92,39 @@ def remap_problems(path: Path) -> list[InputError]:
     return found
 
 
+def encoding_problems(path: Path, sc: scenario.Scenario) -> list[InputError]:
+    """What the DBC encodes (restbus ECUs, commands in signals) made as the run makes it: a frame
+    cantools cannot encode (e.g. a multiplexed message at a multiplexer value its DBC has no
+    signals for) is a problem at the entry's line here, not a traceback once the run started."""
+    from . import plans
+    doc = scenario.parse(path)
+    found: list[InputError] = []
+    def check(where: list, make: Callable[[], object]) -> None:
+        try:
+            make()
+        except Exception as e:  # noqa: BLE001 - cantools' encode errors say what it could not encode
+            found.append(ScenarioError(str(path), scenario.line_of(doc, where),
+                                       f"{'.'.join(map(str, where))}: a frame cannot be encoded with the DBC: {e}"))
+
+    for i, ecu in enumerate(sc.ecus):
+        if ecu.role == "restbus":
+            check(["ecus", i], partial(plans.schedule, ecu, sc))  # makes each message's last frame
+    for i, command in enumerate(sc.commands):
+        if command.signal_plan is not None:
+            check(["commands", i], partial(_first_frame, command))
+    return found
+
+
+def _first_frame(command: scenario.Commands) -> object:
+    from . import restbus
+    return next(iter(restbus.command_frames(command)), None)
+
+
 def problems(path: Path) -> list[InputError]:
     """Every problem of one scenario file and its traces, scenario first, each in line order."""
     found: list[InputError] = []
     try:
-        scenario.load(path)
+        found += encoding_problems(path, scenario.load(path))
     except ScenarioError as e:
         found += getattr(e, "problems", [e])
     found += remap_problems(path)
