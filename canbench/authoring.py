@@ -66,8 +66,9 @@ class TraceSummary:
         load = (", ".join(f"{i} {pct:.1f}%" for i, pct in self.loads.items()) if several
                 else f"{self.load_pct:.1f}%")
         lines = [f"{self.path}: {self.frames} frames over {self.span_s:.3f} s on {where}; "
-                 f"bus load {load} of {self.bitrate // 1000} kbit/s (worst-case stuffing); longest gap "
-                 f"{self.longest_gap_s:.3f} s (before {where_in(self.path, self.longest_gap_line)})",
+                 f"bus load {load} of {self.bitrate // 1000} kbit/s (worst-case stuffing)"
+                 + (f"; longest gap {self.longest_gap_s:.3f} s (before {where_in(self.path, self.longest_gap_line)})"
+                    if self.longest_gap_line else ""),
                  f"  {'interface  ' if several else ''}{'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  "
                  f"{'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:

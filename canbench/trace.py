@@ -323,6 +323,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
+    if path.stat().st_size == 0:  # in every format (a binary reader would say its header is short)
+        return
     by_number = numbered(path)
     # python-can numbers ASC and BLF channels from 0; the file, CANalyzer and CANoe from 1: said as the file has them
     zero_based = path.suffix.lower() in (".asc", ".blf")

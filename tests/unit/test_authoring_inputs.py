@@ -125,3 +125,9 @@ def test_scaffold_does_not_write_over_its_trace_or_take_a_bad_name(tmp_path, cap
     assert cli.main(["scaffold", str(trace), "--name", "My Drive", "--out", str(tmp_path / "sc" / "x.yaml")]) == 2
     assert "--name: 'My Drive': a scenario's name is lowercase letters, digits, - and _" in capsys.readouterr().err
     assert not (tmp_path / "sc").exists()
+
+
+def test_a_burst_at_one_stamp_names_no_gap(tmp_path):
+    trace = tmp_path / "burst.log"
+    trace.write_text("(1700000000.000000) can0 123#11\n(1700000000.000000) can0 124#11\n")
+    assert authoring.summarise(trace).table().splitlines()[0].endswith("(worst-case stuffing)")

@@ -183,3 +183,12 @@ def test_a_trc_version_python_can_does_not_read_is_refused_at_its_header(tmp_pat
     path.write_text("     1)         0.0  1    Rx         0123  8  00 01\n")  # no version: read as 1.0, which fails
     with pytest.raises(TraceError, match=r"v12.trc:1: python-can cannot read it: .* \(the file has no ;\$FILEVERSION"):
         read_trace(path)
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf", ".csv", ".trc"])
+def test_an_empty_file_has_no_frames_in_every_format(tmp_path, suffix):
+    path = tmp_path / f"empty{suffix}"
+    path.write_bytes(b"")
+    with pytest.raises(TraceError) as err:
+        read_trace(path)
+    assert str(err.value) == f"{path}: no frames in trace"
