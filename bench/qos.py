@@ -9,13 +9,16 @@ table (--rx-qos, docs/bridge.md) buys, in one run on one machine (docs/benchmark
   Zenoh side congested: zenohd stopped for PAUSE_S at PAUSE_AT_S (the bridge's TCP send buffer
   small). Latency p50/p99/max of the high id: alone (no flood), under the flood without a table
   (one class: it waits behind the flood's backlog in the bridge's queue and Zenoh's), with the
-  table PRIORITY_TABLE (realtime + express for 0x000-0x0FF, the flood data) and with the
-  flood's class drop, PRIORITY_RUNS runs of each, interleaved (one run's p99 on a shared machine
+  table PRIORITY_TABLE (realtime + express for 0x000-0x0FF, the flood data), with the
+  flood's class drop and without express (Zenoh gives an express sample a batch of its own, and
+  a priority has two: under a backlog a third put waits for a write, holding the bridge's one
+  publisher thread), PRIORITY_RUNS runs of each, interleaved (one run's p99 on a shared machine
   says little): per variant the median of the runs' figures, the losses summed. A lost high
   frame is split by the attachment's sequence numbers: the bridge numbers every frame it reads,
   so one lost after that (its queue, Zenoh, the capture, still in flight) is a number missing;
-  the rest never reached the bridge (the bus emulator's own loss, before any QoS).
-  Ratios: p50/p99 without the table over with it.
+  the rest never reached the bridge (the bus emulator's own loss, before any QoS). And when
+  the frames the bridge read during the stop arrived after it: the high id's median and last,
+  the flood's last (its backlog worked off). Ratios: p50/p99 without the table over with it.
 - **Loss under a congested router**: a steady load (STEADY_FPS frames/s of STEADY_ID) while
   zenohd is stopped (SIGSTOP) for PAUSE_S and continued, the bridge's TCP send buffer small
   (so_sndbuf, so Zenoh's own queue fills rather than the kernel's); per QoS of the one class
@@ -57,6 +60,7 @@ PRIORITY_VARIANTS = {  # name -> (flood on?, --rx-qos)
     "flood, no table": (True, ""),
     "flood, table": (True, PRIORITY_TABLE),
     "flood, table, flood drop": (True, "0x000-0x0FF:realtime,express;0x100-0x7FF:data,drop"),
+    "flood, table, no express": (True, "0x000-0x0FF:realtime;0x100-0x7FF:data"),
 }
 STEADY_FPS, STEADY_S, PAUSE_AT_S, PAUSE_S = 10_000, 3.0, 0.5, 1.5
 PRIORITY_PAUSE_S = 0.5
@@ -288,7 +292,7 @@ def ratios(prio: list[dict], loss: list[dict]) -> dict:
             out[f"p50 no table / {name}"] = round(base["p50_us"] / r["p50_us"], 2)
             out[f"p99 no table / {name}"] = round(base["p99_us"] / r["p99_us"], 2)
             for key, words in (("from_can_stamp", "from the CAN stamp"),
-                               ("from_can_stamp_outside_stop", "from the CAN stamp, outside the stop")):
+                               ("from_can_stamp_outside_stop", "from the CAN stamp, not caught by the stop")):
                 b, t = base.get(key) or {}, r.get(key) or {}
                 if b.get("p99_us") and t.get("p99_us"):
                     out[f"{words}: p50 no table / {name}"] = round(b["p50_us"] / t["p50_us"], 2)
