@@ -306,10 +306,11 @@ def ratios(prio: list[dict], loss: list[dict]) -> dict:
 
 
 def table_md(prio: list[dict], loss: list[dict], rat: dict) -> str:
+    n_runs = len(prio[0].get("runs") or [0]) if prio else 1
     rows = [f"### High-priority id 0x{HIGH_ID:03X} ({HIGH_FPS}/s) under a flood of 0x{FLOOD_ID:03X} "
             f"(offered {FLOOD_FPS}/s on a {BUS_BITRATE // 1000} kbit/s bus), CAN -> Zenoh, client mode, zenohd "
             f"stopped for {prio[0].get('pause_s', PRIORITY_PAUSE_S) if prio else PRIORITY_PAUSE_S} s", "",
-            f"Median of {len(prio[0].get('runs') or [0]) if prio else 1} runs per variant (interleaved), "
+            f"Median of {n_runs} run{'s' if n_runs != 1 else ''} per variant (interleaved), "
             "counts summed. High lost: all / of them at most lost after the bridge read them (the "
             "sequence numbers missing, any id) / the rest never read by the bridge (lost on the bus).", "",
             "| variant | --rx-qos | p50 µs | p90 µs | p99 µs | max µs | from CAN stamp p50 / p99 / max µs "
