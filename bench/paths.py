@@ -32,6 +32,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import zenoh
+
 from canbench.errors import RunError
 from canbench.rig import Rig, Router, candump, free_port, start_bridge, stop, zn_capture
 from canbench.runkeys import open_session
@@ -46,6 +48,7 @@ MODES = ("client", "peer", "router")
 THROUGHPUT_RATES = (9000, 18000, 36000, 72000, 144000, 288000)
 THROUGHPUT_S = 1.0
 SETTLE_S = 5.0
+BRIDGE_UP_S = 30.0  # a bridge's start to its token, at most
 CAN_TO_ZENOH_ID, COMMAND_ID, ECHO_ID = 0x100, 0x321, 0x322
 BATCH_MS = 10  # zenoh-node's batching mode: one sample per bus every 10 ms
 
@@ -97,12 +100,14 @@ class PathRig(Rig):
                 listen = f"tcp/127.0.0.1:{free_port()}"
                 cmd += ["--listen", listen] + (["--router", router] if mode == "peer" else [])
                 self.endpoint = listen
-        with self.session() as s:
-            try:
-                self.bridge = start_bridge(self.procs, cmd, self.env, self.workdir / "bridge.log", s,
-                                           "vehicle/can/bridges/**", cwd=REPO)
-            except RunError as e:
-                sys.exit(f"{bridge} ({mode}) did not come up: {e}")
+        # peer and router mode: the endpoint is the bridge's own listener, so the session that waits
+        # for its token can open only once the bridge runs (before, it waited for ever)
+        try:
+            self.bridge = start_bridge(self.procs, cmd, self.env, self.workdir / "bridge.log",
+                                       lambda: open_session(self.endpoint, wait_s=BRIDGE_UP_S),
+                                       "vehicle/can/bridges/**", timeout=BRIDGE_UP_S, cwd=REPO)
+        except (RunError, zenoh.ZError) as e:
+            sys.exit(f"{bridge} ({mode}) did not come up: {e}")
 
     @contextmanager
     def session(self):

@@ -177,13 +177,18 @@ def bridge_stats(session, prefix: str = "vehicle/can", name: str = "zenoh-node")
 def start_bridge(procs: Procs, cmd: list, env: dict, log: Path, session, token: str,
                  timeout: float = 30, cwd: Path | None = None) -> subprocess.Popen:
     """A bridge (zenoh-node, the reference, or either under valgrind), ready once its liveliness
-    token on `token` exists."""
+    token on `token` exists. session: an open session, or a function that opens one once the
+    bridge runs (a bridge that is itself the endpoint, in router mode: no session can open before it)."""
     with open(log, "w") as out:
         p = procs.spawn(cmd, env=env, stdout=out, stderr=subprocess.STDOUT, cwd=cwd)
+    opened = session() if callable(session) else session
     try:
-        wait_token(session, token, timeout)
+        wait_token(opened, token, timeout)
     except TimeoutError:
         raise RunError(f"{cmd[0]} did not come up:\n{tail(log)}") from None
+    finally:
+        if opened is not session:
+            opened.close()
     return p
 
 

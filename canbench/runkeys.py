@@ -82,15 +82,16 @@ def base_config() -> zenoh.Config:
     return zenoh.Config.from_file(path) if path else zenoh.Config()
 
 
-def open_session(endpoint: str, wait: bool = True) -> zenoh.Session:
-    """wait: for the router rather than fail, and back within a second of a router restart;
-    without, zenoh's defaults (the tests: a router they started is already listening)."""
+def open_session(endpoint: str, wait: bool = True, wait_s: float | None = None) -> zenoh.Session:
+    """wait: for the router rather than fail (at most wait_s, else for ever), and back within a
+    second of a router restart; without, zenoh's defaults (the tests: a router they started is
+    already listening)."""
     conf = base_config()
     conf.insert_json5("mode", '"client"')
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     if wait:
-        conf.insert_json5("connect/timeout_ms", "-1")
+        conf.insert_json5("connect/timeout_ms", str(int(wait_s * 1000)) if wait_s is not None else "-1")
         # like the bridge's own retry (fault steps restart the router)
         conf.insert_json5("connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}")
     return zenoh.open(conf)
