@@ -52,6 +52,7 @@ struct client {
 	pid_t pid;
 	char cookie[UCAN_COOKIE_MAX];
 	int bound, header_mode, epollout, paused, dirty, draining;
+	int reader_gone; /* the peer stopped reading (exited): what it wrote is still read */
 	struct ucan_sockopts opts;
 	struct can_filter *filters;
 	struct outmsg *queue; /* ring, grown on demand up to queue_limit */
@@ -380,7 +381,7 @@ static int client_queue_grow(struct client *c, uint32_t cap)
 	return 0;
 }
 
-enum send_result { QUEUED, DROPPED, NO_MEMORY };
+enum send_result { QUEUED, DROPPED, NO_MEMORY, READER_GONE };
 enum send_kind { FRAME, CONTROL };
 
 /* Queues a message for a client; queues are flushed once per event-loop
@@ -392,6 +393,8 @@ static enum send_result client_send(uint32_t idx, const void *msg, size_t len, e
 {
 	struct client *c = &hub.clients[idx];
 	uint32_t limit = c->queue_limit + (kind == CONTROL ? UCAN_CTL_RESERVE : 0);
+	if (c->reader_gone)
+		return READER_GONE;
 	if (c->queue_len >= limit)
 		return DROPPED;
 	if (c->queue_len == c->queue_cap) {
@@ -419,6 +422,7 @@ static void client_send_ctl(uint32_t idx, uint32_t type, int status)
 		return;
 	switch (client_send(idx, &ctl, sizeof(ctl), CONTROL)) {
 	case QUEUED:
+	case READER_GONE:
 		break;
 	case DROPPED:
 		hub.counters.unread_closes++;
@@ -428,6 +432,34 @@ static void client_send_ctl(uint32_t idx, uint32_t type, int status)
 		client_close(idx, "out of memory");
 		break;
 	}
+}
+
+/* A program that exited (or shut its socket) can still have frames in the
+ * socket it wrote that the hub had not read yet: a paused sender on a
+ * bitrate= interface always has. Closing it on the first failed write to it,
+ * or on the ECONNRESET its exit with unread frames for it leaves (reported
+ * once, before the data), lost them: accepted by its write(), never on the
+ * bus. So stop writing to it, drop what was queued for it (nobody will read
+ * it), and keep reading until EOF (EPOLLHUP drains a paused sender too). */
+static void client_reader_gone(uint32_t idx)
+{
+	struct client *c = &hub.clients[idx];
+	c->reader_gone = 1;
+	free(c->queue);
+	c->queue = NULL;
+	c->queue_cap = c->queue_head = c->queue_len = 0;
+	if (c->epollout) {
+		c->epollout = 0;
+		client_update_events(c, idx);
+	}
+}
+
+static void client_send_failed(uint32_t idx, const char *why)
+{
+	if (errno == EPIPE || errno == ECONNRESET || errno == ECONNREFUSED || errno == ENOTCONN)
+		client_reader_gone(idx);
+	else
+		client_close(idx, why);
 }
 
 static void client_flush(uint32_t idx)
@@ -446,7 +478,7 @@ static void client_flush(uint32_t idx)
 		if (sent < 0) {
 			if (errno == EAGAIN || errno == ENOBUFS)
 				break;
-			client_close(idx, NULL);
+			client_send_failed(idx, NULL);
 			return;
 		}
 		c->queue_head = (c->queue_head + (uint32_t)sent) % c->queue_cap;
@@ -506,11 +538,12 @@ static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame
 	memcpy(msg + len, frame, size);
 	len += size;
 
-	if (client_send(idx, msg, len, FRAME) == QUEUED) {
+	enum send_result sent = client_send(idx, msg, len, FRAME);
+	if (sent == QUEUED) {
 		c->rx_frames++;
 		c->rx_bytes += frame->len;
 		ifc->stats.rx_deliveries++;
-	} else {
+	} else if (sent != READER_GONE) { /* a reader that exited is not a drop */
 		c->rx_drops++;
 		ifc->stats.rx_drops++;
 	}
@@ -720,8 +753,8 @@ static void handle_stats(uint32_t idx)
 		cs->rx_drops = c->rx_drops;
 	}
 	st->nclients = n;
-	if (send(hub.clients[idx].fd, st, size, MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
-		client_close(idx, "stats reply failed");
+	if (!hub.clients[idx].reader_gone && send(hub.clients[idx].fd, st, size, MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
+		client_send_failed(idx, "stats reply failed");
 	free(st);
 }
 
@@ -756,8 +789,8 @@ static void handle_getopt(uint32_t idx, const uint8_t *msg)
 		return;
 	}
 	memcpy(reply, &opts, sizeof(opts));
-	if (send(hub.clients[idx].fd, reply, len, MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
-		client_close(idx, "getopt reply failed");
+	if (!hub.clients[idx].reader_gone && send(hub.clients[idx].fd, reply, len, MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
+		client_send_failed(idx, "getopt reply failed");
 }
 
 static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
@@ -814,8 +847,8 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 	case UCAN_MSG_IFLIST: {
 		struct ucan_iflist list = { .type = UCAN_MSG_IFLIST, .count = hub.nifs };
 		memcpy(list.ifs, hub.ifinfos, hub.nifs * sizeof(hub.ifinfos[0]));
-		if (send(c->fd, &list, sizeof(list), MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
-			client_close(idx, "iflist reply failed");
+		if (!c->reader_gone && send(c->fd, &list, sizeof(list), MSG_DONTWAIT | MSG_NOSIGNAL) < 0)
+			client_send_failed(idx, "iflist reply failed");
 		break;
 	}
 	case UCAN_MSG_BARRIER: {
@@ -862,7 +895,7 @@ static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uin
 {
 	struct mmsghdr msgs[RECV_BATCH];
 	struct iovec iovs[RECV_BATCH];
-	unsigned done = 0;
+	unsigned done = 0, resets = 0;
 	while (done < max_msgs) {
 		struct client *c = &hub.clients[idx];
 		if (c->fd < 0 || (c->paused && !even_if_paused))
@@ -873,6 +906,10 @@ static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uin
 			msgs[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iovs[i], .msg_iovlen = 1 } };
 		}
 		int n = recvmmsg(c->fd, msgs, want, MSG_DONTWAIT, NULL);
+		if (n < 0 && errno == ECONNRESET && resets++ == 0) {
+			client_reader_gone(idx); /* its frames are still there: read them */
+			continue;
+		}
 		if (n < 0) {
 			if (errno != EAGAIN && errno != EINTR)
 				client_close(idx, NULL);
