@@ -173,6 +173,10 @@ def test_starts_before_its_router_and_recovers_after_restart(bus, bridge, router
     try:
         bridge.wait_ready(session2)
         rx = Collector(session2, "vehicle/can/rx")
+        # the bridge connected before this subscriber existed, and its publisher sends only once it
+        # knows of one: a stats query after the declaration is a barrier (the router passes both to
+        # the bridge in order on one link), else the frame may be put before the bridge hears of rx
+        bridge.stats(session2)
         bus.run(["cansend", "vcan0", "111#11"])
         assert [f.can_id for f, _, _ in rx.wait_frames(1)] == [0x111]
         # and a router restart: the bridge reconnects and counts it
