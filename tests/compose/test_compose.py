@@ -1,7 +1,7 @@
 """The bench in compose, as `make test` runs it (scripts/bench-run): the smoke
 scenario passes with every report written; a scenario whose gate cannot be
-met fails on exactly that check; an invalid scenario stops with exit code 2
-before anything runs; no containers, networks or volumes are left behind.
+met fails on exactly that check; an invalid run is run again and still fails;
+an invalid scenario stops with exit code 2 before anything runs; no containers, networks or volumes are left behind.
 Needs the images (make images) and a running Docker daemon."""
 from __future__ import annotations
 
@@ -32,9 +32,14 @@ def bench_run(scenario: Path, **env: str) -> tuple[subprocess.CompletedProcess, 
         pytest.skip("bench images not built (make images)")
     proc = subprocess.run([str(REPO / "scripts" / "bench-run"), str(scenario)], capture_output=True, text=True,
                           timeout=RUN_TIMEOUT_S, cwd=REPO, env={**os.environ, **env})
+    run_dirs = attempts(proc)
+    return proc, REPO / run_dirs[-1] if run_dirs else None  # the last attempt's verdict counts
+
+
+def attempts(proc: subprocess.CompletedProcess) -> list[str]:
+    """The run directory of every attempt bench-run made, in order."""
     marker = "(reports in "
-    run_dir = next((line.split(marker)[1].rstrip(")") for line in proc.stdout.splitlines() if marker in line), None)
-    return proc, REPO / run_dir if run_dir else None
+    return [line.split(marker)[1].rstrip(")") for line in proc.stdout.splitlines() if marker in line]
 
 
 def leftovers(run_dir: Path) -> list[str]:
@@ -124,6 +129,18 @@ def test_viewer_records_the_scenarios_traffic():
     assert "/vehicle/can [can_msgs/msg/Frame]" in " ".join(logged["/discovery/ros2"])
     assert any("vehicle/can/bridges/" in line for line in logged["/discovery/bridges"])
     assert leftovers(run_dir) == []
+
+
+def test_an_invalid_run_runs_again_and_keeps_every_attempt():
+    proc, run_dir = bench_run(DATA / "emulator-never-on-time.yaml", BENCH_RETRY_INVALID="1")
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    runs = attempts(proc)
+    assert len(runs) == 2 and runs[0] != runs[1], runs
+    assert "attempt 1 of 2 was INVALID: EMULATOR" in proc.stderr
+    for run in runs:  # each attempt keeps its reports and says why it is no verdict
+        assert json.loads((REPO / run / "metrics.json").read_text())["validity"]["outcome"] == "invalid: emulator"
+        assert leftovers(REPO / run) == []
+    assert "INVALID: EMULATOR, no verdict on the bridge (exit 1)" in proc.stdout.splitlines()[-1]
 
 
 def test_invalid_scenario_stops_with_exit_2_and_file_line():
