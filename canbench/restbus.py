@@ -5,9 +5,12 @@ role's answers.
 A signal's value comes from the scenario (a constant: a number or a value-table name; a ramp
 `{ramp: [from, to], over_s: T}`; a signal trace in CSV, `time_s,value` per line, held until the
 next line) or else from the DBC: GenSigStartValue, and the value of raw 0 where it has none.
-Signals the scenario names as counters count 0, 1, ... per frame of their message and wrap after
-their largest value; a checksum signal (one whole byte, raw = physical) carries, over the other
-bytes of the payload in order:
+A multiplexer the scenario does not set selects its message's pages in turn, one per frame
+(ascending ids, nested multiplexers within the pages that carry them), as an ECU sending every
+page does; its GenSigStartValue or raw 0 need not be one of its ids. Signals the scenario names
+as counters count 0, 1, ... per frame of their message and wrap after their largest value; a
+checksum signal (one whole byte, raw = physical) carries, over the other bytes of the payload in
+order:
 
   xor             every byte XORed together
   crc8_sae_j1850  CRC-8 SAE J1850: polynomial 0x1D, initial 0xFF, final XOR 0xFF, not reflected
@@ -24,6 +27,7 @@ from array import array
 from bisect import bisect_right
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -91,12 +95,18 @@ class MessagePlan:
     cycle_ms: float | None = None
 
     def values(self, t: float) -> dict:
+        """Every signal's value at t; a multiplexer the scenario does not set is left out (encode
+        gives it the frame's page)."""
         return {s.name: self.sources[s.name].at(t) if s.name in self.sources else default_value(s)
-                for s in self.message.signals}
+                for s in self.message.signals if s.name in self.sources or not s.is_multiplexer}
 
     def encode(self, values: dict, n: int) -> bytes:
-        """The payload of the n-th frame with these signal values (counter and checksum applied)."""
+        """The payload of the n-th frame with these signal values (counter and checksum applied;
+        multiplexers not in values at the n-th of the pages the given ones allow)."""
         m = self.message
+        if m.is_multiplexed():
+            allowed = _pages(m, tuple((k, v) for k, v in values.items() if k in multiplexers(m)))
+            values.update(allowed[n % len(allowed)])
         if self.counter:
             values[self.counter] = n % counter_modulo(m.get_signal_by_name(self.counter))
         if self.checksum:
@@ -120,6 +130,47 @@ def default_value(signal) -> float | str:
     return signal.raw_to_scaled(0)
 
 
+@lru_cache(maxsize=256)
+def multiplexers(message) -> frozenset[str]:
+    return frozenset(s.name for s in message.signals if s.is_multiplexer)
+
+
+@lru_cache(maxsize=256)  # per frame of an hour's plan: the same few selections
+def _pages(message, given: tuple) -> list[dict[str, int]]:
+    return pages(message, dict(given))
+
+
+def multiplexer_ids(message, name: str) -> list[int]:
+    """The ids a multiplexer selects pages by (its signals' m<id>s in the DBC), ascending."""
+    return sorted({i for s in message.signals if s.multiplexer_signal == name for i in s.multiplexer_ids or ()})
+
+
+def pages(message, given: dict) -> list[dict[str, int]]:
+    """Every page of a multiplexed message (multiplexer -> id, nested multiplexers within the page
+    that carries them), in ascending ids; a multiplexer in given (its value or value-table name)
+    keeps that value."""
+    def number(name: str, value) -> int:
+        if isinstance(value, str):
+            return int(message.get_signal_by_name(name).conversion.choice_to_number(value))
+        return int(value)  # as cantools takes a multiplexer's value
+
+    def level(names: list[str]) -> list[dict[str, int]]:
+        out: list[dict[str, int]] = [{}]
+        for name in names:
+            ids = [number(name, given[name])] if name in given else multiplexer_ids(message, name)
+            options = [{name: i, **inner} for i in ids
+                       for inner in level([s.name for s in message.signals if s.is_multiplexer
+                                           and s.multiplexer_signal == name and i in (s.multiplexer_ids or ())])]
+            out = [{**a, **b} for a in out for b in options]
+        return out
+    return level([s.name for s in message.signals if s.is_multiplexer and s.multiplexer_signal is None])
+
+
+def mux_ids(message, name: str) -> list[int] | None:
+    """A multiplexer's ids, None for any other signal."""
+    return multiplexer_ids(message, name) if name in multiplexers(message) else None
+
+
 def counter_modulo(signal) -> int:
     top = 2 ** signal.length - 1
     if signal.maximum is not None:
@@ -131,11 +182,11 @@ def checksum_byte(message, name: str) -> int:
     """The payload byte a one-byte signal occupies (ValueError if it is not exactly one byte)."""
     if message.get_signal_by_name(name).length != 8:
         raise ValueError("a checksum signal fills exactly one byte of the payload (8 bits, byte-aligned)")
-    values = {s.name: 0 for s in message.signals}
-    values[name] = 0xFF
-    data = message.encode(values, scaling=False, strict=False)
-    ones = [i for i, b in enumerate(data) if b]
-    if len(ones) != 1 or data[ones[0]] != 0xFF:
+    values = {s.name: 0 for s in message.signals} | (pages(message, {})[0] if message.is_multiplexed() else {})
+    zero = message.encode({**values, name: 0}, scaling=False, strict=False)
+    full = message.encode({**values, name: 0xFF}, scaling=False, strict=False)  # the byte(s) it takes
+    ones = [i for i, (a, b) in enumerate(zip(zero, full, strict=True)) if a != b]
+    if len(ones) != 1 or zero[ones[0]] ^ full[ones[0]] != 0xFF:
         raise ValueError("a checksum signal fills exactly one byte of the payload (8 bits, byte-aligned)")
     return ones[0]
 
@@ -220,8 +271,8 @@ Fail = Callable[[list, str], None]
 FailFile = Callable[[Path, int, str], None]
 
 
-def value_problem(signal, value) -> str | None:
-    """Why a value cannot be this signal's (None if it can)."""
+def value_problem(signal, value, ids: list[int] | None = None) -> str | None:
+    """Why a value cannot be this signal's (None if it can); ids: a multiplexer's ids."""
     if isinstance(value, bool):
         return f"{value!r} is not a number or a name of {signal.name}'s value table"
     if isinstance(value, str):
@@ -229,18 +280,23 @@ def value_problem(signal, value) -> str | None:
         if value not in names:
             return (f"{value!r} is not in {signal.name}'s value table {names}" if names
                     else f"{signal.name} has no value table: give a number")
-        return None
+        value = signal.conversion.choice_to_number(value)
+        return None if ids is None or value in ids else \
+            f"{value!r} is not one of {signal.name}'s multiplexer ids {ids}"
     if not isinstance(value, int | float) or not math.isfinite(value):
         return f"{value!r} is not a number"
+    if ids is not None and value not in ids:  # cantools selects a page by the exact id
+        return f"{value:g} is not one of {signal.name}'s multiplexer ids {ids}"
     lo, hi = signal.minimum, signal.maximum
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         return f"{value:g} is outside {signal.name}'s range [{lo:g}, {hi:g}] {signal.unit or ''}".rstrip()
     return None
 
 
-def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile) -> SignalTrace | None:
+def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile,
+                      ids: list[int] | None = None) -> SignalTrace | None:
     """A CSV signal trace (`time_s,value`, an optional header line, # comments); each bad line
-    is a problem at its file:line."""
+    is a problem at its file:line (ids: a multiplexer's ids, see value_problem)."""
     times, values, ok, first = array("d"), [], True, True
     try:
         text = path.read_text()
@@ -268,7 +324,7 @@ def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile) -> S
             value: float | str = float(raw)
         except ValueError:
             value = raw
-        problem = value_problem(signal, value) if math.isfinite(t) and t >= 0 else "time_s must be >= 0"
+        problem = value_problem(signal, value, ids) if math.isfinite(t) and t >= 0 else "time_s must be >= 0"
         if problem is None and times and t < times[-1]:
             problem = f"time_s {t:g} is before the line above's {times[-1]:g}"
         if problem:
@@ -283,8 +339,14 @@ def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile) -> S
     return SignalTrace(path, times, tuple(values)) if ok else None
 
 
-def source_of(spec, signal, where: list, base: Path, fail: Fail, fail_file: FailFile) -> Source | None:
+def source_of(spec, signal, where: list, base: Path, fail: Fail, fail_file: FailFile,
+              ids: list[int] | None = None) -> Source | None:
+    """A signal's value source from the scenario (ids: a multiplexer's ids, see value_problem)."""
     if isinstance(spec, dict) and "ramp" in spec:
+        if ids is not None:  # a ramp passes between the ids: pages cantools cannot encode
+            fail([*where, "ramp"], f"{signal.name} is a multiplexer (ids {ids}): give an id, a signal trace "
+                 "of ids, or nothing (its pages in turn)")
+            return None
         ends = spec["ramp"]
         for i, end in enumerate(ends):
             problem = value_problem(signal, end) if not isinstance(end, str) else f"{end!r} is not a number"
@@ -297,8 +359,8 @@ def source_of(spec, signal, where: list, base: Path, fail: Fail, fail_file: Fail
         if not shown.is_file():
             fail([*where, "trace"], f"no such file {shown}")
             return None
-        return read_signal_trace(shown.resolve(), shown, signal, fail_file)
-    problem = value_problem(signal, spec)
+        return read_signal_trace(shown.resolve(), shown, signal, fail_file, ids)
+    problem = value_problem(signal, spec, ids)
     if problem:
         fail(where, problem)
         return None
@@ -325,7 +387,7 @@ def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_
         name = local(key, [*where, signals_key, key])
         if name is not None:
             source = source_of(value, message.get_signal_by_name(name), [*where, signals_key, key], base, fail,
-                               fail_file)
+                               fail_file, mux_ids(message, name))
             if source is not None:
                 sources[name] = source
     counter = None
@@ -334,7 +396,10 @@ def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_
         if name is None:
             continue
         s = message.get_signal_by_name(name)
-        if s.is_signed or s.is_float or s.scale != 1 or s.offset != 0:
+        if s.is_multiplexer:
+            fail([*where, "counters", i], f"{message.name}.{name} is a multiplexer: it selects pages, "
+                 "in turn when not set")
+        elif s.is_signed or s.is_float or s.scale != 1 or s.offset != 0:
             fail([*where, "counters", i], f"{message.name}.{name}: a counter is an unsigned integer signal "
                  "(scale 1, offset 0)")
         elif counter is not None:
@@ -461,7 +526,7 @@ def command_plan(db, spec: dict, where: list, base: Path, fail: Fail, fail_file:
             if key not in names:
                 fail(at, f"{m.name} has no signal {key!r} (it has {sorted(names)})")
                 continue
-            problem = value_problem(m.get_signal_by_name(key), value)
+            problem = value_problem(m.get_signal_by_name(key), value, mux_ids(m, key))
             if problem:
                 fail(at, problem)
             values[key] = value

@@ -94,8 +94,8 @@ def remap_problems(path: Path) -> list[InputError]:
 
 def encoding_problems(path: Path, sc: scenario.Scenario) -> list[InputError]:
     """What the DBC encodes (restbus ECUs, commands in signals) made as the run makes it: a frame
-    cantools cannot encode (e.g. a multiplexed message at a multiplexer value its DBC has no
-    signals for) is a problem at the entry's line here, not a traceback once the run started."""
+    cantools cannot encode (whatever the value checks of scenario.load let through) is a problem
+    at the entry's line here, not a traceback once the run started."""
     from . import plans
     doc = scenario.parse(path)
     found: list[InputError] = []
