@@ -1,6 +1,7 @@
 """DBC files (cantools): loading one (cached per file and mtime, so a scenario's buses and its
 checks share one database), a frame's signals as numbers (the recording's /signals channels,
-the viewer, the signal expectations), and a message's database cycle time and send type."""
+the viewer, the signal expectations), a message's database cycle time and send type, and why a
+scenario's value cannot be a signal's."""
 from __future__ import annotations
 
 from functools import lru_cache
@@ -38,6 +39,21 @@ def decode_signals(dbc, frame) -> tuple[str, dict] | None:
     except Exception:  # a frame the DBC does not describe correctly is still recorded raw
         return None
     return message.name, {k: float(v) for k, v in decoded.items() if isinstance(v, int | float)}
+
+
+def name_problem(signal, value: str, in_yaml: bool = True) -> str | None:
+    """Why text cannot be the signal's value (None if it is a name of its value table, even one that
+    looks like a number): a number YAML read as text (in_yaml: '12' quoted, 1e3), else a name the
+    value table lacks."""
+    from .scenario import text_number
+    names = [str(v) for v in (signal.choices or {}).values()]
+    if value in names:
+        return None
+    form = text_number(value) if in_yaml else None
+    if form is not None:
+        return f"YAML reads {value!r} as text, not a number for {signal.name}: write {form}"
+    return (f"{value!r} is not in {signal.name}'s value table {names}" if names
+            else f"{signal.name} has no value table: give a number")
 
 
 def cycle_time_ms(message) -> float | None:

@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from .dbc import name_problem
 from .stats import latency_stats
 
 if TYPE_CHECKING:
@@ -54,6 +55,26 @@ def _number(signal, value) -> float:
     if isinstance(value, str):
         return float(signal.choice_to_number(value))
     return float(value)
+
+
+def value_problem(signal, value) -> str | None:
+    """Why a condition's value cannot be the signal's (None if it can)."""
+    if isinstance(value, str):
+        return name_problem(signal, value)
+    return None
+
+
+def condition_problems(signal, spec: dict, where: list, fail) -> bool:
+    """Each value of a `when`/`then` condition the signal cannot have, at its line; True if any."""
+    values: list[tuple[list, Any]] = [(["equals"], spec["equals"])] if "equals" in spec else []
+    values += [(["one_of", k], v) for k, v in enumerate(spec.get("one_of") or [])]
+    bad = False
+    for key, value in values:
+        problem = value_problem(signal, value)
+        if problem:
+            fail([*where, *key], problem)
+            bad = True
+    return bad
 
 
 def condition(signal, spec: dict) -> Condition:
@@ -134,10 +155,11 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
             continue
         try:
             message, signal = _message_signal(db, then["signal"])
-            then_cond = condition(signal, then)
         except KeyError as e:
-            fail([*where, "then", "signal"], f"{then['signal']}: not in the DBC or its value table ({e})")
+            fail([*where, "then", "signal"], f"{then['signal']}: not in the DBC ({e})")
             continue
+        bad = condition_problems(signal, then, [*where, "then"], fail)  # the stimulus is checked too
+        then_cond = None if bad else condition(signal, then)
         rule = dict(name=spec.get("name", f"response{i}"), bus=bus, within_ms=float(spec["within_ms"]),
                     response_message=message, response_signal=signal.name, then=then_cond,
                     side=then.get("side", "zenoh"), count=spec.get("count"), once=bool(spec.get("once", False)))
@@ -155,18 +177,28 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
             for name, value in (when.get("signals") or {}).items():
                 try:
                     s = command.get_signal_by_name(name)
-                    carried.append((name, _number(s, value), s.scale / 2 if not s.is_float else 0.0))
                 except KeyError:
-                    fail([*where, "when", "signals", name], f"{command.name} has no signal {name!r} or {value!r} "
-                         "is not in its value table")
-            out.append(Rule(**rule, command=command, command_signals=tuple(carried)))
+                    fail([*where, "when", "signals", name], f"{command.name} has no signal {name!r} "
+                         f"(it has {sorted(x.name for x in command.signals)})")
+                    bad = True
+                    continue
+                problem = value_problem(s, value)
+                if problem:
+                    fail([*where, "when", "signals", name], problem)
+                    bad = True
+                    continue
+                carried.append((name, _number(s, value), s.scale / 2 if not s.is_float else 0.0))
+            if not bad:
+                out.append(Rule(**rule, command=command, command_signals=tuple(carried)))
         else:
             try:
                 smessage, ssignal = _message_signal(db, when["signal"])
+            except KeyError as e:
+                fail([*where, "when", "signal"], f"{when['signal']}: not in the DBC ({e})")
+                continue
+            if not condition_problems(ssignal, when, [*where, "when"], fail) and not bad:
                 out.append(Rule(**rule, stimulus_message=smessage, stimulus_signal=ssignal.name,
                                 when=condition(ssignal, when)))
-            except KeyError as e:
-                fail([*where, "when", "signal"], f"{when['signal']}: not in the DBC or its value table ({e})")
     return tuple(out)
 
 

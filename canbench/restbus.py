@@ -34,7 +34,8 @@ from typing import Any
 import can
 from crccheck.crc import Crc8SaeJ1850
 
-from .dbc import cycle_time_ms
+from .dbc import cycle_time_ms, name_problem
+from .scenario import text_number
 
 
 def xor8(data: bytes) -> int:
@@ -271,15 +272,15 @@ Fail = Callable[[list, str], None]
 FailFile = Callable[[Path, int, str], None]
 
 
-def value_problem(signal, value, ids: list[int] | None = None) -> str | None:
-    """Why a value cannot be this signal's (None if it can); ids: a multiplexer's ids."""
+def value_problem(signal, value, ids: list[int] | None = None, in_yaml: bool = True) -> str | None:
+    """Why a value cannot be this signal's (None if it can); ids: a multiplexer's ids; in_yaml:
+    a scenario's value (text that reads as a number is said to be YAML's text)."""
     if isinstance(value, bool):
         return f"{value!r} is not a number or a name of {signal.name}'s value table"
     if isinstance(value, str):
-        names = [str(v) for v in (signal.choices or {}).values()]
-        if value not in names:
-            return (f"{value!r} is not in {signal.name}'s value table {names}" if names
-                    else f"{signal.name} has no value table: give a number")
+        problem = name_problem(signal, value, in_yaml)
+        if problem:
+            return problem
         value = signal.conversion.choice_to_number(value)
         return None if ids is None or value in ids else \
             f"{value!r} is not one of {signal.name}'s multiplexer ids {ids}"
@@ -324,7 +325,8 @@ def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile,
             value: float | str = float(raw)
         except ValueError:
             value = raw
-        problem = value_problem(signal, value, ids) if math.isfinite(t) and t >= 0 else "time_s must be >= 0"
+        problem = value_problem(signal, value, ids, in_yaml=False) if math.isfinite(t) and t >= 0 \
+            else "time_s must be >= 0"
         if problem is None and times and t < times[-1]:
             problem = f"time_s {t:g} is before the line above's {times[-1]:g}"
         if problem:
@@ -349,7 +351,8 @@ def source_of(spec, signal, where: list, base: Path, fail: Fail, fail_file: Fail
             return None
         ends = spec["ramp"]
         for i, end in enumerate(ends):
-            problem = value_problem(signal, end) if not isinstance(end, str) else f"{end!r} is not a number"
+            problem = value_problem(signal, end) if not isinstance(end, str) \
+                else (name_problem(signal, end) if text_number(end) else f"{end!r} is not a number")
             if problem:
                 fail([*where, "ramp", i], problem)
                 return None

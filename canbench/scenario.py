@@ -4,6 +4,7 @@ and report problems as file:line: field: message."""
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,8 +56,35 @@ class _LocatedList(list):
         self.item_lines, self.line = item_lines, line
 
 
+class _AmbiguousNumber(yaml.constructor.ConstructorError):
+    """A number YAML 1.1 (PyYAML) reads otherwise than YAML 1.2 and a user do."""
+
+
+def _construct_int(loader: _LineLoader, node: yaml.ScalarNode) -> int:
+    value = loader.construct_yaml_int(node)
+    text = str(node.value).replace("_", "").lstrip("+-")
+    if ":" in text:
+        raise _AmbiguousNumber(None, None, f"{node.value} is {value} to YAML 1.1 (base 60), text to YAML 1.2: "
+                               f"write {value}, or quote it", node.start_mark)
+    if re.fullmatch(r"0[0-9]+", text) and int(text, 8) != int(text, 10):
+        decimal = int(str(node.value).replace("_", ""), 10)
+        raise _AmbiguousNumber(None, None, f"{node.value} is {value} to YAML 1.1 (a leading 0 is octal), "
+                               f"{decimal} to YAML 1.2: write {decimal} or {value}", node.start_mark)
+    return value
+
+
+def _construct_float(loader: _LineLoader, node: yaml.ScalarNode) -> float:
+    value = loader.construct_yaml_float(node)
+    if ":" in str(node.value):
+        raise _AmbiguousNumber(None, None, f"{node.value} is {value:g} to YAML 1.1 (base 60), text to YAML 1.2: "
+                               f"write {yaml_number(value)}, or quote it", node.start_mark)
+    return value
+
+
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, _construct_sequence)
+_LineLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_LineLoader.add_constructor("tag:yaml.org,2002:float", _construct_float)
 
 
 def line_of(doc: Any, path: list) -> int:
@@ -188,6 +216,8 @@ def parse(path: str | Path) -> Any:
         raise ScenarioError(str(path), None, f"cannot read: {e.strerror}") from None
     try:
         doc = yaml.load(text, Loader=_LineLoader)
+    except _AmbiguousNumber as e:
+        raise ScenarioError(str(path), e.problem_mark.line + 1 if e.problem_mark else None, str(e.problem)) from None
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         # one line: the mark says where, as every problem is said
@@ -211,19 +241,42 @@ def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
         if "propertyNames" in error.schema_path and isinstance(error.instance, str):
             line_path.append(error.instance)  # the key whose name is wrong
         hint = ""
-        if error.validator == "type" and isinstance(error.instance, str) and EXPONENT_ONLY.match(error.instance) \
-                and "number" in (error.validator_value if isinstance(error.validator_value, list)
-                                 else [error.validator_value]):
-            mantissa, exponent = re.split("[eE]", error.instance)
-            hint = (f" (YAML reads {error.instance} as text: write {mantissa}.0e"
-                    f"{exponent if exponent[0] in '+-' else '+' + exponent})")
+        wanted = error.validator_value if isinstance(error.validator_value, list) else [error.validator_value]
+        if error.validator == "type" and {"number", "integer"} & set(wanted) and text_number(error.instance):
+            hint = f" (YAML reads {error.instance!r} as text: write {text_number(error.instance)})"
         problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}{hint}"))
     return problems
 
 
-# what YAML 1.1 (PyYAML) takes for a string, a user for a number: 1e3, -2E-5 (no dot). Not resolved as
-# numbers: an unquoted hex id such as 1E3 would become 1000.0
-EXPONENT_ONLY = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
+def text_number(value: Any) -> str | None:
+    """For text a user means as a number, how to write that number so YAML 1.1 (PyYAML) reads it
+    as one: '12' quoted, 1e3 and -2E-5 (no dot), 0o17 (YAML 1.2's octal) are text to it; else None.
+    Not resolved as numbers by the loader: an unquoted hex id such as 1E3 would become 1000.0."""
+    if not isinstance(value, str) or not re.search("[0-9]", value):
+        return None
+    text = value.strip()
+    if re.fullmatch(r"[-+]?[0-9][0-9_]*", text):
+        return str(int(text.replace("_", "")))  # 010 too: decimal, as a user and YAML 1.2 mean it
+    if re.fullmatch(r"[-+]?[0-9]+[eE][-+]?[0-9]+", text):  # the user's own form, with the dot YAML 1.1 needs
+        mantissa, exponent = re.split("[eE]", text)
+        return f"{mantissa}.0e{exponent if exponent[0] in '+-' else '+' + exponent}"
+    try:
+        number: int | float = int(text, 0)  # 0x10, 0o17, 0b101
+    except ValueError:
+        try:
+            number = float(text)  # 12.5, 1e3, 1_000.5
+        except ValueError:
+            return None
+    return yaml_number(number) if math.isfinite(number) else None
+
+
+def yaml_number(number: int | float) -> str:
+    """A number as YAML 1.1 reads it back: 1e+20 needs its dot (1.0e+20)."""
+    if isinstance(number, int):
+        return str(number)
+    text = repr(float(number))
+    mantissa, e, exponent = text.partition("e")
+    return f"{mantissa}.0e{exponent}" if e and "." not in mantissa else text
 
 
 def problems_error(problems: list[ScenarioError]) -> ScenarioError:

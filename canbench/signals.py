@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from . import wire
 from .dbc import load_dbc, message_of
+from .scenario import text_number
 
 if TYPE_CHECKING:
     from .analysis import RunResult
@@ -180,8 +181,10 @@ def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where
             return None  # the schema refused it
         if isinstance(v, str):
             if v not in choices:
-                fail(at, f"{v!r} is not in {key}'s value table"
-                     + (f" ({', '.join(choices)})" if choices else " (it has none)"))
+                form = text_number(v)  # a value-table name first, even one that looks like a number
+                listed = f" ({', '.join(choices)})" if choices else " (it has none)"
+                fail(at, f"YAML reads {v!r} as text, not a number for {key}: write {form}" if form
+                     else f"{v!r} is not in {key}'s value table{listed}")
                 ok = False
                 return None
             scaled = float(signal.conversion.raw_to_scaled(choices[v], decode_choices=False))

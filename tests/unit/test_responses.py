@@ -130,9 +130,10 @@ def test_unknown_names_are_problems():
                                     "then": {"signal": "TorqueResponse.TorqueActual"}, "within_ms": 5}]
     responses.rules(bad, {"vcan0": DBC}, load_dbc, lambda where, m: problems.append((".".join(map(str, where)), m)))
     where = [w for w, _ in problems]
-    assert where == ["expect.responses.0.then.signal", "expect.responses.1.then.signal",
-                     "expect.responses.2.when.command"]
-    assert "no command puts PedalData on vcan0" in problems[2][1]
+    assert where == ["expect.responses.0.then.signal", "expect.responses.1.then.equals",
+                     "expect.responses.1.when.signals.Torque", "expect.responses.2.when.command"]
+    assert problems[1][1] == "'Open' is not in DoorsLocked's value table ['Unlocked', 'Locked']"
+    assert "no command puts PedalData on vcan0" in problems[3][1]
 
 
 def test_readmes_scenario_shows_a_response_check_that_loads():
@@ -159,4 +160,5 @@ def test_a_stimulus_signal_the_command_lacks_is_a_problem():
     bad = doc({"command": "TorqueRequest", "signals": {"Torque": 1}}, {"signal": "TorqueResponse.TorqueActual"})
     responses.rules(bad, {"vcan0": DBC}, load_dbc, lambda where, m: problems.append((".".join(map(str, where)), m)))
     assert problems == [("expect.responses.0.when.signals.Torque",
-                         "TorqueRequest has no signal 'Torque' or 1 is not in its value table")]
+                         "TorqueRequest has no signal 'Torque' (it has ['RequestChecksum', 'RequestCounter', "
+                         "'TorqueRequested'])")]

@@ -40,7 +40,7 @@ def test_merge_keys_may_override(tmp_path):
 def test_exponent_without_a_dot_says_how_yaml_read_it(tmp_path):
     text = "name: t\nduration_s: 1e3\nbuses: [{name: vcan0}]\n" + ECU + "expect: {integrity: true}\n"
     found = problems(tmp_path, text)
-    assert found == ["2: duration_s: '1e3' is not of type 'number' (YAML reads 1e3 as text: write 1.0e+3)"]
+    assert found == ["2: duration_s: '1e3' is not of type 'number' (YAML reads '1e3' as text: write 1.0e+3)"]
 
 
 def test_a_yaml_error_is_one_line(tmp_path):
