@@ -4,6 +4,7 @@ the viewer, the signal expectations), a message's database cycle time and send t
 scenario's value cannot be a signal's."""
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from pathlib import Path
 
@@ -54,6 +55,41 @@ def name_problem(signal, value: str, in_yaml: bool = True) -> str | None:
         return f"YAML reads {value!r} as text, not a number for {signal.name}: write {form}"
     return (f"{value!r} is not in {signal.name}'s value table {names}" if names
             else f"{signal.name} has no value table: give a number")
+
+
+def value_range(signal) -> tuple[float, float, str]:
+    """(lowest, highest, where from) of the physical values a signal can carry: what its raw bits
+    encode at its scale and offset, narrowed to the DBC's minimum and maximum where it gives them
+    (cantools reads [0|0] as none); where from is empty when the DBC's limits are the range."""
+    lo, hi, encoded = -math.inf, math.inf, ""
+    if not signal.is_float:  # a float signal's bits carry any value a scenario would give
+        raw = (-(2 ** (signal.length - 1)), 2 ** (signal.length - 1) - 1) if signal.is_signed \
+            else (0, 2 ** signal.length - 1)
+        ends = sorted(r * signal.scale + signal.offset for r in raw)
+        lo, hi = ends
+        encoded = (f"what its {signal.length}{' signed' if signal.is_signed else ''} bits at scale "
+                   f"{signal.scale:g}, offset {signal.offset:g} carry: [{lo:g}, {hi:g}]")
+    dbc_lo, dbc_hi = signal.minimum, signal.maximum
+    inside = dbc_lo is not None and dbc_hi is not None and lo <= dbc_lo and dbc_hi <= hi
+    if dbc_lo is not None:
+        lo = max(lo, dbc_lo)
+    if dbc_hi is not None:
+        hi = min(hi, dbc_hi)
+    if inside or not encoded:
+        return lo, hi, ""
+    given = "" if dbc_lo is None and dbc_hi is None else \
+        f"the DBC's [{'' if dbc_lo is None else f'{dbc_lo:g}'}|{'' if dbc_hi is None else f'{dbc_hi:g}'}] and "
+    return lo, hi, given + encoded
+
+
+def range_problem(signal, value: float) -> str | None:
+    """Why a number is not one of the signal's physical values (None if it is one)."""
+    lo, hi, where = value_range(signal)
+    slack = 1e-9 * max(1.0, abs(lo) if math.isfinite(lo) else 0.0, abs(hi) if math.isfinite(hi) else 0.0)
+    if lo - slack <= value <= hi + slack:  # the ends as scale * raw + offset computes them
+        return None
+    return (f"{value:g} is outside {signal.name}'s range [{lo:g}, {hi:g}]{' ' + signal.unit if signal.unit else ''}"
+            + (f" ({where})" if where else ""))
 
 
 def cycle_time_ms(message) -> float | None:

@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .dbc import name_problem
+from .dbc import name_problem, range_problem, value_range
 from .stats import latency_stats
 
 if TYPE_CHECKING:
@@ -58,10 +58,13 @@ def _number(signal, value) -> float:
 
 
 def value_problem(signal, value) -> str | None:
-    """Why a condition's value cannot be the signal's (None if it can)."""
+    """Why a condition's value cannot be the signal's (None if it can): a name its value table
+    lacks, a number YAML read as text, a number outside what the signal carries (never met)."""
     if isinstance(value, str):
         return name_problem(signal, value)
-    return None
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return range_problem(signal, value)
+    return None  # the schema's
 
 
 def condition_problems(signal, spec: dict, where: list, fail) -> bool:
@@ -73,6 +76,17 @@ def condition_problems(signal, spec: dict, where: list, fail) -> bool:
         problem = value_problem(signal, value)
         if problem:
             fail([*where, *key], problem)
+            bad = True
+    rng = spec.get("range")
+    if isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, int | float) for x in rng):
+        lo, hi, source = value_range(signal)
+        if rng[0] > rng[1]:
+            fail([*where, "range"], f"min {rng[0]:g} is above max {rng[1]:g}")
+            bad = True
+        elif range_problem(signal, rng[0]) and range_problem(signal, rng[1]) and (rng[1] < lo or rng[0] > hi):
+            unit = f" {signal.unit}" if signal.unit else ""
+            fail([*where, "range"], f"[{rng[0]:g}, {rng[1]:g}] is outside {signal.name}'s range [{lo:g}, {hi:g}]"
+                 f"{unit}" + (f" ({source})" if source else "") + ": no value meets it")
             bad = True
     return bad
 
@@ -130,7 +144,8 @@ def _message_signal(db, key: str):
 
 def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
     """expect.responses read against the buses' DBCs (load: path -> database); every unknown
-    bus, message, signal or value-table name is a problem at its line (fail(where, message))."""
+    bus, message, signal or value-table name, and every value the signal cannot carry (a
+    condition no frame meets), is a problem at its line (fail(where, message))."""
     specs = (doc.get("expect") or {}).get("responses") or []
     buses = [b["name"] for b in doc.get("buses", []) if isinstance(b, dict) and "name" in b]
     out = []

@@ -34,7 +34,7 @@ from typing import Any
 import can
 from crccheck.crc import Crc8SaeJ1850
 
-from .dbc import cycle_time_ms, name_problem
+from .dbc import cycle_time_ms, name_problem, range_problem
 from .scenario import text_number
 
 
@@ -288,10 +288,7 @@ def value_problem(signal, value, ids: list[int] | None = None, in_yaml: bool = T
         return f"{value!r} is not a number"
     if ids is not None and value not in ids:  # cantools selects a page by the exact id
         return f"{value:g} is not one of {signal.name}'s multiplexer ids {ids}"
-    lo, hi = signal.minimum, signal.maximum
-    if (lo is not None and value < lo) or (hi is not None and value > hi):
-        return f"{value:g} is outside {signal.name}'s range [{lo:g}, {hi:g}] {signal.unit or ''}".rstrip()
-    return None
+    return range_problem(signal, value)
 
 
 def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile,
