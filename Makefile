@@ -246,12 +246,17 @@ $(VENV)/.installed: pyproject.toml
 CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run --rm --pull never -u $$(id -u):$$(id -g) \
            -v $(CURDIR):$(CURDIR) -w $(CURDIR) canbench/orchestrator:$(BENCH_TAG) canbench)
 CANBENCH_DEP = $(if $(wildcard $(VENV)/bin/canbench),,images)
+# Paths are quoted for the shell ('a b.log', it's.log); a TRACE or SCENARIO naming one file is one
+# argument, spaces and all, else a list of them (summarise and validate take several).
 summarise: $(CANBENCH_DEP)
-	@$(CANBENCH) summarise $(TRACE) $(if $(DBC),--dbc $(DBC))
+	@paths='$(subst ','\'',$(TRACE))'; if [ -e "$$paths" ]; then set -- "$$paths"; else set -- $$paths; fi; \
+	 $(CANBENCH) summarise "$$@" $(if $(DBC),--dbc '$(subst ','\'',$(DBC))')
 scaffold: $(CANBENCH_DEP)
-	@$(CANBENCH) scaffold $(TRACE) --name $(NAME) $(if $(DBC),--dbc $(DBC))
+	@$(CANBENCH) scaffold $(if $(TRACE),'$(subst ','\'',$(TRACE))') $(if $(NAME),--name '$(subst ','\'',$(NAME))') \
+	 $(if $(DBC),--dbc '$(subst ','\'',$(DBC))')
 validate: $(CANBENCH_DEP)
-	@$(CANBENCH) validate $(SCENARIO)
+	@paths='$(subst ','\'',$(SCENARIO))'; if [ -e "$$paths" ]; then set -- "$$paths"; else set -- $$paths; fi; \
+	 $(CANBENCH) validate "$$@"
 open:
 	@test -f reports/latest/report.html || { echo "open: no reports/latest/report.html (make test writes it)" >&2; exit 1; }
 	@echo "$(CURDIR)/reports/latest/report.html"
