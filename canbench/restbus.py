@@ -35,7 +35,7 @@ import can
 from crccheck.crc import Crc8SaeJ1850
 
 from .dbc import cycle_time_ms, name_problem, range_problem
-from .scenario import text_number
+from .scenario import YAML_BOOLS, text_number
 
 
 def xor8(data: bytes) -> int:
@@ -276,7 +276,9 @@ def value_problem(signal, value, ids: list[int] | None = None, in_yaml: bool = T
     """Why a value cannot be this signal's (None if it can); ids: a multiplexer's ids; in_yaml:
     a scenario's value (text that reads as a number is said to be YAML's text)."""
     if isinstance(value, bool):
-        return f"{value!r} is not a number or a name of {signal.name}'s value table"
+        said = [str(n) for n in (signal.choices or {}).values() if str(n).lower() in YAML_BOOLS[value]]
+        return (f"YAML reads {said[0]} as {str(value).lower()}, not a name of {signal.name}'s value table: "
+                f"write '{said[0]}'" if said else f"{value!r} is not a number or a name of {signal.name}'s value table")
     if isinstance(value, str):
         problem = name_problem(signal, value, in_yaml)
         if problem:

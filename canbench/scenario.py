@@ -244,8 +244,14 @@ def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
         wanted = error.validator_value if isinstance(error.validator_value, list) else [error.validator_value]
         if error.validator == "type" and {"number", "integer"} & set(wanted) and text_number(error.instance):
             hint = f" (YAML reads {error.instance!r} as text: write {text_number(error.instance)})"
+        elif isinstance(error.instance, bool) and error.validator in ("type", "oneOf") and "boolean" not in wanted:
+            hint = " (YAML 1.1 reads yes, no, on and off as true and false: quote a name meant as text)"
         problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}{hint}"))
     return problems
+
+
+# the words PyYAML (YAML 1.1) reads as booleans, in any of its cases: a value-table name On is true
+YAML_BOOLS = {True: ("yes", "on", "true"), False: ("no", "off", "false")}
 
 
 def text_number(value: Any) -> str | None:

@@ -130,3 +130,38 @@ def test_a_signal_trace_is_csv_not_yaml(tmp_path):
     with pytest.raises(ScenarioError) as e:
         scenario.load(tmp_path / "s.yaml")
     assert str(e.value) == f"{tmp_path / 'fl.csv'}:1: WheelSpeedFL has no value table: give a number"
+
+
+ON_OFF = """\
+VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: GW
+
+BO_ 768 Lamp: 8 GW
+ SG_ Light : 0|1@1+ (1,0) [0|1] "" GW
+
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_DEF_DEF_ "GenMsgCycleTime" 0;
+BA_ "GenMsgCycleTime" BO_ 768 100;
+
+VAL_ 768 Light 0 "Off" 1 "On" ;
+"""
+
+
+def test_a_value_table_name_yaml_reads_as_a_boolean_says_so(tmp_path):
+    (tmp_path / "lamp.dbc").write_text(ON_OFF)
+    path = tmp_path / "s.yaml"
+    path.write_text("name: s\nduration_s: 10\ndbc: lamp.dbc\nbuses: [{name: vcan0}]\n"
+                    "ecus: [{name: e, bus: vcan0, role: restbus, dbc_node: GW, run_s: 1, signals: {Lamp.Light: On}}]\n"
+                    "expect:\n  signals:\n    Lamp.Light: {equals: Off}\n")
+    bools = " (YAML 1.1 reads yes, no, on and off as true and false: quote a name meant as text)"
+    assert [str(p).removeprefix(f"{path}:") for p in validate.problems(path)] == [
+        "5: ecus.0.signals.Lamp.Light: True is not valid under any of the given schemas" + bools,
+        "5: ecus.0.signals.Lamp.Light: YAML reads On as true, not a name of Light's value table: write 'On'",
+        "8: expect.signals.Lamp.Light.equals: False is not of type 'number', 'string'" + bools]
+    path.write_text(path.read_text().replace("Light: On", "Light: 'On'").replace("equals: Off", "equals: 'Off'"))
+    assert validate.problems(path) == []
