@@ -12,8 +12,9 @@ for the report thinned to at most PLOT_POINTS points (every other point dropped 
 step doubles; 16 bytes a point), so an hour of traffic takes the memory of a minute of it: about
 40 KiB per gated signal and side at most.
 
-Validation (gates): a name the bus's DBC lacks, a value-table name the signal lacks, or an
-expectation on a bus without a DBC is a scenario problem at its file:line."""
+Validation (gates): a name the bus's DBC lacks, a value-table name the signal lacks, a number
+YAML read as text ('12' quoted), or an expectation on a bus without a DBC is a scenario problem at
+its file:line."""
 from __future__ import annotations
 
 import math

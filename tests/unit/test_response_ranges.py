@@ -99,8 +99,8 @@ def test_values_at_the_ends_and_ranges_that_overlap_pass(tmp_path):
 
 
 def test_a_value_the_bits_cannot_carry_is_refused_before_the_run(tmp_path):
-    # Raw8 = 200 is raw 420 in 8 bits: validate said ok, then cantools raised OverflowError at the
-    # responder's first answer, in the ECU's container
+    # Raw8 = 200 is raw 420 in 8 bits: validate said ok, then every answer raised OverflowError in
+    # cantools, which the responder counts as an undecodable request: nothing answered, no word why
     (tmp_path / "r.dbc").write_text(DBC)
     path = tmp_path / "s.yaml"
     path.write_text(HEAD.replace("set: {RespVal: ReqVal}", "set: {RespVal: ReqVal, Raw8: 200}")
