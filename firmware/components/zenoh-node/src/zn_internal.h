@@ -52,6 +52,7 @@ struct bus_counters {
 	uint64_t tx_samples, tx_frames, can_tx_errors, tx_queue_full, tx_abandoned;
 	uint64_t tx_rejected[ZN_WIRE_REASONS];
 	uint64_t can_reopens;
+	uint64_t direct_frames, direct_stalls; /* immediate mode: frames the reader put itself; its puts that stalled */
 	uint64_t tx_rejected_stale, tx_unstamped; /* freshness (tx_max_age_ms): refused as stale; no source time */
 };
 
@@ -80,6 +81,16 @@ struct bus {
 		uint64_t published_frames, drops; /* counters of this class */
 	} ring[ZN_MAX_QOS_CLASSES];
 	uint32_t queued;
+	/* immediate mode, the reader's own put (zn_rx.c, Direct puts); all guarded by lock.
+	 * direct: the reader is publishing (its put started at direct_since, monotonic ns);
+	 * publishing: the publisher is; degraded: a put stalled, the reader hands over until the
+	 * publisher caught up; watching: the publisher polls for a stalled put (direct_puts: the
+	 * reader's count, to see when its puts have stopped); rescuing: the publisher reads the
+	 * CAN port meanwhile, reader_back: the reader returned and waits on handback */
+	int direct, publishing, degraded, watching, rescuing, reader_back;
+	int64_t direct_since;
+	uint64_t direct_puts;
+	zn_cond_t *handback;
 	zn_qos_table_t qos; /* cfg.rx_qos_table over cfg.rx_qos */
 	uint64_t next_seq;
 	uint8_t *payload, *attachment; /* the publisher's sample being built (batch_max_frames) */

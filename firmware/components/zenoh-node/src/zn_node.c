@@ -47,6 +47,7 @@ static esp_err_t init_bus(struct bus *b, size_t index)
 	ZN_TRY(zn_mutex_new(&b->lock));
 	ZN_TRY(zn_mutex_new(&b->can_lock));
 	ZN_TRY(zn_cond_new(&b->nonempty));
+	ZN_TRY(zn_cond_new(&b->handback));
 	ZN_TRY(zn_mutex_new(&b->tx_lock));
 	ZN_TRY(zn_cond_new(&b->tx_ready));
 	ZN_TRY(zn_cond_new(&b->tx_idle));
@@ -106,6 +107,7 @@ static void release(int final_stats)
 		free(b->payload);
 		free(b->attachment);
 		zn_cond_free(b->nonempty);
+		zn_cond_free(b->handback);
 		zn_cond_free(b->tx_ready);
 		zn_cond_free(b->tx_idle);
 		zn_mutex_free(b->tx_lock);

@@ -11,7 +11,18 @@
  * publisher on the same key, and the publisher serves the highest priority
  * first, so a flood in one class never holds back, nor takes queue room from,
  * another. Sequence numbers stay per bus: a subscriber sees them without gaps
- * across the classes, in order within a class, not across classes. */
+ * across the classes, in order within a class, not across classes.
+ *
+ * Direct puts (immediate mode): while the session is healthy and nothing is
+ * queued or being published, the reader puts a burst itself, one wakeup of
+ * the publisher fewer per frame. A put can block (congestion control block, a
+ * frozen router), so the publisher watches while the reader puts: a reader
+ * away from its port for DIRECT_STALL_NS makes it read the CAN port in the
+ * reader's place into the queue (the rescue), and the queue is the path again
+ * (degraded) until the publisher has emptied it with puts that no longer
+ * stall. Order is kept: the reader puts only when the queue is empty, and
+ * frames of its burst not yet put when a put stalled go back to the queue's
+ * front, ahead of what the rescue read after them. */
 #include <assert.h>
 #include <inttypes.h>
 #include <stdlib.h>
@@ -29,6 +40,14 @@ static_assert(sizeof(struct rx_entry) <= 40, "a queued CAN frame (rx_queue_frame
 #define CLASS_CHUNK 4
 
 #define HOLD_FIRST_NS 1000000 /* batching: the first sleep of a stretch, before its rate is known */
+
+/* Direct puts: a reader away from its port putting for longer than this has stalled and the
+ * publisher reads in its place; the publisher looks this often while the reader puts; in a rescue it looks this
+ * often whether the reader is back. Together they bound how long the CAN port goes unread
+ * (about 20 ms: 180 frames of a saturated bus, against the port's capacity of 256) */
+#define DIRECT_STALL_NS 10000000
+#define WATCH_MS 10
+#define RESCUE_POLL_MS 10
 
 static int flush_due[ZN_MAX_BUSES]; /* batching: the reader's drain at a period's end is queued (b->lock) */
 
@@ -182,6 +201,65 @@ static size_t take(struct bus *b, size_t cls, struct rx_entry *out, size_t max)
 	return n;
 }
 
+/* Queues admitted frames of a burst (b->lock held); returns how many were admitted. */
+static size_t queue_burst_locked(struct bus *b, const zn_can_rx_t *rx, size_t n)
+{
+	size_t admitted = 0;
+	for (size_t i = 0; i < n; i++)
+		if (admit(b, &rx[i].msg) == ESP_OK) {
+			enqueue_locked(b, &rx[i].msg, rx[i].rx_time_ns);
+			admitted++;
+		}
+	return admitted;
+}
+
+/* The reader's put stalled: read the CAN port in its place into the queue until the reader is
+ * back (b->lock held on entry and return). The reader is inside a put, so the port is not
+ * read twice; it reopens a lost port itself once back. */
+static void rescue(struct bus *b, zn_can_rx_t *rx)
+{
+	b->rescuing = b->degraded = 1;
+	if (COUNT(b->n.direct_stalls) == 0)
+		zn_log("W", "%s: a put stalled (Zenoh session blocked): the publisher reads the bus meanwhile and "
+			    "publishes from the queue until it caught up (direct_stalls counts these)", b->name);
+	while (!b->reader_back && !zn_node.stopping) {
+		zn_mutex_unlock(b->lock);
+		size_t n = 0;
+		esp_err_t rc = zn_can_receive_burst(b->can, rx, ZN_CAN_BURST_MAX, &n, RESCUE_POLL_MS);
+		if (rc == ESP_FAIL)
+			zn_stop_wait(RESCUE_POLL_MS); /* bus gone: the reader reopens it when back */
+		zn_mutex_lock(b->lock);
+		if (rc == ESP_OK)
+			queue_burst_locked(b, rx, n);
+	}
+	b->rescuing = b->reader_back = 0;
+	zn_cond_signal(b->handback);
+}
+
+/* Immediate mode: waits until frames are queued and the reader is not putting, watching
+ * the reader's puts meanwhile (b->lock held). */
+static void wait_immediate(struct bus *b, zn_can_rx_t *rx)
+{
+	uint64_t seen = b->direct_puts;
+	for (;;) {
+		if (!b->direct && (b->queued || zn_node.stopping))
+			return;
+		if (b->direct && zn_monotonic_ns() - b->direct_since >= DIRECT_STALL_NS) {
+			rescue(b, rx);
+			continue;
+		}
+		int timeout_ms = -1;
+		if (b->watching) {
+			if (!b->direct && b->direct_puts == seen)
+				b->watching = 0; /* no put since the last look: sleep until the reader puts again */
+			else
+				timeout_ms = WATCH_MS;
+			seen = b->direct_puts;
+		}
+		zn_cond_wait(b->nonempty, b->lock, timeout_ms);
+	}
+}
+
 void zn_rx_publisher_thread(void *arg)
 {
 	struct bus *b = arg;
@@ -189,16 +267,18 @@ void zn_rx_publisher_thread(void *arg)
 	size_t batch_max = period_ms ? zn_node.cfg.batch_max_frames : 1;
 	size_t take_max = period_ms ? batch_max : b->qos.class_count > 1 ? CLASS_CHUNK : PUBLISH_CHUNK;
 	struct rx_entry *taken = malloc(take_max * sizeof(*taken));
-	if (!taken) {
+	zn_can_rx_t *rx = period_ms ? NULL : malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* a rescue's reads */
+	if (!taken || (!period_ms && !rx)) {
 		zn_log("E", "%s: out of memory for the publisher", b->name);
+		free(taken);
 		return;
 	}
 	int64_t next_flush = zn_monotonic_ns() + (int64_t)period_ms * 1000000;
 	for (;;) {
 		zn_mutex_lock(b->lock);
 		if (period_ms == 0) {
-			while (b->queued == 0 && !zn_node.stopping)
-				zn_cond_wait(b->nonempty, b->lock, -1);
+			wait_immediate(b, rx);
+			b->publishing = 1;
 		} else {
 			/* wait for the period to end, unless a full batch is already there */
 			while (!zn_node.stopping && b->queued < batch_max && !flush_due[b->index]) {
@@ -221,6 +301,7 @@ void zn_rx_publisher_thread(void *arg)
 		/* a round: highest class first; immediate mode starts over after the first class
 		 * that had frames (a higher one may have some by now), batching mode takes a batch of each */
 		size_t round = 0;
+		int64_t round_start = zn_monotonic_ns();
 		for (size_t c = 0; c < b->qos.class_count; c++) {
 			if (c)
 				zn_mutex_lock(b->lock);
@@ -232,17 +313,27 @@ void zn_rx_publisher_thread(void *arg)
 			if (n && !period_ms)
 				break;
 		}
+		if (!period_ms) {
+			int64_t took = zn_monotonic_ns() - round_start;
+			zn_mutex_lock(b->lock);
+			b->publishing = 0;
+			/* caught up with puts that no longer stall: the reader may put again */
+			if (b->degraded && !b->queued && !b->rescuing && took < DIRECT_STALL_NS)
+				b->degraded = 0;
+			zn_mutex_unlock(b->lock);
+		}
 		if (stopping && round == 0)
 			break; /* queues flushed */
 	}
 	free(taken);
+	free(rx);
 }
 
 /* ---- the reader: bursts from the CAN port ----
  *
  * Immediate mode: each wakeup reads everything queued (one zn_can_receive_burst
  * per ZN_CAN_BURST_MAX frames) and queues it under one lock, waking the
- * publisher once if it was idle. Batching mode (publish_period_ms > 0): the
+ * publisher once if it was idle, or puts it itself (Direct puts, above). Batching mode (publish_period_ms > 0): the
  * port keeps the frames and their stamps; after the first frame of an active
  * stretch the reader sleeps until the period ends, reads all, and asks the
  * publisher to flush: one reader and one publisher wakeup per period. It wakes
@@ -251,18 +342,93 @@ void zn_rx_publisher_thread(void *arg)
  * worth of frames; a stretch starts with a 1 ms sleep, each next one at most
  * twice the last, so a rate is known before a sleep is long. A period without
  * frames ends the stretch (the reader then blocks until the next frame). The
- * reader never waits for Zenoh. */
+ * CAN port never waits for Zenoh: a reader stuck in a put is read for. */
 
 
-/* Queues one burst: one lock; the publisher woken once at most. */
-static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, int flush)
+/* May the reader put a burst of n itself? (b->lock held) Immediate mode, connected, no stall
+ * since the publisher last caught up, nothing queued or being published (order), and the
+ * burst not full: a full one means more waits in the port, and a reader that also put would
+ * fall behind the bus where the publisher in parallel keeps up (and a flood beyond both is
+ * then lost in the queue, counted, not in the port). */
+static int direct_ok(const struct bus *b, size_t n)
+{
+	return !zn_node.cfg.publish_period_ms && n < ZN_CAN_BURST_MAX && !b->queued && !b->publishing &&
+	       !b->degraded && !b->rescuing && READ(zn_node.connected) && !zn_node.stopping;
+}
+
+/* Puts frames [i, n) of f back at the front of their queues, ahead of what came after them (b->lock held). */
+static void requeue_front_locked(struct bus *b, const struct rx_entry *f, size_t n)
+{
+	for (size_t i = n; i-- > 0;) {
+		struct rx_ring *r = &b->ring[zn_qos_class_of(&b->qos, &f[i].msg)];
+		if (r->len == r->cap) { /* the rescue filled the queue: these are lost as a full queue loses */
+			COUNT(b->n.rx_queue_drops);
+			COUNT(r->drops);
+			continue;
+		}
+		r->head = (r->head + r->cap - 1) % r->cap;
+		r->queue[r->head] = f[i];
+		r->len++;
+		b->queued++;
+	}
+}
+
+/* The reader puts a burst itself, one sample per frame (b->lock held on entry, released on
+ * return). When a put stalls (the publisher's rescue, or the reader sees it took too long),
+ * the rest goes to the queue, and the reader back to its port. */
+static void put_direct(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx_entry *own)
+{
+	size_t k = 0;
+	for (size_t i = 0; i < n; i++)
+		if (admit(b, &rx[i].msg) == ESP_OK)
+			own[k++] = (struct rx_entry){ .msg = rx[i].msg, .rx_time_ns = rx[i].rx_time_ns, .seq = b->next_seq++ };
+	size_t done = 0;
+	if (k) {
+		b->direct = 1;
+		b->direct_puts++;
+		if (!b->watching) { /* the publisher sleeps for good: from now on it watches */
+			b->watching = 1;
+			zn_cond_signal(b->nonempty);
+		}
+	}
+	/* the port goes unread from now on: what counts is the whole burst's time, not one put's */
+	b->direct_since = zn_monotonic_ns();
+	while (done < k && !b->degraded && !b->rescuing) {
+		zn_mutex_unlock(b->lock);
+		publish(b, zn_qos_class_of(&b->qos, &own[done].msg), &own[done], 1);
+		int64_t away = zn_monotonic_ns() - b->direct_since; /* only the reader writes it */
+		COUNT(b->n.direct_frames);
+		zn_mutex_lock(b->lock);
+		done++;
+		if (away >= DIRECT_STALL_NS)
+			b->degraded = 1; /* slow even without a rescue: the queue takes the rest */
+	}
+	b->direct = 0;
+	/* before the rescue ends: the publisher takes from the queue as soon as it does, and
+	 * these are older than all it read */
+	requeue_front_locked(b, own + done, k - done);
+	if (b->rescuing) { /* the publisher reads in our place: it stops within RESCUE_POLL_MS */
+		b->reader_back = 1;
+		while (b->rescuing)
+			zn_cond_wait(b->handback, b->lock, -1);
+	}
+	if (b->queued)
+		zn_cond_signal(b->nonempty);
+	zn_mutex_unlock(b->lock);
+}
+
+/* Queues one burst: one lock; the publisher woken once at most. In immediate mode the
+ * reader puts it itself when it may (own: room for ZN_CAN_BURST_MAX frames). */
+static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, int flush, struct rx_entry *own)
 {
 	size_t wake_at = zn_node.cfg.publish_period_ms ? zn_node.cfg.batch_max_frames : 1;
 	zn_mutex_lock(b->lock);
+	if (n && own && direct_ok(b, n)) {
+		put_direct(b, rx, n, own);
+		return;
+	}
 	size_t before = b->queued;
-	for (size_t i = 0; i < n; i++)
-		if (admit(b, &rx[i].msg) == ESP_OK)
-			enqueue_locked(b, &rx[i].msg, rx[i].rx_time_ns);
+	queue_burst_locked(b, rx, n);
 	if (flush)
 		flush_due[b->index] = 1;
 	if (flush || (before < wake_at && b->queued >= wake_at))
@@ -271,7 +437,7 @@ static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, int flu
 }
 
 /* Reads what the port holds, a burst at a time until one comes back short; queues each. */
-static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, int timeout_ms, size_t *total)
+static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, struct rx_entry *own, int timeout_ms, size_t *total)
 {
 	*total = 0;
 	for (;;) {
@@ -279,7 +445,7 @@ static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, int timeout_ms, size_t *t
 		esp_err_t rc = zn_can_receive_burst(b->can, rx, ZN_CAN_BURST_MAX, &n, timeout_ms);
 		if (rc != ESP_OK)
 			return *total ? ESP_OK : rc; /* a lost bus shows on the next call */
-		submit_burst(b, rx, n, 0);
+		submit_burst(b, rx, n, 0, own);
 		*total += n;
 		if (n < ZN_CAN_BURST_MAX)
 			return ESP_OK;
@@ -289,7 +455,7 @@ static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, int timeout_ms, size_t *t
 
 static void request_flush(struct bus *b)
 {
-	submit_burst(b, NULL, 0, 1);
+	submit_burst(b, NULL, 0, 1, NULL);
 }
 
 void zn_rx_reader_thread(void *arg)
@@ -298,8 +464,11 @@ void zn_rx_reader_thread(void *arg)
 	int backoff_ms = CAN_REOPEN_MIN_MS;
 	int64_t period_ns = (int64_t)zn_node.cfg.publish_period_ms * 1000000;
 	zn_can_rx_t *rx = malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* off the stack: a small task's budget */
-	if (!rx) {
+	/* immediate mode: the frames of a burst the reader puts itself */
+	struct rx_entry *own = period_ns ? NULL : malloc(ZN_CAN_BURST_MAX * sizeof(*own));
+	if (!rx || (!period_ns && !own)) {
 		zn_log("E", "%s: out of memory for the reader", b->name);
+		free(rx);
 		return;
 	}
 	int64_t flush_at = 0;	       /* batching: end of the current period; 0 = idle */
@@ -315,7 +484,7 @@ void zn_rx_reader_thread(void *arg)
 			timeout_ms = 0;
 		}
 		size_t n = 0;
-		esp_err_t rc = drain(b, rx, timeout_ms, &n);
+		esp_err_t rc = drain(b, rx, own, timeout_ms, &n);
 		if (rc == ESP_OK || rc == ESP_ERR_TIMEOUT) {
 			backoff_ms = CAN_REOPEN_MIN_MS;
 			if (!period_ns)
@@ -370,6 +539,7 @@ void zn_rx_reader_thread(void *arg)
 	}
 	/* stopping: what the port still holds goes out with the publisher's last flush */
 	size_t n = 0;
-	drain(b, rx, 0, &n);
+	drain(b, rx, NULL, 0, &n);
 	free(rx);
+	free(own);
 }
