@@ -93,6 +93,8 @@ class Bench(Rig):
     def __init__(self, args, workdir: Path):
         super().__init__(Path(args.ucan_build), workdir)
         self.args = args
+        # Zenoh's thread pools of zenoh-node alone (--zenoh-runtime), never the router's, the load's or the reference's
+        self.bridge_env = {**self.env, **({"ZENOH_RUNTIME": args.zenoh_runtime} if args.zenoh_runtime else {})}
 
     def run_one(self, system: str, buses: int, direction: str = "can-to-zenoh") -> dict:
         names = [f"vcan{i}" for i in range(buses)]
@@ -116,7 +118,8 @@ class Bench(Rig):
             else:
                 cmd = [sys.executable, "-m", "bench.refbridge", "--router", endpoint, "--can", ",".join(group)]
             try:
-                bridges.append(start_bridge(self.procs, cmd, self.env, self.workdir / f"{system}-{k}.log", session,
+                env = self.bridge_env if system.startswith("zenoh-node") else self.env
+                bridges.append(start_bridge(self.procs, cmd, env, self.workdir / f"{system}-{k}.log", session,
                                             f"vehicle/can/bridges/*/{group[0]}/**", cwd=REPO))
             except RunError as e:
                 sys.exit(f"{system} with {buses} buses did not come up: {e}")
@@ -259,16 +262,22 @@ def main() -> int:
     add_tool_arguments(ap)
     ap.add_argument("--buses", default=",".join(map(str, BUS_COUNTS)))
     ap.add_argument("--directions", default=",".join(DIRECTIONS))
+    ap.add_argument("--systems", default=",".join(SYSTEMS), help="which systems (comma-separated; ratios need "
+                    "python-ref)")
+    ap.add_argument("--zenoh-runtime", default="", help="ZENOH_RUNTIME for zenoh-node only (docs/benchmark.md)")
     ap.add_argument("--update-readme", action="store_true",
                     help="replace README's performance table (between the bench markers) with this run's")
     args = ap.parse_args()
+    systems = args.systems.split(",")
+    if set(systems) - set(SYSTEMS):
+        ap.error(f"--systems: unknown {', '.join(sorted(set(systems) - set(SYSTEMS)))} (known: {', '.join(SYSTEMS)})")
     run_id, out = run_id_and_output(args)
     results = []
     for direction in args.directions.split(","):
         lossy: set[str] = set()  # systems past their first load with loss: no higher load for them
         for buses in [int(b) for b in args.buses.split(",")]:
             for system in SYSTEMS if direction == "can-to-zenoh" else ZENOH_TO_CAN_SYSTEMS:
-                if system in lossy:
+                if system in lossy or system not in systems:
                     continue
                 with tempfile.TemporaryDirectory(prefix="bench-bridge-") as tmp:
                     bench = Bench(args, Path(tmp))
@@ -284,9 +293,10 @@ def main() -> int:
     for direction in args.directions.split(","):
         plot(results, out / f"throughput_{direction.replace('-', '_')}.png", direction)
     machine = machine_line()
-    (out / "bench.json").write_text(json.dumps({"run_id": run_id, "machine": machine, "results": results},
-                                               indent=2))
-    (out / "bench.md").write_text(f"Bridge benchmark {run_id} on {machine}\n\n{md}\n")
+    (out / "bench.json").write_text(json.dumps({"run_id": run_id, "machine": machine,
+                                                "zenoh_runtime": args.zenoh_runtime, "results": results}, indent=2))
+    runtime = f" (zenoh-node with ZENOH_RUNTIME={args.zenoh_runtime})" if args.zenoh_runtime else ""
+    (out / "bench.md").write_text(f"Bridge benchmark {run_id} on {machine}{runtime}\n\n{md}\n")
     print(md)
     print(f"written: {out}/bench.json, bench.md, throughput_*.png")
     if args.update_readme:

@@ -213,15 +213,23 @@ def main() -> int:
     ap.add_argument("--strace", action="store_true", help="--can-side: syscalls per frame (strace -c)")
     ap.add_argument("--zenoh-runtime", default="", help="ZENOH_RUNTIME for the bridge only, e.g. "
                     "'(rx: (handover: tx), app: (handover: tx), net: (handover: tx), acc: (handover: tx))'")
+    ap.add_argument("--modes", default="immediate,batching,zenoh-to-can",
+                    help="which runs: CAN -> Zenoh immediate and batching, Zenoh -> CAN (comma-separated)")
     args = ap.parse_args()
     run_id, out = run_id_and_output(args)
     results = []
     rates = [int(rate) for rate in args.rates.split(",")]
+    modes = args.modes.split(",")
+    unknown = set(modes) - {"immediate", "batching", "zenoh-to-can"}
+    if unknown:
+        ap.error(f"--modes: unknown {', '.join(sorted(unknown))}")
+    can_modes = [m for m in ("immediate", "batching") if m in modes]
     if args.can_side:
-        plan = [("can-side", mode, rate) for mode in ("immediate", "batching") for rate in rates + [CAN_SIDE_FAST]]
+        plan = [("can-side", mode, rate) for mode in can_modes for rate in rates + [CAN_SIDE_FAST]]
     else:
-        plan = [("can-to-zenoh", mode, rate) for mode in ("immediate", "batching") for rate in rates]
-        plan.append(("zenoh-to-can", "immediate", TX_RATE))
+        plan = [("can-to-zenoh", mode, rate) for mode in can_modes for rate in rates]
+        if "zenoh-to-can" in modes:
+            plan.append(("zenoh-to-can", "immediate", TX_RATE))
     for direction, mode, rate in plan:
         with tempfile.TemporaryDirectory(prefix="bench-wakeups-", dir="/tmp") as tmp:  # short: unix socket path
             run = Run(args, Path(tmp))
