@@ -10,7 +10,7 @@ from functools import wraps
 
 from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult
-from .commands import stale_at_put, stamp_ages_ns
+from .commands import explained_refusals, stale_at_put, stamp_ages_ns
 from .dbc import cycle_time_ms, load_dbc
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import FAULT_LEAD_NS, describe
@@ -431,9 +431,9 @@ def freshness(result: RunResult) -> dict:
         pairs = list(c.matched) + [(s, r) for s, r, _ in c.corrupted]
         aged = [(s, r, (r.t_ns - s.t_ns + ages.get(key(s), 0)) / 1e6) for s, r in pairs]
         late = sorted((a for a in aged if a[2] > deadline_ms + FRESHNESS_SLACK_MS), key=lambda a: -a[2])
-        reached = {id(s) for s, _ in pairs}
         per_window = [{"action": w["action"], "start_s": w.get("start_s"), "lost": 0} for w in windows]
-        in_faults = [o for o in c.lost_in_faults if key(o) not in aged_out]  # those stamped stale: counted apart
+        stamped_refused, in_faults = explained_refusals(b.bus, b.commands, c, aged_out)
+        refused_late = getattr(b, "refused_late", [])
         for o in in_faults:
             at = [i for i, w in enumerate(windows) if w["start_ns"] - FAULT_LEAD_NS <= o.t_ns]
             if at:
@@ -449,9 +449,12 @@ def freshness(result: RunResult) -> dict:
                               for s, r, age in late[:10]],
             "refused_stale": (stats or {}).get("tx_rejected", {}).get("stale"),
             "stamped_stale": sum(1 for s in b.commands if key(s) in aged_out),
-            "stamped_stale_refused": sum(1 for s in b.commands if key(s) in aged_out and id(s) not in reached),
+            "stamped_stale_refused": stamped_refused,
             "lost_in_faults": len(in_faults),
             "lost_per_window": per_window,
+            "refused_after_late_delivery": len(refused_late),
+            "refused_late_examples": [f"{describe(o)}: the next {o.frame.can_id:X} reached the bus {upper:.1f} ms "
+                                      "after this one's source time" for o, upper in refused_late[:10]],
         }
     result.metrics["freshness"] = out
     return out
@@ -469,11 +472,13 @@ def no_stale_commands(result: RunResult) -> list[str] | None:
             problems.append(f"{bus}: {f['late']} of {f['reached_bus']} commands reached the bus older than the "
                             f"deadline {f['deadline_ms']} ms + {f['slack_ms']} ms (oldest {f['max_age_ms']:.1f} ms): "
                             + "; ".join(f["late_examples"]) + (" ..." if f["late"] > len(f["late_examples"]) else ""))
-        explained = f["stamped_stale_refused"] + f["lost_in_faults"]
+        late = f.get("refused_after_late_delivery", 0)
+        explained = f["stamped_stale_refused"] + f["lost_in_faults"] + late
         if f["refused_stale"] is not None and f["refused_stale"] > explained:
             problems.append(f"{bus}: the bridge refused {f['refused_stale']} commands as stale; only {explained} are "
                             f"explained ({f['stamped_stale_refused']} stamped too old when put, {f['lost_in_faults']} "
-                            "lost inside fault windows): commands refused without a stalled link")
+                            f"lost inside fault windows, {late} delivered late): commands refused without a "
+                            "stalled link")
     return problems
 
 

@@ -51,6 +51,38 @@ def stale_at_put(scenario: Scenario) -> set[tuple[str, int, bool]]:
     return {k for k, age_ns in stamp_ages_ns(scenario).items() if age_ns > deadline_ns} if deadline_ns else set()
 
 
+def explained_refusals(bus: str, commands: list, tx, stale: set[tuple[str, int, bool]]) -> tuple[int, list]:
+    """What explains the bridge's stale refusals on one bus, apart from a late link: how many commands
+    stamped too old when put never reached the bus, and the commands lost inside fault windows (those
+    stamped too old counted apart)."""
+    def key(o):
+        return (bus, o.frame.can_id, o.frame.extended)
+    reached = {id(s) for s, _ in tx.matched} | {id(s) for s, _, _ in tx.corrupted}
+    stamped_refused = sum(1 for s in commands if key(s) in stale and id(s) not in reached)
+    return stamped_refused, [o for o in tx.lost_in_faults if key(o) not in stale]
+
+
+def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_ns: int) -> list[tuple]:
+    """(command, upper bound of its age at the bridge in ms) for each lost command a late link explains:
+    the next command of its id (one publisher, one QoS: it cannot overtake it) reached the bus more than
+    the deadline after the lost one's source time, so the lost one reached the bridge at least as late,
+    as far as the bench can see: stale, and refused as the bridge must. Oldest first. A lost command
+    with no later one of its id on the bus is not explained."""
+    delivered: dict[tuple[int, bool], list[tuple[int, int]]] = {}
+    for s, r in matched:
+        delivered.setdefault((s.frame.can_id, s.frame.extended), []).append((s.index, r.t_ns))
+    out = []
+    for o in lost:
+        later = [t for i, t in delivered.get((o.frame.can_id, o.frame.extended), []) if i > o.index]
+        if not later:
+            continue
+        source_ns = o.t_ns - ages_ns.get((bus, o.frame.can_id, o.frame.extended), 0)
+        upper_ms = (min(later) - source_ns) / 1e6
+        if upper_ms * 1e6 > deadline_ns:
+            out.append((o, round(upper_ms, 3)))
+    return sorted(out, key=lambda item: -item[1])
+
+
 def _messages(c: Commands):
     if c.signal_plan is not None:  # commands in signals, encoded with cantools
         return restbus.command_frames(c)
