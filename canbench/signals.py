@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import wire
-from .dbc import load_dbc, message_of
+from .dbc import load_dbc, message_of, range_problem, value_range
 from .scenario import text_number
 
 if TYPE_CHECKING:
@@ -191,6 +191,11 @@ def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where
             scaled = float(signal.conversion.raw_to_scaled(choices[v], decode_choices=False))
             names[scaled] = v
             return scaled
+        problem = range_problem(signal, v)  # a value no frame can carry: the gate could only fail
+        if problem:
+            fail(at, problem)
+            ok = False
+            return None
         return float(v)
 
     rng = spec.get("range")
@@ -202,6 +207,13 @@ def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where
     if isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, int | float) for x in rng) and rng[0] > rng[1]:
         fail([*where, "range"], f"min {rng[0]} is above max {rng[1]}")
         ok = False
+    elif isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, int | float) for x in rng):
+        lo, hi, source = value_range(signal)
+        if rng[1] < lo or rng[0] > hi:  # every value the signal carries is outside the gate
+            unit = f" {signal.unit}" if signal.unit else ""
+            fail([*where, "range"], f"[{rng[0]:g}, {rng[1]:g}] is outside {signal.name}'s range [{lo:g}, {hi:g}]"
+                 f"{unit}" + (f" ({source})" if source else "") + ": every frame would fail it")
+            ok = False
     for name, raw in choices.items():  # every value-table entry can be shown by name
         names.setdefault(float(signal.conversion.raw_to_scaled(raw, decode_choices=False)), name)
     if not ok:

@@ -115,3 +115,19 @@ def test_value_range_of_float_and_limited_signals():
     assert dbc.value_range(resp.get_signal_by_name("RespVal")) == (-1000, 1000, "")
     assert dbc.value_range(resp.get_signal_by_name("Flt"))[:2] == (float("-inf"), float("inf"))
     assert dbc.range_problem(resp.get_signal_by_name("Raw8"), 117.5) is None  # 255 * 0.5 - 10
+
+
+@pytest.mark.parametrize("gate,said", [
+    ("{equals: 1500}", "Resp.RespVal.equals: 1500 is outside RespVal's range [-1000, 1000] Nm"),
+    ("{one_of: [0, -2000]}", "Resp.RespVal.one_of.1: -2000 is outside RespVal's range [-1000, 1000] Nm"),
+    ("{range: [2000, 3000]}",
+     "Resp.RespVal.range: [2000, 3000] is outside RespVal's range [-1000, 1000] Nm: every frame would fail it"),
+])
+def test_a_signal_gate_no_frame_can_meet_fails_validation(tmp_path, gate, said):
+    # expect.signals: a value or band the signal never carries is a gate that can only fail
+    assert problems(tmp_path, f"expect:\n  signals:\n    Resp.RespVal: {gate}\n") == [f"9: expect.signals.{said}"]
+
+
+def test_a_signal_gate_overlapping_the_range_passes(tmp_path):
+    body = "expect:\n  signals:\n    Resp.RespVal: {range: [900, 5000]}\n    Resp.Raw8: {one_of: [-10, 117.5]}\n"
+    assert problems(tmp_path, body) == []
