@@ -69,3 +69,29 @@ def test_a_frozen_router_never_stops_the_can_side_and_order_is_kept(bus, bridge,
     after = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and
                      s["published_frames"] + s["rx_queue_drops"] == FRAMES + AFTER and s, "the frames after the freeze")
     assert after["direct_frames"] > stats["direct_frames"], (stats, after)
+
+
+def test_sigterm_while_a_put_is_stalled_exits_cleanly(bus, bridge, router, session, tmp_path):
+    """Stopping while the reader is stuck in a put and the publisher reads in its place: the
+    publisher stops reading for it and waits for the put to return (no second rescue while
+    stopping), and the bridge exits 0 once the router runs again."""
+    Collector(session, "vehicle/can/rx")  # a subscriber: without one the bridge's puts never leave it
+    config = tmp_path / "zenoh.json5"
+    config.write_text(f"{{transport: {{link: {{tcp: {{so_sndbuf: {SNDBUF}}}}}}}}}\n")
+    bridge.start("--zenoh-config", str(config), "--can", "vcan0", "--publish-period-ms", "0")
+    bridge.wait_ready(session)
+    load = bus.popen(["cangen", "vcan0", "-I", "i", "-L", "8", "-D", "i", "-g", GAP_MS, "-n", str(FRAMES)])
+    assert router.proc is not None and bridge.proc is not None
+    try:
+        time.sleep(FREEZE_AFTER_S)  # the load's schedule, not synchronisation
+        router.proc.send_signal(signal.SIGSTOP)
+        wait_for(lambda: "a put stalled" in bridge.log.read_text(), "the publisher reading for a stalled put")
+        bridge.proc.send_signal(signal.SIGTERM)
+        time.sleep(0.5)  # stopping while the put is still stalled: what the test is about
+    finally:
+        router.proc.send_signal(signal.SIGCONT)
+    rc, log = bridge.stop()  # waits up to 20 s
+    load.kill()
+    load.wait()
+    assert rc == 0, log[-2000:]
+    assert "final stats" in log

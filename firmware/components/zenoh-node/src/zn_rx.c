@@ -244,7 +244,9 @@ static void wait_immediate(struct bus *b, zn_can_rx_t *rx)
 	for (;;) {
 		if (!b->direct && (b->queued || zn_node.stopping))
 			return;
-		if (b->direct && zn_monotonic_ns() - b->direct_since >= DIRECT_STALL_NS) {
+		/* stopping: the port is no longer read for a stuck reader (the rescue would end at
+		 * once and start again, never releasing the lock the reader needs to come back) */
+		if (b->direct && !zn_node.stopping && zn_monotonic_ns() - b->direct_since >= DIRECT_STALL_NS) {
 			rescue(b, rx);
 			continue;
 		}
