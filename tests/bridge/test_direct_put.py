@@ -15,10 +15,15 @@ from conftest import wait_for
 from test_bridge_host import Collector
 
 FRAMES, GAP_MS = 20_000, "0.2"  # paced by cangen: about 5000 frames/s, 4 s of load
-FREEZE_AFTER_S, FREEZE_S = 0.5, 3.0  # the router stops 0.5 s into the load, for 3 s (well inside Zenoh's 10 s lease)
+FREEZE_S = 3.0  # the router stops once the reader puts, for 3 s (well inside Zenoh's 10 s lease)
 AFTER = 100  # frames once the router runs again
 MAX_BACKLOG = 1000  # frames: 0.2 s of the load unread (the stall is seen within about 20 ms)
 SNDBUF = 4096  # bytes, the kernel's floor: the puts block once Zenoh's queue and the router's socket are full
+
+
+def reader_putting(bridge, session) -> None:
+    """Returns once the reader has put frames itself: the load flows and the direct path is in use."""
+    wait_for(lambda: bridge.stats(session)["buses"][0]["direct_frames"] > 0, "the reader's own puts")
 
 
 def test_a_frozen_router_never_stops_the_can_side_and_order_is_kept(bus, bridge, router, session, tmp_path):
@@ -31,14 +36,14 @@ def test_a_frozen_router_never_stops_the_can_side_and_order_is_kept(bus, bridge,
     assert router.proc is not None
     backlog = 0  # userspace bus: the most frames the hub held for the bridge during the freeze
     try:
-        time.sleep(FREEZE_AFTER_S)  # the load's schedule, not synchronisation
+        reader_putting(bridge, session)
         router.proc.send_signal(signal.SIGSTOP)
-        end = time.monotonic() + FREEZE_S
+        end = time.monotonic() + FREEZE_S  # the fault: how long the router gets no CPU
         while time.monotonic() < end:  # sampled for as long as the router stays frozen
             if bus.mode == "userspace":
                 client = next(c for c in bus.stats()["clients"] if c["pid"] == bridge.proc.pid)
                 backlog = max(backlog, client["queued"])
-            time.sleep(0.01)  # the sampling period
+            time.sleep(0.01)  # the sampling period of the measurement, within the fault's length
     finally:
         router.proc.send_signal(signal.SIGCONT)
     assert load.wait(timeout=60) == 0, load.stderr.read() if load.stderr else ""
@@ -83,11 +88,13 @@ def test_sigterm_while_a_put_is_stalled_exits_cleanly(bus, bridge, router, sessi
     load = bus.popen(["cangen", "vcan0", "-I", "i", "-L", "8", "-D", "i", "-g", GAP_MS, "-n", str(FRAMES)])
     assert router.proc is not None and bridge.proc is not None
     try:
-        time.sleep(FREEZE_AFTER_S)  # the load's schedule, not synchronisation
+        reader_putting(bridge, session)
         router.proc.send_signal(signal.SIGSTOP)
         wait_for(lambda: "a put stalled" in bridge.log.read_text(), "the publisher reading for a stalled put")
         bridge.proc.send_signal(signal.SIGTERM)
-        time.sleep(0.5)  # stopping while the put is still stalled: what the test is about
+        # what the test is about: the stop seen while the put is still stalled
+        wait_for(lambda: "stopping while a put is stalled" in bridge.log.read_text(),
+                 "the publisher to stop reading for the stalled put", timeout=10)
     finally:
         router.proc.send_signal(signal.SIGCONT)
     rc, log = bridge.stop()  # waits up to 20 s

@@ -232,6 +232,9 @@ static void rescue(struct bus *b, zn_can_rx_t *rx)
 		if (rc == ESP_OK)
 			queue_burst_locked(b, rx, n);
 	}
+	if (!b->reader_back) /* stopping: said, so a stop during a stall can be told from one after it */
+		zn_log("I", "%s: stopping while a put is stalled: the publisher stops reading for it and waits "
+			    "for the put to return", b->name);
 	b->rescuing = b->reader_back = 0;
 	zn_cond_signal(b->handback);
 }
