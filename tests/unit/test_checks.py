@@ -161,31 +161,18 @@ def stale_scenario_run(run_dir, write_stamped_stale: bool):
     """stale-commands.yaml analysed without its fault steps, as the host fault test runs it: an ECU
     frame every 10 ms, the 6A0 commands written 1 ms after their put, the 6B0 ones (stamped 400 ms
     before their put) refused as the bridge must, or written by a bridge that ignores the deadline."""
-    from canbench import analysis, commands, oracle, plans, scenario, wire
+    from synthetic import write_command_run
+
+    from canbench import analysis, commands, oracle, scenario
     sc = scenario.load(Path(__file__).resolve().parents[2] / "scenarios" / "stale-commands.yaml")
     t0, ms = 1_700_000_000 * 10**9, 1_000_000
-    bus_lines, zenoh_lines, written, refused = [], [], 0, 0
-    with open(run_dir / "commands.tsv", "w") as cmd_log, open(run_dir / "ecu-engine.sent.tsv", "w") as ecu_log:
-        cmd_log.write(plans.SENT_LOG_HEADER)
-        ecu_log.write(plans.SENT_LOG_HEADER)
-        for i in range(50):  # the engine ECU: on the bus, then on Zenoh
-            f, t = wire.Frame(0x0C0, 1, bytes([i])), t0 + i * 10 * ms
-            ecu_log.write(plans.sent_line(0, t, f, "vcan0"))
-            bus_lines.append((t, f))
-            zenoh_lines.append(f"{t + ms // 2}\tvehicle/can/rx\t{wire.encode(f).hex()}\t"
-                               f"{wire.encode_attachment(i, [t]).hex()}\n")
-        for offset, bus, line, f in commands.plan(sc)[:60]:
-            put = t0 + int(offset * 1e9) + 3 * ms
-            cmd_log.write(plans.sent_line(line, put, f, bus))
-            if f.can_id == 0x6B0 and not write_stamped_stale:
-                refused += 1
-                continue
-            written += 1
-            bus_lines.append((put + ms, f))
-    with open(run_dir / "can.log", "w") as can_log:
-        for t, f in sorted(bus_lines, key=lambda x: x[0]):
-            can_log.write(f"({t // 10**9}.{t % 10**9 // 1000:06d}) {f.candump('vcan0')}\n")
-    (run_dir / "zenoh.tsv").write_text("".join(zenoh_lines))
+    sent = []
+    for offset, _bus, line, f in commands.plan(sc)[:60]:
+        put = t0 + int(offset * 1e9) + 3 * ms
+        sent.append((line, put, f, None if f.can_id == 0x6B0 and not write_stamped_stale else put + ms))
+    write_command_run(run_dir, t0, 50, sent)
+    written = sum(on_bus is not None for *_, on_bus in sent)
+    refused = len(sent) - written
     stats = {"buses": [{"bus": "vcan0", "published_frames": 50, "tx_frames": written,
                         "tx_rejected": {"stale": refused}}]}
     return analysis.analyse(sc, "stale", run_dir, "vehicle/can", {}, stats, 1.0), oracle

@@ -5,8 +5,9 @@ it (tx_rejected.stale). Fresh commands refused, or commands lost without being c
 from __future__ import annotations
 
 import pytest
+from synthetic import write_command_run
 
-from canbench import analysis, checks, plans, scenario, wire
+from canbench import analysis, checks, scenario, wire
 
 SCENARIO = """name: late
 description: commands through a link that stalls
@@ -28,25 +29,11 @@ def late_run(run_dir, delays_ms: list[int | None], refused: int):
     path = run_dir / "late.yaml"
     path.write_text(SCENARIO)
     sc = scenario.load(path)
-    bus_lines, zenoh_lines = [], []
-    with open(run_dir / "commands.tsv", "w") as cmd_log, open(run_dir / "ecu-engine.sent.tsv", "w") as ecu_log:
-        cmd_log.write(plans.SENT_LOG_HEADER)
-        ecu_log.write(plans.SENT_LOG_HEADER)
-        for i in range(20):  # the ECU's frames, on the bus and on Zenoh
-            f, t = wire.Frame(0x0C0, 1, bytes([i])), T0 + i * 10 * MS
-            ecu_log.write(plans.sent_line(0, t, f, "vcan0"))
-            bus_lines.append((t, f))
-            zenoh_lines.append(f"{t + MS // 2}\tvehicle/can/rx\t{wire.encode(f).hex()}\t"
-                               f"{wire.encode_attachment(i, [t]).hex()}\n")
-        for i, delay in enumerate(delays_ms):
-            f, put = wire.Frame(0x6A0, 1, bytes([i])), T0 + i * 20 * MS
-            cmd_log.write(plans.sent_line(i + 2, put, f, "vcan0"))
-            if delay is not None:
-                bus_lines.append((put + delay * MS, f))
-    with open(run_dir / "can.log", "w") as can_log:
-        for t, f in sorted(bus_lines, key=lambda x: x[0]):
-            can_log.write(f"({t // 10**9}.{t % 10**9 // 1000:06d}) {f.candump('vcan0')}\n")
-    (run_dir / "zenoh.tsv").write_text("".join(zenoh_lines))
+    sent = []
+    for i, delay in enumerate(delays_ms):
+        put = T0 + i * 20 * MS
+        sent.append((i + 2, put, wire.Frame(0x6A0, 1, bytes([i])), None if delay is None else put + delay * MS))
+    write_command_run(run_dir, T0, 20, sent)
     written = sum(d is not None for d in delays_ms)
     stats = {"buses": [{"bus": "vcan0", "published_frames": 20, "tx_frames": written,
                         "tx_rejected": {"stale": refused}}]}
