@@ -7,6 +7,7 @@ time, the put time (less the entry's stamp_age_ms), which the bridge's deadline
 (tx_max_age_ms) is judged on."""
 from __future__ import annotations
 
+import bisect
 import threading
 import time
 from pathlib import Path
@@ -64,22 +65,31 @@ def explained_refusals(bus: str, commands: list, tx, stale: set[tuple[str, int, 
 
 def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_ns: int) -> list[tuple]:
     """(command, upper bound of its age at the bridge in ms) for each lost command a late link explains:
-    the next command of its id (one publisher, one QoS: it cannot overtake it) reached the bus more than
-    the deadline after the lost one's source time, so the lost one reached the bridge at least as late,
+    every command of its id put after it (one publisher, one QoS: none can overtake it) reached the bus
+    more than the deadline after the lost one's source time, so the lost one reached the bridge at least as late,
     as far as the bench can see: stale, and refused as the bridge must. Oldest first. A lost command
     with no later one of its id on the bus is not explained."""
     delivered: dict[tuple[int, bool], list[tuple[int, int]]] = {}
     for s, r in matched:
         delivered.setdefault((s.frame.can_id, s.frame.extended), []).append((s.index, r.t_ns))
+    # per id, in put order: the earliest bus time of any command put at or after each position
+    # (one bisect per lost command, not a scan: a lossy bridge may lose thousands)
+    by_id = {}
+    for key, pairs in delivered.items():
+        pairs.sort()
+        earliest = [t for _, t in pairs]
+        for k in range(len(earliest) - 2, -1, -1):
+            earliest[k] = min(earliest[k], earliest[k + 1])
+        by_id[key] = ([i for i, _ in pairs], earliest)
     out = []
     for o in lost:
-        later = [t for i, t in delivered.get((o.frame.can_id, o.frame.extended), []) if i > o.index]
-        if not later:
+        indices, earliest = by_id.get((o.frame.can_id, o.frame.extended), ([], []))
+        k = bisect.bisect_right(indices, o.index)
+        if k == len(indices):
             continue
         source_ns = o.t_ns - ages_ns.get((bus, o.frame.can_id, o.frame.extended), 0)
-        upper_ms = (min(later) - source_ns) / 1e6
-        if upper_ms * 1e6 > deadline_ns:
-            out.append((o, round(upper_ms, 3)))
+        if earliest[k] - source_ns > deadline_ns:
+            out.append((o, round((earliest[k] - source_ns) / 1e6, 3)))
     return sorted(out, key=lambda item: -item[1])
 
 
