@@ -185,6 +185,11 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
     return result
 
 
+def bus_stats(bridge_stats: dict | None, bus: str) -> dict | None:
+    """One bus's entry of the bridge's stats (None without stats or that bus)."""
+    return next((s for s in (bridge_stats or {}).get("buses", []) if s["bus"] == bus), None)
+
+
 def _refused_late(scenario: Scenario, bus: str, commands: list[oracle.Observed], tx: oracle.Comparison,
                   stale: set, bridge_stats: dict | None) -> list[tuple[oracle.Observed, float]]:
     """The lost commands the bridge refused as stale because the link delivered them late (a stalled
@@ -194,8 +199,7 @@ def _refused_late(scenario: Scenario, bus: str, commands: list[oracle.Observed],
     without counting them as stale, or refuses fresh ones, is not excused."""
     if not scenario.tx_max_age_ms or not tx.lost:
         return []
-    stats = next((s for s in (bridge_stats or {}).get("buses", []) if s["bus"] == bus), None)
-    refused = (stats or {}).get("tx_rejected", {}).get("stale") or 0
+    refused = (bus_stats(bridge_stats, bus) or {}).get("tx_rejected", {}).get("stale") or 0
     stamped_refused, in_faults = explained_refusals(bus, commands, tx, stale)
     budget = refused - stamped_refused - len(in_faults)
     if budget <= 0:

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from functools import wraps
 
 from . import rxqos, security, signals, validity, wire
-from .analysis import RunResult
+from .analysis import RunResult, bus_stats
 from .commands import explained_refusals, stale_at_put, stamp_ages_ns
 from .dbc import cycle_time_ms, load_dbc
 from .faults import disruptive, last_bridge_restart_ns
@@ -438,7 +438,7 @@ def freshness(result: RunResult) -> dict:
             at = [i for i, w in enumerate(windows) if w["start_ns"] - FAULT_LEAD_NS <= o.t_ns]
             if at:
                 per_window[at[-1]]["lost"] += 1
-        stats = next((s for s in (result.bridge_stats or {}).get("buses", []) if s["bus"] == b.bus), None)
+        stats = bus_stats(result.bridge_stats, b.bus)
         out[b.bus] = {
             "deadline_ms": deadline_ms,
             "slack_ms": FRESHNESS_SLACK_MS,
