@@ -4,6 +4,7 @@ vcan where the kernel has it and on the userspace hub otherwise; tests of
 hub-only features say so when skipped."""
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import random
@@ -12,6 +13,7 @@ import socket
 import struct
 import subprocess
 import sys
+import time
 
 import pytest
 from conftest import Bus, require_userspace, wait_for
@@ -383,6 +385,32 @@ def test_bitrate_limits_delivery_rate_and_arbitrates_by_id(bus):
     stamps = [float(line[1:line.index(")")]) for line in lines]
     frame_s = 135 / 50_000  # 8-byte standard frame, worst-case stuffing
     assert stamps[-1] - stamps[0] >= 39 * frame_s * 0.95
+
+
+def test_bitrate_stamps_keep_the_wire_schedule_when_the_hub_is_late(bus):
+    """A frame on a bitrate= interface is stamped when its transmission ended, by the wire's
+    schedule: a hub held up (here SIGSTOP, as a loaded machine does) that then delivers its
+    backlog at once still stamps the frames one frame time apart, not all at its wake-up."""
+    require_userspace(bus, "bitrate emulation is a hub feature")
+    bus.stop_hub()
+    bus.start_hub("vcan0:bitrate=10000,stuffing=worst")
+    frame_s = 135 / 10_000  # 8-byte standard frame, worst-case stuffing: 13.5 ms
+    dump = start_candump(bus, "-L", "vcan0", count=20)
+    bus.run([sys.executable, "-c",
+             "import socket, struct\n"
+             "s = socket.socket(socket.PF_CAN, socket.SOCK_RAW, socket.CAN_RAW); s.bind(('vcan0',))\n"
+             "for i in range(20): s.send(struct.pack('<IB3x8s', 0x123, 8, bytes([i]) * 8))\n"])
+    wait_for(lambda: bus.stats()["interfaces"][0]["frames"] >= 2, "the first frames on the wire")
+    os.kill(bus.hub.pid, signal.SIGSTOP)
+    try:
+        time.sleep(8 * frame_s)  # the fault: the hub misses about eight frame ends
+    finally:
+        os.kill(bus.hub.pid, signal.SIGCONT)
+    out, _ = stop(dump)
+    stamps = [float(line[1:line.index(")")]) for line in out.splitlines() if line.startswith("(")]
+    assert len(stamps) == 20
+    gaps_ms = [round((b - a) * 1000, 2) for a, b in itertools.pairwise(stamps)]
+    assert min(gaps_ms) >= frame_s * 1000 * 0.99, gaps_ms
 
 
 # -- more kernel semantics ----------------------------------------------------

@@ -511,11 +511,26 @@ static void flush_dirty(void)
 /* ---- the bus ---- */
 
 /* The one stamp of a frame, taken as it goes on the bus: every reader (the
- * sender's echo included) gets it, as every socket does from kernel vcan. */
-static struct timespec bus_stamp(struct iface *ifc)
+ * sender's echo included) gets it, as every socket does from kernel vcan.
+ * A bitrate interface stamps the moment the frame left the wire (wire_end,
+ * monotonic), not the moment the hub got round to it: a hub woken late
+ * delivers a backlog at once, and stamps of "now" would squeeze the bus's
+ * timing out of the trace. */
+static struct timespec bus_stamp(struct iface *ifc, const struct timespec *wire_end)
 {
 	struct timespec now;
 	clock_gettime(CLOCK_REALTIME, &now);
+	if (wire_end) {
+		struct timespec mono;
+		clock_gettime(CLOCK_MONOTONIC, &mono);
+		int64_t late_ns = (int64_t)(mono.tv_sec - wire_end->tv_sec) * 1000000000 +
+				  (mono.tv_nsec - wire_end->tv_nsec);
+		if (late_ns > 0) {
+			int64_t ns = (int64_t)now.tv_sec * 1000000000 + now.tv_nsec - late_ns;
+			now.tv_sec = (time_t)(ns / 1000000000);
+			now.tv_nsec = (long)(ns % 1000000000);
+		}
+	}
 	if (ts_before_eq(&now, &ifc->last_stamp))
 		now = ifc->last_stamp; /* the clock was set back: hold, never decrease */
 	ifc->last_stamp = now;
@@ -551,7 +566,7 @@ static void deliver_to(uint32_t idx, struct iface *ifc, const struct canfd_frame
 
 /* A frame has been transmitted on ifc: account for it and hand it to every reader. */
 static void bus_transmit(struct iface *ifc, uint32_t sender, uint32_t sender_gen, int loopback,
-			 const struct canfd_frame *frame, size_t size)
+			 const struct canfd_frame *frame, size_t size, const struct timespec *wire_end)
 {
 	unsigned bits = can_frame_bits(frame, size == CANFD_MTU, (enum ucan_stuffing)ifc->info.stuffing);
 	ifc->stats.frames++;
@@ -565,7 +580,7 @@ static void bus_transmit(struct iface *ifc, uint32_t sender, uint32_t sender_gen
 	 * with loopback off nobody on this host sees the frame, the sender included */
 	if (!loopback)
 		return;
-	struct timespec stamp = bus_stamp(ifc);
+	struct timespec stamp = bus_stamp(ifc, wire_end);
 	for (uint32_t i = 0; i < hub.nclients_alloc; i++) {
 		struct client *c = &hub.clients[i];
 		if (c->fd < 0 || !c->bound)
@@ -642,8 +657,8 @@ static void wire_timer(struct iface *ifc)
 			(ifc->npending - (uint32_t)ifc->on_wire - 1) * sizeof(p));
 		ifc->npending--;
 		ifc->on_wire = -1;
-		bus_transmit(ifc, p.client, p.generation, p.loopback, &p.frame, p.size);
 		struct timespec end = ifc->wire_end;
+		bus_transmit(ifc, p.client, p.generation, p.loopback, &p.frame, p.size, &end);
 		if (ifc->npending > 0)
 			wire_start(ifc, &end);
 	}
@@ -840,7 +855,7 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 			if (queue_for_wire(ifc, idx, &frame, size) < 0)
 				ifc->stats.tx_rejects++;
 		} else {
-			bus_transmit(ifc, idx, c->generation, c->opts.loopback, &frame, size);
+			bus_transmit(ifc, idx, c->generation, c->opts.loopback, &frame, size, NULL);
 		}
 		break;
 	}
