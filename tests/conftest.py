@@ -186,10 +186,10 @@ class Bridge:
         self.log = bus.workdir / "bridge.log"
         self.proc: subprocess.Popen | None = None
 
-    def start(self, *args: str) -> subprocess.Popen:
+    def start(self, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen:
         with open(self.log, "ab") as log:
             self.proc = subprocess.Popen([str(self.binary), "--router", self.router.endpoint, *args],
-                                         stdout=log, stderr=log, env=self.bus.env)
+                                         stdout=log, stderr=log, env={**self.bus.env, **(env or {})})
         return self.proc
 
     def wait_ready(self, session, prefix: str = "vehicle/can") -> list[str]:

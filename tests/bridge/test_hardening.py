@@ -157,7 +157,7 @@ def test_a_fragmented_16_mib_sample_on_the_tx_key_is_dropped_not_reassembled(bus
     a sample of that size before on_command refused it: the port caps it at ZN_RX_MESSAGE_MAX."""
     bridge.start("--can", "vcan0")
     bridge.wait_ready(session)
-    dump, out = start_candump(bus, bus.workdir / "big.log")
+    dump, out = start_candump(bus, bus.workdir / "big.log", frames=1)
     hwm_before = status_kib(bridge.proc.pid, "VmHWM")
     # blocking, so neither this session nor the router drops fragments: all of it reaches the bridge
     session.put("vehicle/can/tx", bytes(BIG_SAMPLE), congestion_control=zenoh.CongestionControl.BLOCK)
@@ -194,3 +194,19 @@ def test_a_tls_file_that_cannot_be_read_exits_2_at_once_naming_key_and_path(bus,
     assert len(lines) == 1, log
     assert "transport/link/tls/root_ca_certificate" in lines[0], log
     assert str(missing) in lines[0] and "No such file" in lines[0], log
+
+
+@pytest.mark.parametrize("option, endpoint", [("--listen", "udp/127.0.0.1:7449"), ("--router", "quic/127.0.0.1:7449"),
+                                              ("--listen", "ws/127.0.0.1:7449")])
+def test_an_endpoint_of_a_protocol_the_build_lacks_exits_2_naming_what_it_has(bus, bridge, option, endpoint):
+    """The Linux build's Zenoh carries TCP and TLS links only (firmware/ports/linux/zenoh_rust/Cargo.toml):
+    Zenoh would treat another protocol's endpoint like an absent router and retry forever; the port
+    refuses it at once, a configuration error (exit 2) naming the endpoint and what the build has."""
+    args = [option, endpoint] + (["--mode", "peer"] if option == "--listen" else [])
+    t0 = time.monotonic()
+    proc = bridge.start(*args)
+    assert proc.wait(timeout=30) == 2, bridge.log.read_text()
+    assert time.monotonic() - t0 < 5, bridge.log.read_text()
+    log = bridge.log.read_text()
+    assert "retrying" not in log, log
+    assert endpoint in log and "it has tcp, tls" in log, log

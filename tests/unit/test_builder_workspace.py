@@ -15,8 +15,6 @@ pytestmark = pytest.mark.unit
 REPO = Path(__file__).resolve().parents[2]
 WORKSPACE = REPO / "images" / "builder" / "rust"
 PORT = REPO / "firmware" / "ports" / "linux" / "zenoh_rust"
-# zenohd 1.10.2's Cargo.toml: [dependencies.zenoh] features
-ZENOHD_ZENOH_FEATURES = {"internal", "plugins", "runtime_plugins", "unstable"}
 
 
 def test_profile_is_the_ports_own():
@@ -38,8 +36,24 @@ def test_one_zenoh_and_the_routers_version_everywhere():
     port_dep = tomllib.loads((PORT / "Cargo.toml").read_text())["dependencies"]["zenoh"]
     port_dep = port_dep if isinstance(port_dep, dict) else {"version": port_dep}
     assert port_dep["version"] == f"={zenohd}"
-    # features zenohd 1.10.2 itself enables on zenoh: asking for one of them adds nothing to the
-    # workspace's unified feature set, so zenoh still compiles once for both
-    assert set(port_dep.get("features", [])) <= ZENOHD_ZENOH_FEATURES
+    # the port's zenoh features are the build's (zenohd's defaults are off): zenoh's own defaults
+    # (every link protocol: 75 crates more) must not come back through the port
+    assert port_dep.get("default-features") is False
     port = next(p for p in lock if p["name"] == "zn_port_zenoh")
     assert port["dependencies"] == ["zenoh"]
+
+
+def test_every_workspace_build_leaves_zenohds_defaults_off_and_zn_flood_adds_no_feature():
+    """cargo unifies features over one build: a build line without --no-default-features turns
+    zenohd's default (all of zenoh's links) back on, and a zn-flood asking for more than the port
+    would change the feature set the bench image builds with: zenoh would compile again."""
+    for image in ("builder", "bench"):
+        dockerfile = (REPO / "images" / image / "Dockerfile").read_text()
+        builds = re.findall(r"cargo build [^\n]*", dockerfile)
+        assert builds, image
+        for line in builds:
+            assert "--workspace --no-default-features" in line, (image, line)
+    port = tomllib.loads((PORT / "Cargo.toml").read_text())["dependencies"]["zenoh"]
+    flood = tomllib.loads((REPO / "bench" / "tools" / "zn-flood" / "Cargo.toml").read_text())["dependencies"]["zenoh"]
+    assert flood.get("default-features") is False
+    assert set(flood.get("features", [])) <= set(port["features"])

@@ -56,6 +56,16 @@ const STATS_REPLY_MAX: usize = 16384;
 const OPEN_RETRY_MIN: std::time::Duration = std::time::Duration::from_millis(250);
 const OPEN_RETRY_MAX: std::time::Duration = std::time::Duration::from_millis(4000);
 
+/// Zenoh's thread pools for the bridge unless the user set ZENOH_RUNTIME (zenoh-runtime reads it
+/// once, at its first use). A tokio socket belongs to the runtime whose context created it:
+/// the router link is opened inside zn_open's `.wait()` (the app runtime) and reopened after a
+/// router restart on the net runtime, so without this every sample woke app-0 (or net-0) in
+/// epoll_wait, which woke an rx worker through the rx runtime's inject queue, which woke the
+/// other rx worker (tokio: the last searching worker wakes another). With app, net and acc
+/// handed over to rx, the link's events reach the rx worker that then reads it itself.
+/// tx stays apart (a callback's reply never waits for its own thread).
+const ZENOH_RUNTIME_DEFAULT: &str = "(app: (handover: rx), net: (handover: rx), acc: (handover: rx))";
+
 fn c_str<'a>(p: *const c_char) -> Option<&'a str> {
     if p.is_null() {
         return None;
@@ -116,7 +126,71 @@ fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
         "{period_init_ms: 250, period_max_ms: 2000, period_increase_factor: 2}".into(),
     )?;
     check_tls_files(&config)?;
+    check_protocols(&config)?;
     Ok(config)
+}
+
+/// The link protocols this build's Zenoh carries (Cargo.toml: TCP and TLS always, the
+/// port's transport_* features for more).
+fn built_protocols() -> Vec<&'static str> {
+    let mut built = vec!["tcp", "tls"];
+    for (on, protocol) in [
+        (cfg!(feature = "transport_udp"), "udp"),
+        (cfg!(feature = "transport_quic"), "quic"),
+        (cfg!(feature = "transport_ws"), "ws"),
+        (cfg!(feature = "transport_unixsock-stream"), "unixsock-stream"),
+    ] {
+        if on {
+            built.push(protocol);
+        }
+    }
+    built
+}
+
+/// Zenoh treats an endpoint of a protocol it was built without like an absent router, and a
+/// client retries forever: refuse it here, naming what this build has.
+fn check_protocols(config: &Config) -> Result<(), String> {
+    let built = built_protocols();
+    for key in ["connect/endpoints", "listen/endpoints"] {
+        let Ok(json) = config.get_json(key) else { continue };
+        // a list of endpoint strings, or one list per mode: every string with a '/' is one
+        for endpoint in json_strings(&json) {
+            let Some((protocol, _)) = endpoint.split_once('/') else { continue };
+            if !built.contains(&protocol) {
+                return Err(format!(
+                    "{key}: {endpoint}: this build's Zenoh has no {protocol} links (it has {}; \
+                     the port's Cargo features transport_udp, transport_quic, transport_ws add more)",
+                    built.join(", ")
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The string values of a JSON text (an escaped character is taken as itself).
+fn json_strings(json: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut chars = json.chars();
+    while let Some(c) = chars.next() {
+        if c != '"' {
+            continue;
+        }
+        let mut s = String::new();
+        while let Some(c) = chars.next() {
+            match c {
+                '"' => break,
+                '\\' => {
+                    if let Some(escaped) = chars.next() {
+                        s.push(escaped);
+                    }
+                }
+                c => s.push(c),
+            }
+        }
+        out.push(s);
+    }
+    out
 }
 
 /// Zenoh reads TLS files only when a link opens, and a client retries its
@@ -145,6 +219,11 @@ fn check_tls_files(config: &Config) -> Result<(), String> {
 pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession) -> c_int {
     if cfg.is_null() || out.is_null() {
         return ERR;
+    }
+    // before anything starts Zenoh's runtimes; the C side starts no thread that reads the
+    // environment before zn_open (edition 2021: set_var is safe, not yet `unsafe`)
+    if std::env::var_os("ZENOH_RUNTIME").is_none() {
+        std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME_DEFAULT);
     }
     let _ = zenoh::try_init_log_from_env();
     let config = match build_config(unsafe { &*cfg }) {
