@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "check.h"
+#include "le64.h"
 #include "zn_node.h"
 #include "zn_wire.h"
 #include "zn_mock.h"
@@ -24,14 +25,6 @@ static can_message_t frame(uint32_t id, int extd, int rtr, uint8_t dlc, uint8_t 
 	if (!rtr)
 		memset(m.data, fill, dlc);
 	return m;
-}
-
-static uint64_t le64(const uint8_t *p)
-{
-	uint64_t v = 0;
-	for (int i = 7; i >= 0; i--)
-		v = v << 8 | p[i];
-	return v;
 }
 
 static zn_node_config_t base_config(uint32_t period_ms)

@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "check.h"
+#include "le64.h"
 #include "config_args.h"
 #include "zn_config_parse.h"
 #include "zn_mock.h"
@@ -28,14 +29,6 @@ static can_message_t frame(uint32_t id, int extd, uint8_t fill)
 	m.data_length_code = 1;
 	m.data[0] = fill;
 	return m;
-}
-
-static uint64_t le64(const uint8_t *p)
-{
-	uint64_t v = 0;
-	for (int i = 7; i >= 0; i--)
-		v = v << 8 | p[i];
-	return v;
 }
 
 static int qos_is(const zn_qos_t *q, uint8_t priority, zn_congestion_t congestion, uint8_t express, uint8_t best_effort)

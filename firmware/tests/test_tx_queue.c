@@ -7,7 +7,9 @@
  * priority order (lowest arbitration id first, FIFO among equals); a command
  * older than tx_max_age_ms is refused on arrival or when the transmitter takes
  * it, never written (tx_rejected.stale), one without a source time written
- * and counted (tx_unstamped). A command's frames are written in bursts. */
+ * and counted (tx_unstamped). A command's frames are written in bursts; one
+ * that finds the bus free is written by the callback itself, without waiting,
+ * and what the bus did not take at once goes before anything queued. */
 #include <pthread.h>
 #include <string.h>
 #include <time.h>
@@ -352,6 +354,62 @@ static void test_stale_waiting_for_the_bus(void)
 	zn_node_stop();
 }
 
+/* A command that finds the bus free is written by Zenoh's callback itself before it returns
+ * (no transmitter wakeup): every frame from the delivering thread, in bursts, counted in
+ * tx_direct_frames as well as tx_frames. */
+static void test_free_bus_written_by_the_callback(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	size_t len = command(big, 1, 0x100);
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", big, len, NULL, 0) == 0);
+	len = command(big, 100, 0x200);
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", big, len, NULL, 0) == 0);
+	size_t sent = mock_can_tx_count("vcan0"), mine = 0;
+	for (size_t i = 0; i < sent; i++)
+		mine += (size_t)mock_can_tx_by("vcan0", i, pthread_self());
+	if (sent != 101 || mine != 101)
+		fprintf(stderr, "test_free_bus_written_by_the_callback: %zu of 101 frames written when the callbacks "
+				"returned, %zu by the callback\n",
+			sent, mine);
+	CHECK(sent == 101 && mine == 101);
+	CHECK(mock_can_tx_calls("vcan0") == 3); /* 1, then 64 + 36 */
+	CHECK(stats_soon_has("\"tx_frames\": 101"));
+	CHECK(stats_soon_has("\"tx_direct_frames\": 101"));
+	zn_node_stop();
+}
+
+/* The bus takes 10 frames of a 30-frame command at once: the callback writes those and returns;
+ * the transmitter writes the other 20 once the bus has room, before the commands that came
+ * meanwhile, even one of higher priority (a command is never interleaved with another). */
+static void test_rest_of_a_direct_write_goes_first(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_tx_room("vcan0", 10);
+	size_t len = command(big, 30, 0x300);
+	CHECK(deliver_ms(big, len) < FAST_MS);
+	CHECK(mock_can_tx_count("vcan0") == 10);
+	uint8_t w[16];
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x001, 0, 0xA1), NULL, 0) == 0);
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x7FF, 0, 0xA2), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 3"));
+	mock_can_tx_room("vcan0", -1);
+	CHECK(mock_can_wait_tx("vcan0", 32, WAIT_MS) == 32);
+	for (size_t i = 0; i < 30; i++) {
+		can_message_t m = mock_can_tx("vcan0", i);
+		CHECK(m.identifier == 0x300 + i && m.data[0] == (uint8_t)i);
+		CHECK(mock_can_tx_by("vcan0", i, pthread_self()) == (i < 10));
+	}
+	CHECK(mock_can_tx("vcan0", 30).data[0] == 0xA1 && mock_can_tx("vcan0", 31).data[0] == 0xA2);
+	CHECK(stats_soon_has("\"tx_frames\": 32"));
+	CHECK(stats_soon_has("\"tx_direct_frames\": 10"));
+	CHECK(stats_soon_has("\"can_tx_errors\": 0, \"tx_queue_full\": 0, \"tx_abandoned\": 0"));
+	zn_node_stop();
+}
+
 /* Runs every test, or the one named by argv[1] (to run one against other code). */
 int main(int argc, char **argv)
 {
@@ -369,6 +427,8 @@ int main(int argc, char **argv)
 		{ "stale_arrival", test_stale_refused_on_arrival },
 		{ "stale_queue", test_stale_in_queue },
 		{ "stale_waiting", test_stale_waiting_for_the_bus },
+		{ "direct", test_free_bus_written_by_the_callback },
+		{ "direct_rest", test_rest_of_a_direct_write_goes_first },
 	};
 	for (size_t i = 0; i < sizeof(tests) / sizeof(tests[0]); i++)
 		if (argc < 2 || strcmp(argv[1], tests[i].name) == 0)

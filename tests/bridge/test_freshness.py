@@ -42,7 +42,7 @@ def bus_frames(path) -> list[tuple[int, str]]:
 def test_a_stale_command_is_refused_and_counted_a_fresh_one_written(bus, bridge, session, tmp_path):
     bridge.start("--can", "vcan0", "--tx-max-age-ms", str(MAX_AGE_MS))
     bridge.wait_ready(session)
-    dump, out = start_candump(bus, tmp_path / "can.log")
+    dump, out = start_candump(bus, tmp_path / "can.log", frames=2)
     put(session, 0x100, b"\x01", time.time_ns() - 500 * MS)  # stamped 500 ms ago: the router stamps it fresh
     put(session, 0x101, b"\x02", time.time_ns(), seq=1)
     put(session, 0x102, b"\x03", None)  # no attachment: the sample's Zenoh timestamp decides
@@ -56,7 +56,7 @@ def test_a_stale_command_is_refused_and_counted_a_fresh_one_written(bus, bridge,
 def test_with_the_deadline_off_an_old_command_is_written(bus, bridge, session, tmp_path):
     bridge.start("--can", "vcan0", "--tx-max-age-ms", "0")
     bridge.wait_ready(session)
-    dump, out = start_candump(bus, tmp_path / "can.log")
+    dump, out = start_candump(bus, tmp_path / "can.log", frames=1)
     put(session, 0x100, b"\x01", time.time_ns() - 5000 * MS)
     stats = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and s["tx_frames"] == 1 and s, "the command")
     assert stop_candump(dump, out) == ["vcan0 100#01"]

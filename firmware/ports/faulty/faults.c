@@ -232,15 +232,20 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 
 esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms)
 {
-	if ((fault.kind != TXDROP && fault.kind != TXFLIP) ||
-	    __atomic_add_fetch(&fault.tx_count, 1, __ATOMIC_RELAXED) % fault.n)
+	if (fault.kind != TXDROP && fault.kind != TXFLIP)
 		return __real_zn_can_transmit(can, msg, timeout_ms);
-	if (fault.kind == TXDROP)
-		return ESP_OK; /* "written", silently lost */
-	can_message_t flipped = *msg;
-	if (flipped.data_length_code > 0 && !flipped.rtr)
-		flipped.data[0] ^= 0x01;
-	return __real_zn_can_transmit(can, &flipped, timeout_ms);
+	/* "every Nth" counts frames the bus takes: a frame refused at once (a callback's
+	 * timeout-0 try, docs/bridge.md) is tried again by the transmitter, not counted twice */
+	unsigned nth = __atomic_load_n(&fault.tx_count, __ATOMIC_RELAXED) + 1; /* one writer at a time (zn_tx.c) */
+	can_message_t out = *msg;
+	int faulted = nth % fault.n == 0;
+	if (faulted && fault.kind == TXFLIP && out.data_length_code > 0 && !out.rtr)
+		out.data[0] ^= 0x01;
+	esp_err_t rc = faulted && fault.kind == TXDROP ? ESP_OK /* "written", silently lost */
+						       : __real_zn_can_transmit(can, &out, timeout_ms);
+	if (rc == ESP_OK)
+		__atomic_add_fetch(&fault.tx_count, 1, __ATOMIC_RELAXED);
+	return rc;
 }
 
 /* Bursts go frame by frame through the wrap above while a Zenoh -> CAN fault is

@@ -18,8 +18,11 @@ struct mock_bus {
 	int64_t rx_time[MOCK_FRAMES];
 	size_t rx_head, rx_len;
 	can_message_t tx[MOCK_FRAMES];
+	pthread_t tx_thread[MOCK_FRAMES]; /* who transmitted each */
 	size_t tx_len;
 	int stalled;
+	int tx_limited; /* the bus takes tx_room more frames, then holds the rest until given room */
+	size_t tx_room;
 	unsigned generation; /* handles of an older generation are of a bus that went away */
 	size_t capacity;     /* frames held before injected ones are dropped (0: MOCK_FRAMES) */
 	size_t rx_drops, reads, tx_calls; /* frames dropped; receive and transmit calls that moved frames */
@@ -47,6 +50,16 @@ static struct mock_bus *find_bus(const char *name, int create)
 		}
 	}
 	return NULL;
+}
+
+static void record_tx(struct mock_bus *b, const can_message_t *msg) /* lock held */
+{
+	if (b->tx_len < MOCK_FRAMES) {
+		b->tx_thread[b->tx_len] = pthread_self();
+		b->tx[b->tx_len++] = *msg;
+	}
+	if (b->tx_limited)
+		b->tx_room--;
 }
 
 void mock_can_reset(void);
@@ -148,6 +161,25 @@ void mock_can_stall(const char *bus, int stalled)
 	find_bus(bus, 1)->stalled = stalled;
 	pthread_cond_broadcast(&sent);
 	pthread_mutex_unlock(&lock);
+}
+
+void mock_can_tx_room(const char *bus, long frames)
+{
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 1);
+	b->tx_limited = frames >= 0;
+	b->tx_room = frames >= 0 ? (size_t)frames : 0;
+	pthread_cond_broadcast(&sent);
+	pthread_mutex_unlock(&lock);
+}
+
+int mock_can_tx_by(const char *bus, size_t i, pthread_t thread)
+{
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 0);
+	int by = b && i < b->tx_len && i < MOCK_FRAMES && pthread_equal(b->tx_thread[i], thread);
+	pthread_mutex_unlock(&lock);
+	return by;
 }
 
 void mock_can_lose(const char *bus)
@@ -259,15 +291,14 @@ esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_m
 		pthread_mutex_unlock(&lock);
 		return ESP_FAIL;
 	}
-	while (can->bus->stalled)
-		if (can->bus->stalled == MOCK_HOLD)
+	while (can->bus->stalled || (can->bus->tx_limited && can->bus->tx_room == 0))
+		if ((can->bus->stalled == MOCK_HOLD || !can->bus->stalled) && timeout_ms != 0) /* held, or no room */
 			pthread_cond_wait(&sent, &lock);
-		else if (pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
+		else if (timeout_ms == 0 || pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
 			pthread_mutex_unlock(&lock);
 			return ESP_ERR_TIMEOUT;
 		}
-	if (can->bus->tx_len < MOCK_FRAMES)
-		can->bus->tx[can->bus->tx_len++] = *msg;
+	record_tx(can->bus, msg);
 	can->bus->tx_calls++;
 	pthread_cond_broadcast(&sent);
 	pthread_mutex_unlock(&lock);
@@ -284,21 +315,24 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 			pthread_mutex_unlock(&lock);
 			return ESP_FAIL;
 		}
-		if (!can->bus->stalled)
-			break;
-		if (can->bus->stalled == MOCK_HOLD)
+		if (!can->bus->stalled) {
+			size_t before = *done;
+			for (; *done < n && (!can->bus->tx_limited || can->bus->tx_room > 0); (*done)++)
+				record_tx(can->bus, &msgs[*done]);
+			if (*done > before) {
+				can->bus->tx_calls += before == 0; /* a call that moved frames, counted once */
+				pthread_cond_broadcast(&sent);
+			}
+			if (*done == n)
+				break;
+		}
+		if ((can->bus->stalled == MOCK_HOLD || !can->bus->stalled) && timeout_ms != 0) /* held, or no room */
 			pthread_cond_wait(&sent, &lock);
-		else if (pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
+		else if (timeout_ms == 0 || pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
 			pthread_mutex_unlock(&lock);
 			return ESP_ERR_TIMEOUT;
 		}
 	}
-	for (; *done < n; (*done)++)
-		if (can->bus->tx_len < MOCK_FRAMES)
-			can->bus->tx[can->bus->tx_len++] = msgs[*done];
-	if (n)
-		can->bus->tx_calls++;
-	pthread_cond_broadcast(&sent);
 	pthread_mutex_unlock(&lock);
 	return ESP_OK;
 }

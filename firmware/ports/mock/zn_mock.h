@@ -3,6 +3,7 @@
 #ifndef ZN_MOCK_H
 #define ZN_MOCK_H
 
+#include <pthread.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <time.h>
@@ -52,9 +53,16 @@ size_t mock_can_tx_count(const char *bus);
 size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms);
 /* A stalled bus takes no frame: zn_can_transmit waits its timeout and fails (as a
  * controller whose bus is busy or has no acknowledging node). MOCK_HOLD: it
- * waits, whatever its timeout, until the stall is lifted (0). */
+ * waits, whatever its timeout, until the stall is lifted (0); a caller that may
+ * not wait (timeout 0) is told ESP_ERR_TIMEOUT at once. */
 enum { MOCK_HOLD = 2 };
 void mock_can_stall(const char *bus, int stalled);
+/* The bus takes `frames` more frames, then none (a full controller queue): as
+ * MOCK_HOLD, a caller that may wait waits until given room again, one that may
+ * not is told ESP_ERR_TIMEOUT; -1: no limit (the default). */
+void mock_can_tx_room(const char *bus, long frames);
+/* Was transmitted frame i written by this thread? */
+int mock_can_tx_by(const char *bus, size_t i, pthread_t thread);
 /* The bus goes away under its open handles (hub restarted, interface down): they fail from
  * now on; a zn_can_open after this gets a working handle again. */
 void mock_can_lose(const char *bus);

@@ -54,6 +54,7 @@ struct bus_counters {
 	uint64_t can_reopens;
 	uint64_t direct_frames, direct_stalls; /* immediate mode: frames the reader put itself; its puts that stalled */
 	uint64_t tx_rejected_stale, tx_unstamped; /* freshness (tx_max_age_ms): refused as stale; no source time */
+	uint64_t tx_direct_frames; /* frames Zenoh's callback wrote itself (zn_tx.c, Direct writes) */
 };
 
 struct bus {
@@ -61,7 +62,7 @@ struct bus {
 	const char *name;
 	char rx_key[ZN_KEY_MAX], tx_key[ZN_KEY_MAX], token_key[ZN_KEY_MAX];
 	zn_can_t *can;
-	zn_mutex_t *can_lock; /* the reader reopens the port; the transmitter transmits on it */
+	zn_mutex_t *can_lock; /* the reader reopens the port; the transmitter or a direct write transmits on it */
 	zn_publisher_t *pub[ZN_MAX_QOS_CLASSES]; /* CAN -> Zenoh, one per QoS class of qos, all on rx_key */
 	zn_subscriber_t *sub;
 	zn_token_t *token;
@@ -88,6 +89,7 @@ struct bus {
 	 * reader's count, to see when its puts have stopped); rescuing: the publisher reads the
 	 * CAN port meanwhile, reader_back: the reader returned and waits on handback */
 	int direct, publishing, degraded, watching, rescuing, reader_back;
+	int long_stall_said; /* a put stalled 1 s was logged (once) */
 	int64_t direct_since;
 	uint64_t direct_puts;
 	zn_cond_t *handback;
@@ -104,6 +106,13 @@ struct bus {
 	struct tx_cmd *tx_heap;
 	uint32_t tx_cap, tx_len, tx_free, tx_waiting, tx_order;
 	int tx_stop;
+	/* direct writes (zn_tx.c): a callback is writing (tx_direct); tx_burst: the burst buffer of
+	 * whichever writes (the callback or the transmitter: never both at once, off the stack);
+	 * the rest of its command the bus did not take at once, the transmitter's next (count 0: none) */
+	int tx_direct;
+	can_message_t *tx_burst;
+	struct tx_cmd tx_rest;
+	int tx_failed; /* the transmitter's last command failed and no frame went since: at stop, give up */
 	zn_thread_t *transmitter;
 	int cb_inflight, cb_closed; /* atomics: callbacks inside the gate; gate closed (zn_tx_close) */
 	struct bus_counters n;
@@ -144,8 +153,8 @@ int zn_rx_declare(struct bus *b);
 void zn_rx_undeclare(struct bus *b);
 void zn_rx_queue_free(struct bus *b);
 
-/* zn_tx.c: the subscriber callback of one bus's tx key, queueing commands
- * whole for the transmitter thread. zn_tx_close undeclares the subscriber and
+/* zn_tx.c: the subscriber callback of one bus's tx key, writing a command
+ * itself when the bus is free or queueing it whole for the transmitter thread. zn_tx_close undeclares the subscriber and
  * returns once no callback is inside the queue any more. */
 void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
 		      uint64_t source_time_ns, void *bus);

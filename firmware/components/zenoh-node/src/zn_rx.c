@@ -13,6 +13,12 @@
  * another. Sequence numbers stay per bus: a subscriber sees them without gaps
  * across the classes, in order within a class, not across classes.
  *
+ * Batching mode (publish period > 0): the reader and the publisher thread
+ * take turns (Turns, below): whichever is due reads the port and, at a
+ * period's end, puts the period's batch itself, so a period wakes one thread;
+ * the other sleeps until the drain after, which is also its watch: a put still
+ * running then has stalled, and the sleeper reads the port meanwhile.
+ *
  * Direct puts (immediate mode): while the session is healthy and nothing is
  * queued or being published, the reader puts a burst itself, one wakeup of
  * the publisher fewer per frame. A put can block (congestion control block, a
@@ -40,6 +46,7 @@ static_assert(sizeof(struct rx_entry) <= 40, "a queued CAN frame (rx_queue_frame
 #define CLASS_CHUNK 4
 
 #define HOLD_FIRST_NS 1000000 /* batching: the first sleep of a stretch, before its rate is known */
+#define TURN_SLACK_NS 1000000 /* batching: a sleeper due this much after the drain it is to make is not woken */
 
 /* Direct puts: a reader away from its port putting for longer than this has stalled and the
  * publisher reads in its place; the publisher looks this often while the reader puts; in a rescue it looks this
@@ -48,8 +55,23 @@ static_assert(sizeof(struct rx_entry) <= 40, "a queued CAN frame (rx_queue_frame
 #define DIRECT_STALL_NS 10000000
 #define WATCH_MS 10
 #define RESCUE_POLL_MS 10
+#define STALL_LONG_NS 1000000000 /* a put stalled this long is the link's, not a scheduling hiccup: said once */
 
-static int flush_due[ZN_MAX_BUSES]; /* batching: the reader's drain at a period's end is queued (b->lock) */
+/* Batching mode's turns (zn_rx.c, Turns), one per bus, guarded by its b->lock. Threads: 0 the
+ * reader, 1 the publisher. */
+enum { NOBODY = -1 };
+static struct turns {
+	int port, putter; /* the thread reading the port; the one publishing from the queue (or NOBODY) */
+	int idle_read;	  /* the port's reader waits for a stretch's first frame (due was 0) */
+	int next;	  /* the thread to make the drain at due */
+	int64_t due;	  /* the port's next drain (monotonic ns); 0: no stretch, the port is waited on */
+	int64_t flush_at, last_drain, hold; /* the period's end (0: none); the last drain; how long the port may keep frames now */
+	size_t period_frames;
+	int64_t sleeping[2]; /* a sleeping thread's wakeup (INT64_MAX: until signalled); 0: awake */
+	int64_t put_since;   /* the putter's current put started then */
+	uint64_t puts, stall_seen; /* puts so far; the one last counted as stalled */
+	int reader_done, backoff_ms;
+} turns[ZN_MAX_BUSES];
 
 esp_err_t zn_rx_queue_init(struct bus *b)
 {
@@ -58,6 +80,7 @@ esp_err_t zn_rx_queue_init(struct bus *b)
 		zn_log("E", "%s", err); /* zn_node_check_config refused it already */
 		return ESP_ERR_INVALID_ARG;
 	}
+	turns[b->index] = (struct turns){ .port = NOBODY, .putter = NOBODY, .backoff_ms = CAN_REOPEN_MIN_MS };
 	for (size_t c = 0; c < b->qos.class_count; c++) {
 		b->ring[c].cap = zn_node.cfg.rx_queue_frames;
 		b->ring[c].queue = calloc(b->ring[c].cap, sizeof(struct rx_entry));
@@ -146,11 +169,22 @@ esp_err_t zn_node_submit(size_t bus_index, const can_message_t *msg, int64_t rx_
 	zn_mutex_lock(b->lock);
 	rc = enqueue_locked(b, msg, rx_time_ns);
 	/* Wake the publisher only when it has something to do: it sleeps on an empty queue
-	 * (immediate mode) or until its period ends or a batch is full (batching mode).
-	 * A wakeup per frame would cost two context switches per frame for nothing. */
-	size_t wake_at = zn_node.cfg.publish_period_ms ? zn_node.cfg.batch_max_frames : 1;
-	if (rc == ESP_OK && b->queued == wake_at)
+	 * (immediate mode); in batching mode a period starts (if none runs: the threads sleep
+	 * until its end) or a batch is full. A wakeup per frame would cost two context
+	 * switches per frame for nothing. */
+	struct turns *t = &turns[b->index];
+	int64_t period_ns = (int64_t)zn_node.cfg.publish_period_ms * 1000000;
+	if (rc == ESP_OK && period_ns && !t->flush_at) {
+		int64_t now = zn_monotonic_ns();
+		t->flush_at = now + period_ns;
+		t->hold = HOLD_FIRST_NS < period_ns ? HOLD_FIRST_NS : period_ns;
+		t->last_drain = now;
+		t->period_frames = 0; /* only the port's frames continue a stretch */
+		t->due = now + t->hold;
 		zn_cond_signal(b->nonempty);
+	} else if (rc == ESP_OK && b->queued == (period_ns ? zn_node.cfg.batch_max_frames : 1)) {
+		zn_cond_signal(b->nonempty);
+	}
 	zn_mutex_unlock(b->lock);
 	return rc;
 }
@@ -222,6 +256,7 @@ static void rescue(struct bus *b, zn_can_rx_t *rx)
 	if (COUNT(b->n.direct_stalls) == 0)
 		zn_log("W", "%s: a put stalled (Zenoh session blocked): the publisher reads the bus meanwhile and "
 			    "publishes from the queue until it caught up (direct_stalls counts these)", b->name);
+	int64_t since = zn_monotonic_ns();
 	while (!b->reader_back && !zn_node.stopping) {
 		zn_mutex_unlock(b->lock);
 		size_t n = 0;
@@ -231,6 +266,11 @@ static void rescue(struct bus *b, zn_can_rx_t *rx)
 		zn_mutex_lock(b->lock);
 		if (rc == ESP_OK)
 			queue_burst_locked(b, rx, n);
+		if (!b->long_stall_said && zn_monotonic_ns() - since >= STALL_LONG_NS) {
+			b->long_stall_said = 1;
+			zn_log("W", "%s: a put has been stalled for 1 s (the router or the link takes no samples); the "
+				    "publisher keeps reading the bus for it", b->name);
+		}
 	}
 	if (!b->reader_back) /* stopping: said, so a stop during a stall can be told from one after it */
 		zn_log("I", "%s: stopping while a put is stalled: the publisher stops reading for it and waits "
@@ -265,46 +305,31 @@ static void wait_immediate(struct bus *b, zn_can_rx_t *rx)
 	}
 }
 
+static void batch_thread(struct bus *b, int me);
+
 void zn_rx_publisher_thread(void *arg)
 {
 	struct bus *b = arg;
-	uint32_t period_ms = zn_node.cfg.publish_period_ms;
-	size_t batch_max = period_ms ? zn_node.cfg.batch_max_frames : 1;
-	size_t take_max = period_ms ? batch_max : b->qos.class_count > 1 ? CLASS_CHUNK : PUBLISH_CHUNK;
-	struct rx_entry *taken = malloc(take_max * sizeof(*taken));
-	zn_can_rx_t *rx = period_ms ? NULL : malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* a rescue's reads */
-	if (!taken || (!period_ms && !rx)) {
-		zn_log("E", "%s: out of memory for the publisher", b->name);
-		free(taken);
+	if (zn_node.cfg.publish_period_ms) {
+		batch_thread(b, 1);
 		return;
 	}
-	int64_t next_flush = zn_monotonic_ns() + (int64_t)period_ms * 1000000;
+	size_t take_max = b->qos.class_count > 1 ? CLASS_CHUNK : PUBLISH_CHUNK;
+	struct rx_entry *taken = malloc(take_max * sizeof(*taken));
+	zn_can_rx_t *rx = malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* a rescue's reads */
+	if (!taken || !rx) {
+		zn_log("E", "%s: out of memory for the publisher", b->name);
+		free(taken);
+		free(rx);
+		return;
+	}
 	for (;;) {
 		zn_mutex_lock(b->lock);
-		if (period_ms == 0) {
-			wait_immediate(b, rx);
-			b->publishing = 1;
-		} else {
-			/* wait for the period to end, unless a full batch is already there */
-			while (!zn_node.stopping && b->queued < batch_max && !flush_due[b->index]) {
-				int64_t left_ms = (next_flush - zn_monotonic_ns()) / 1000000;
-				if (left_ms <= 0)
-					break;
-				zn_cond_wait(b->nonempty, b->lock, (int)left_ms);
-			}
-			if (flush_due[b->index]) {
-				/* the reader ends the periods while frames come: this timer only catches
-				 * frames submitted otherwise (zn_node_submit); cleared once all is taken */
-				if (b->queued <= take_max)
-					flush_due[b->index] = 0;
-				next_flush = zn_monotonic_ns() + 2 * (int64_t)period_ms * 1000000;
-			} else if (zn_monotonic_ns() >= next_flush)
-				next_flush += (int64_t)period_ms * 1000000 *
-					      (1 + (zn_monotonic_ns() - next_flush) / ((int64_t)period_ms * 1000000));
-		}
+		wait_immediate(b, rx);
+		b->publishing = 1;
 		int stopping = zn_node.stopping;
-		/* a round: highest class first; immediate mode starts over after the first class
-		 * that had frames (a higher one may have some by now), batching mode takes a batch of each */
+		/* a round: highest class first, starting over after the first class that had
+		 * frames (a higher one may have some by now) */
 		size_t round = 0;
 		int64_t round_start = zn_monotonic_ns();
 		for (size_t c = 0; c < b->qos.class_count; c++) {
@@ -313,20 +338,18 @@ void zn_rx_publisher_thread(void *arg)
 			size_t n = take(b, c, taken, take_max);
 			zn_mutex_unlock(b->lock);
 			if (n)
-				publish_runs(b, c, taken, n, batch_max);
+				publish_runs(b, c, taken, n, 1);
 			round += n;
-			if (n && !period_ms)
+			if (n)
 				break;
 		}
-		if (!period_ms) {
-			int64_t took = zn_monotonic_ns() - round_start;
-			zn_mutex_lock(b->lock);
-			b->publishing = 0;
-			/* caught up with puts that no longer stall: the reader may put again */
-			if (b->degraded && !b->queued && !b->rescuing && took < DIRECT_STALL_NS)
-				b->degraded = 0;
-			zn_mutex_unlock(b->lock);
-		}
+		int64_t took = zn_monotonic_ns() - round_start;
+		zn_mutex_lock(b->lock);
+		b->publishing = 0;
+		/* caught up with puts that no longer stall: the reader may put again */
+		if (b->degraded && !b->queued && !b->rescuing && took < DIRECT_STALL_NS)
+			b->degraded = 0;
+		zn_mutex_unlock(b->lock);
 		if (stopping && round == 0)
 			break; /* queues flushed */
 	}
@@ -334,21 +357,12 @@ void zn_rx_publisher_thread(void *arg)
 	free(rx);
 }
 
-/* ---- the reader: bursts from the CAN port ----
+/* ---- the reader (immediate mode): bursts from the CAN port ----
  *
- * Immediate mode: each wakeup reads everything queued (one zn_can_receive_burst
- * per ZN_CAN_BURST_MAX frames) and queues it under one lock, waking the
- * publisher once if it was idle, or puts it itself (Direct puts, above). Batching mode (publish_period_ms > 0): the
- * port keeps the frames and their stamps; after the first frame of an active
- * stretch the reader sleeps until the period ends, reads all, and asks the
- * publisher to flush: one reader and one publisher wakeup per period. It wakes
- * sooner when the port would otherwise fill: the rate measured over the last
- * sleep and zn_can_rx_capacity bound the next sleep to half the capacity's
- * worth of frames; a stretch starts with a 1 ms sleep, each next one at most
- * twice the last, so a rate is known before a sleep is long. A period without
- * frames ends the stretch (the reader then blocks until the next frame). The
- * CAN port never waits for Zenoh: a reader stuck in a put is read for. */
-
+ * Each wakeup reads everything queued (one zn_can_receive_burst per
+ * ZN_CAN_BURST_MAX frames) and queues it under one lock, waking the publisher
+ * once if it was idle, or puts it itself (Direct puts, above). The CAN port
+ * never waits for Zenoh: a reader stuck in a put is read for. */
 
 /* May the reader put a burst of n itself? (b->lock held) Immediate mode, connected, no stall
  * since the publisher last caught up, nothing queued or being published (order), and the
@@ -422,11 +436,10 @@ static void put_direct(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx
 	zn_mutex_unlock(b->lock);
 }
 
-/* Queues one burst: one lock; the publisher woken once at most. In immediate mode the
- * reader puts it itself when it may (own: room for ZN_CAN_BURST_MAX frames). */
-static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, int flush, struct rx_entry *own)
+/* Queues one burst: one lock; the publisher woken once at most, or the reader puts it
+ * itself when it may (own: room for ZN_CAN_BURST_MAX frames; NULL: queue only). */
+static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx_entry *own)
 {
-	size_t wake_at = zn_node.cfg.publish_period_ms ? zn_node.cfg.batch_max_frames : 1;
 	zn_mutex_lock(b->lock);
 	if (n && own && direct_ok(b, n)) {
 		put_direct(b, rx, n, own);
@@ -434,9 +447,7 @@ static void submit_burst(struct bus *b, const zn_can_rx_t *rx, size_t n, int flu
 	}
 	size_t before = b->queued;
 	queue_burst_locked(b, rx, n);
-	if (flush)
-		flush_due[b->index] = 1;
-	if (flush || (before < wake_at && b->queued >= wake_at))
+	if (!before && b->queued)
 		zn_cond_signal(b->nonempty);
 	zn_mutex_unlock(b->lock);
 }
@@ -450,7 +461,7 @@ static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, struct rx_entry *own, int
 		esp_err_t rc = zn_can_receive_burst(b->can, rx, ZN_CAN_BURST_MAX, &n, timeout_ms);
 		if (rc != ESP_OK)
 			return *total ? ESP_OK : rc; /* a lost bus shows on the next call */
-		submit_burst(b, rx, n, 0, own);
+		submit_burst(b, rx, n, own);
 		*total += n;
 		if (n < ZN_CAN_BURST_MAX)
 			return ESP_OK;
@@ -458,93 +469,289 @@ static esp_err_t drain(struct bus *b, zn_can_rx_t *rx, struct rx_entry *own, int
 	}
 }
 
-static void request_flush(struct bus *b)
+/* The port went away (interface down, userspace hub restarted): reopens it after backoff_ms,
+ * doubling that up to CAN_REOPEN_MAX_MS while it fails; returns whether the node stops.
+ * Only the thread that reads the port calls this. */
+static int reopen(struct bus *b, int *backoff_ms)
 {
-	submit_burst(b, NULL, 0, 1, NULL);
+	zn_log("W", "%s: CAN bus lost, reopening in %d ms", b->name, *backoff_ms);
+	if (zn_stop_wait(*backoff_ms))
+		return 1;
+	zn_can_t *fresh = NULL;
+	if (zn_can_open(b->name, &fresh) == ESP_OK) {
+		zn_mutex_lock(b->can_lock);
+		zn_can_t *old = b->can;
+		b->can = fresh;
+		zn_mutex_unlock(b->can_lock);
+		zn_can_close(old);
+		COUNT(b->n.can_reopens);
+		zn_log("I", "%s: CAN bus reopened", b->name);
+	} else if (*backoff_ms < CAN_REOPEN_MAX_MS) {
+		*backoff_ms *= 2;
+	}
+	return 0;
 }
 
 void zn_rx_reader_thread(void *arg)
 {
 	struct bus *b = arg;
-	int backoff_ms = CAN_REOPEN_MIN_MS;
-	int64_t period_ns = (int64_t)zn_node.cfg.publish_period_ms * 1000000;
-	zn_can_rx_t *rx = malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* off the stack: a small task's budget */
-	/* immediate mode: the frames of a burst the reader puts itself */
-	struct rx_entry *own = period_ns ? NULL : malloc(ZN_CAN_BURST_MAX * sizeof(*own));
-	if (!rx || (!period_ns && !own)) {
-		zn_log("E", "%s: out of memory for the reader", b->name);
-		free(rx);
+	if (zn_node.cfg.publish_period_ms) {
+		batch_thread(b, 0);
 		return;
 	}
-	int64_t flush_at = 0;	       /* batching: end of the current period; 0 = idle */
-	int64_t last_drain = 0, hold = 0; /* when the port was last drained; how long it may keep frames now */
-	size_t period_frames = 0;
+	int backoff_ms = CAN_REOPEN_MIN_MS;
+	zn_can_rx_t *rx = malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* off the stack: a small task's budget */
+	struct rx_entry *own = malloc(ZN_CAN_BURST_MAX * sizeof(*own)); /* the frames of a burst it puts itself */
+	if (!rx || !own) {
+		zn_log("E", "%s: out of memory for the reader", b->name);
+		free(rx);
+		free(own);
+		return;
+	}
 	while (!zn_node.stopping) {
-		int timeout_ms = CAN_RECEIVE_TIMEOUT_MS;
-		if (flush_at) {
-			int64_t now = zn_monotonic_ns();
-			int64_t wake = flush_at < last_drain + hold ? flush_at : last_drain + hold;
-			if (wake > now && zn_stop_wait((int)((wake - now + 999999) / 1000000)))
-				break;
-			timeout_ms = 0;
-		}
 		size_t n = 0;
-		esp_err_t rc = drain(b, rx, own, timeout_ms, &n);
-		if (rc == ESP_OK || rc == ESP_ERR_TIMEOUT) {
+		esp_err_t rc = drain(b, rx, own, CAN_RECEIVE_TIMEOUT_MS, &n);
+		if (rc == ESP_OK || rc == ESP_ERR_TIMEOUT)
 			backoff_ms = CAN_REOPEN_MIN_MS;
-			if (!period_ns)
-				continue;
-			int64_t now = zn_monotonic_ns();
-			if (!flush_at) {
-				if (n) { /* a stretch starts: the period's clock runs from its first frame */
-					flush_at = now + period_ns;
-					hold = HOLD_FIRST_NS < period_ns ? HOLD_FIRST_NS : period_ns;
-					period_frames = n;
-					last_drain = now;
-				}
-				continue;
-			}
-			/* half the port's capacity at the rate of the last sleep, at most twice the
-			 * last hold (the rate is only known for sleeps that short) and the period */
-			int64_t half = (int64_t)zn_can_rx_capacity(b->can) / 2;
-			int64_t fits = n ? half * (now - last_drain) / (int64_t)n : period_ns;
-			hold = fits < 2 * hold ? fits : 2 * hold;
-			if (hold > period_ns)
-				hold = period_ns;
-			last_drain = now;
-			period_frames += n;
-			if (now >= flush_at) {
-				request_flush(b);
-				flush_at = period_frames ? flush_at + period_ns : 0;
-				if (flush_at && flush_at <= now)
-					flush_at = now + period_ns; /* behind (a stall): a full period from now */
-				period_frames = 0;
-			}
-			continue;
-		}
-		/* bus gone (interface down, userspace hub restarted): reopen with backoff */
-		if (flush_at)
-			request_flush(b); /* what was read before it went goes out now */
-		flush_at = 0;
-		zn_log("W", "%s: CAN bus lost, reopening in %d ms", b->name, backoff_ms);
-		if (zn_stop_wait(backoff_ms))
+		else if (reopen(b, &backoff_ms))
 			break;
-		zn_can_t *fresh = NULL;
-		if (zn_can_open(b->name, &fresh) == ESP_OK) {
-			zn_mutex_lock(b->can_lock);
-			zn_can_t *old = b->can;
-			b->can = fresh;
-			zn_mutex_unlock(b->can_lock);
-			zn_can_close(old);
-			COUNT(b->n.can_reopens);
-			zn_log("I", "%s: CAN bus reopened", b->name);
-		} else if (backoff_ms < CAN_REOPEN_MAX_MS) {
-			backoff_ms *= 2;
-		}
 	}
 	/* stopping: what the port still holds goes out with the publisher's last flush */
 	size_t n = 0;
 	drain(b, rx, NULL, 0, &n);
 	free(rx);
 	free(own);
+}
+
+/* ---- batching mode: turns ----
+ *
+ * The port keeps the frames and their stamps between drains: from a stretch's
+ * first frame the port is drained when the period ends, or sooner when it would
+ * otherwise fill (the rate measured over the last sleep and zn_can_rx_capacity
+ * bound the next sleep to half the capacity's worth of frames; a stretch starts
+ * with a 1 ms sleep, each next one at most twice the last, so a rate is known
+ * before a sleep is long). Each drain goes to the queue; at a period's end (or
+ * with a full batch queued) the thread that drained publishes the queue itself.
+ * A period without frames ends the stretch, and a thread then blocks on the port
+ * until the next frame.
+ *
+ * Both threads run this: the drains alternate between them (next), and the one
+ * not draining sleeps until the drain after the next one. So a period costs one
+ * wakeup of one thread (and Zenoh's transmit task's for the put), and the
+ * sleeper's wakeup is the watch that costs nothing: if the other is still in a
+ * put when the next drain is due (a frozen router, congestion control block),
+ * the drain is the sleeper's, and every one after it until the put returns,
+ * into the queue (rx_queue_drops once full), so the port is never left longer
+ * than a drain's hold. A put that kept a drain waiting longer than
+ * DIRECT_STALL_NS counts once in direct_stalls. Order: one thread reads the port
+ * at a time and queues in reading order, one publishes at a time in queue order
+ * (the batch a put took is published before anything queued after it). */
+
+/* Reads the port (this thread's: t->port) into the queue, a burst at a time until one comes
+ * back short (b->lock held on entry and return, released while reading). */
+static esp_err_t drain_to_queue(struct bus *b, zn_can_rx_t *rx, int timeout_ms, size_t *total)
+{
+	*total = 0;
+	for (;;) {
+		size_t n = 0;
+		zn_mutex_unlock(b->lock);
+		esp_err_t rc = zn_can_receive_burst(b->can, rx, ZN_CAN_BURST_MAX, &n, timeout_ms);
+		zn_mutex_lock(b->lock);
+		if (rc != ESP_OK)
+			return *total ? ESP_OK : rc; /* a lost bus shows on the next call */
+		queue_burst_locked(b, rx, n);
+		*total += n;
+		if (n < ZN_CAN_BURST_MAX)
+			return ESP_OK;
+		timeout_ms = 0;
+	}
+}
+
+/* After a drain of n frames at now (n = 0: none was made): the next drain (t->due) and whether
+ * the period has ended (b->lock held). */
+static int plan(struct turns *t, size_t n, int64_t now, int64_t period_ns, size_t capacity)
+{
+	if (!t->flush_at) {
+		if (n) { /* a stretch starts: the period's clock runs from its first frame */
+			t->flush_at = now + period_ns;
+			t->hold = HOLD_FIRST_NS < period_ns ? HOLD_FIRST_NS : period_ns;
+			t->period_frames = n;
+			t->last_drain = now;
+		}
+		t->due = t->flush_at ? now + t->hold : 0;
+		return 0;
+	}
+	/* half the port's capacity at the rate of the last sleep, at most twice the last hold
+	 * (the rate is only known for sleeps that short) and the period */
+	int64_t half = (int64_t)capacity / 2;
+	int64_t fits = n ? half * (now - t->last_drain) / (int64_t)n : period_ns;
+	t->hold = fits < 2 * t->hold ? fits : 2 * t->hold;
+	if (t->hold > period_ns)
+		t->hold = period_ns;
+	t->last_drain = now;
+	t->period_frames += n;
+	int ended = now >= t->flush_at;
+	if (ended) {
+		t->flush_at = t->period_frames ? t->flush_at + period_ns : 0;
+		if (t->flush_at && t->flush_at <= now)
+			t->flush_at = now + period_ns; /* behind (a stall): a full period from now */
+		t->period_frames = 0;
+	}
+	t->due = !t->flush_at ? 0 : t->flush_at < t->last_drain + t->hold ? t->flush_at : t->last_drain + t->hold;
+	return ended;
+}
+
+/* Publishes the queue, all of it (a period ended) or its full batches, a batch of each class
+ * per round, highest first (b->lock held; released during puts). */
+static void publish_queue(struct bus *b, struct turns *t, int me, struct rx_entry *taken, int all)
+{
+	size_t batch_max = zn_node.cfg.batch_max_frames;
+	t->putter = me;
+	while (b->queued && (all || b->queued >= batch_max)) {
+		for (size_t c = 0; c < b->qos.class_count; c++) {
+			size_t n = take(b, c, taken, batch_max);
+			if (!n)
+				continue;
+			t->put_since = zn_monotonic_ns();
+			t->puts++;
+			zn_mutex_unlock(b->lock);
+			publish_runs(b, c, taken, n, batch_max);
+			zn_mutex_lock(b->lock);
+		}
+	}
+	t->putter = NOBODY;
+}
+
+/* This thread reads the port: the drain due, or (due 0) a wait for a stretch's first frame;
+ * then publishes if the period ended (b->lock held; released meanwhile). */
+static void drain_turn(struct bus *b, struct turns *t, int me, zn_can_rx_t *rx, struct rx_entry *taken)
+{
+	int other = 1 - me, idle = !t->due;
+	int64_t now = zn_monotonic_ns();
+	if (t->putter == other && t->stall_seen != t->puts && now - t->put_since >= DIRECT_STALL_NS) {
+		t->stall_seen = t->puts;
+		if (COUNT(b->n.direct_stalls) == 0)
+			zn_log("W", "%s: a put stalled (Zenoh session blocked): the other thread reads the bus meanwhile "
+				    "(direct_stalls counts these)", b->name);
+	}
+	t->port = me;
+	t->idle_read = idle;
+	size_t n = 0;
+	esp_err_t rc = drain_to_queue(b, rx, idle ? CAN_RECEIVE_TIMEOUT_MS : 0, &n);
+	t->idle_read = 0;
+	if (rc == ESP_FAIL) { /* bus gone: what was read before it went goes out now */
+		t->flush_at = t->due = 0;
+		if (t->putter == NOBODY && b->queued)
+			publish_queue(b, t, me, taken, 1);
+		zn_mutex_unlock(b->lock);
+		reopen(b, &t->backoff_ms); /* still t->port: nobody reads the port meanwhile */
+		zn_mutex_lock(b->lock);
+		t->port = NOBODY;
+		return;
+	}
+	t->port = NOBODY;
+	t->backoff_ms = CAN_REOPEN_MIN_MS;
+	if (idle && t->due == 0 && n == 0)
+		return; /* nothing yet: wait again (stopping is seen in between) */
+	int ended = plan(t, n, zn_monotonic_ns(), (int64_t)zn_node.cfg.publish_period_ms * 1000000,
+			 zn_can_rx_capacity(b->can));
+	/* the next drain is the other's unless it is putting; it sleeps until then at the latest
+	 * (woken if not), so it is awake for the drain even if our put below stalls */
+	t->next = t->putter == other ? me : other;
+	if (t->next == other && t->due && t->sleeping[other] > t->due + TURN_SLACK_NS)
+		zn_cond_signal(b->nonempty);
+	if (t->putter == NOBODY && (ended || b->queued >= zn_node.cfg.batch_max_frames))
+		publish_queue(b, t, me, taken, ended);
+}
+
+/* When this thread wakes next (b->lock held): for the drain due if it is its turn (or the other
+ * is putting), else for the drain after it, which is its own or, if the other is still in a
+ * put by then, the drain the other could not make. */
+static int64_t wake_time(const struct turns *t, int me, int64_t now, int64_t period_ns)
+{
+	if (!t->due)
+		return INT64_MAX; /* a thread waits on the port, or nothing runs: until signalled */
+	if (t->due <= now)
+		return INT64_MAX; /* the other is draining it now: it wakes us if the next is ours */
+	if (t->next == me || t->putter == 1 - me)
+		return t->due;
+	int64_t step = 2 * t->hold < period_ns ? 2 * t->hold : period_ns;
+	int64_t after = t->due + step;
+	return t->due < t->flush_at && after > t->flush_at ? t->flush_at : after;
+}
+
+/* Stopping (b->lock held): the reader reads the port once more if nobody does and leaves; the
+ * publisher, once the reader has left and no put runs, reads it once more and publishes all
+ * that is queued (nothing is read for a put that is stuck: that is waited for). Returns whether
+ * this thread is done. */
+static int stop_turn(struct bus *b, struct turns *t, int me, zn_can_rx_t *rx, struct rx_entry *taken)
+{
+	size_t n = 0;
+	if (me == 0) {
+		if (t->port == NOBODY) {
+			t->port = me;
+			drain_to_queue(b, rx, 0, &n);
+			t->port = NOBODY;
+		}
+		t->reader_done = 1;
+		zn_cond_signal(b->nonempty);
+		return 1;
+	}
+	if (!t->reader_done || t->port != NOBODY || t->putter != NOBODY) {
+		zn_cond_wait(b->nonempty, b->lock, -1);
+		return 0;
+	}
+	t->port = me;
+	drain_to_queue(b, rx, 0, &n);
+	t->port = NOBODY;
+	publish_queue(b, t, me, taken, 1);
+	return 1;
+}
+
+/* Batching mode, thread me (0 the reader, 1 the publisher): takes its turns until stopped. */
+static void batch_thread(struct bus *b, int me)
+{
+	struct turns *t = &turns[b->index];
+	int64_t period_ns = (int64_t)zn_node.cfg.publish_period_ms * 1000000;
+	zn_can_rx_t *rx = malloc(ZN_CAN_BURST_MAX * sizeof(*rx)); /* off the stack: a small task's budget */
+	struct rx_entry *taken = malloc(zn_node.cfg.batch_max_frames * sizeof(*taken));
+	if (!rx || !taken) {
+		zn_log("E", "%s: out of memory for %s", b->name, me ? "the publisher" : "the reader");
+		free(rx);
+		free(taken);
+		return;
+	}
+	zn_mutex_lock(b->lock);
+	for (;;) {
+		if (zn_node.stopping) {
+			if (stop_turn(b, t, me, rx, taken))
+				break;
+			continue;
+		}
+		int64_t now = zn_monotonic_ns();
+		if (t->port == NOBODY && (!t->due || now >= t->due)) {
+			drain_turn(b, t, me, rx, taken);
+			continue;
+		}
+		/* frames of zn_node_submit while the port is waited on: their period ends without a drain */
+		if (t->port != NOBODY && t->idle_read && t->due && now >= t->due && t->putter == NOBODY) {
+			int ended = plan(t, 0, now, period_ns, zn_can_rx_capacity(b->can));
+			publish_queue(b, t, me, taken, ended);
+			continue;
+		}
+		if (t->putter == NOBODY && b->queued >= zn_node.cfg.batch_max_frames) {
+			publish_queue(b, t, me, taken, 0);
+			continue;
+		}
+		int64_t until = wake_time(t, me, now, period_ns);
+		/* the reader is joined first on stop, and only a stop wait would see it at once */
+		if (me == 0 && until - now > (int64_t)CAN_RECEIVE_TIMEOUT_MS * 1000000)
+			until = now + (int64_t)CAN_RECEIVE_TIMEOUT_MS * 1000000;
+		t->sleeping[me] = until;
+		zn_cond_wait(b->nonempty, b->lock, until == INT64_MAX ? -1 : (int)((until - now + 999999) / 1000000));
+		t->sleeping[me] = 0;
+	}
+	zn_mutex_unlock(b->lock);
+	free(rx);
+	free(taken);
 }

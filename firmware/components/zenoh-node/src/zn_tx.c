@@ -10,6 +10,12 @@
  * can_tx_errors and abandons the rest of that command (tx_abandoned), so one
  * stalled command costs one timeout, not one per frame.
  *
+ * Direct writes: a command that finds nothing queued and nobody writing is
+ * written by the callback itself, with a timeout of 0 (it still never waits),
+ * so a bridge whose bus keeps up costs no transmitter wakeup per command. What
+ * the bus does not take at once is the transmitter's next command (tx_rest),
+ * ahead of the queue: a command stays whole, never interleaved with another.
+ *
  * A command's source time: its attachment's first frame time when it carries
  * an attachment (and that time is not 0), else the sample's Zenoh timestamp,
  * else none (accepted, counted tx_unstamped). Ages are CLOCK_REALTIME now minus
@@ -57,12 +63,15 @@ esp_err_t zn_tx_queue_init(struct bus *b, uint32_t frames)
 	b->tx_cap = frames;
 	b->txq = calloc(frames, sizeof(*b->txq));
 	b->tx_heap = calloc(frames, sizeof(*b->tx_heap)); /* a command has at least one frame */
-	if (!b->txq || !b->tx_heap)
+	b->tx_burst = malloc(ZN_CAN_BURST_MAX * sizeof(*b->tx_burst));
+	if (!b->txq || !b->tx_heap || !b->tx_burst)
 		return ESP_ERR_NO_MEM;
 	for (uint32_t i = 0; i < frames; i++)
 		b->txq[i].next = i + 1 < frames ? i + 1 : ZN_TX_NONE;
 	b->tx_free = 0;
 	b->tx_len = b->tx_waiting = b->tx_order = 0;
+	b->tx_rest.count = 0;
+	b->tx_direct = 0;
 	return ESP_OK;
 }
 
@@ -149,6 +158,34 @@ static void refuse_stale(struct bus *b, int64_t age_ms, uint32_t frames, const c
 		       b->name, b->tx_key, where, age_ms, zn_node.cfg.tx_max_age_ms, frames);
 }
 
+/* Writes the next burst of command c (up to ZN_CAN_BURST_MAX of its frames, copied to burst)
+ * with zn_can_send_burst's timeout (0: what the bus takes at once). The frames written leave
+ * the command (c->first, c->count) and their slots are released; counted in tx_frames. */
+static esp_err_t write_burst(struct bus *b, struct tx_cmd *c, can_message_t *burst, int timeout_ms)
+{
+	uint32_t k = 0;
+	for (uint32_t at = c->first; k < ZN_CAN_BURST_MAX && k < c->count; k++) {
+		burst[k] = b->txq[at].msg;
+		at = b->txq[at].next;
+	}
+	size_t sent = 0;
+	zn_mutex_lock(b->can_lock);
+	esp_err_t rc = zn_can_send_burst(b->can, burst, k, &sent, timeout_ms);
+	zn_mutex_unlock(b->can_lock);
+	zn_mutex_lock(b->tx_lock);
+	for (size_t i = 0; i < sent; i++) { /* the slots written, in chain order */
+		uint32_t next = b->txq[c->first].next;
+		release(b, c->first, 1);
+		c->first = next;
+	}
+	if (sent > 0)
+		b->tx_failed = 0; /* the bus takes frames again */
+	zn_mutex_unlock(b->tx_lock);
+	c->count -= (uint32_t)sent;
+	COUNT_N(b->n.tx_frames, sent);
+	return rc;
+}
+
 static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t att_len,
 		   uint64_t zenoh_ns)
 {
@@ -197,8 +234,23 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 		slot = e->next;
 	}
 	b->tx_len += (uint32_t)count;
-	heap_push(b, c);
-	zn_cond_signal(b->tx_ready);
+	if (b->tx_len > count || b->tx_direct) { /* others wait or are being written: queue behind them */
+		heap_push(b, c);
+		if (!b->tx_direct) /* else the direct writer hands over when it is done */
+			zn_cond_signal(b->tx_ready);
+		zn_mutex_unlock(b->tx_lock);
+		return;
+	}
+	b->tx_direct = 1; /* the transmitter waits until this command is written or handed over */
+	zn_mutex_unlock(b->tx_lock);
+	while (c.count > 0 && write_burst(b, &c, b->tx_burst, 0) == ESP_OK)
+		;
+	COUNT_N(b->n.tx_direct_frames, count - c.count);
+	zn_mutex_lock(b->tx_lock);
+	b->tx_direct = 0;
+	b->tx_rest = c; /* what the bus did not take at once (count 0: nothing) */
+	if (c.count > 0 || b->tx_waiting > 0)
+		zn_cond_signal(b->tx_ready);
 	zn_mutex_unlock(b->tx_lock);
 }
 
@@ -236,9 +288,6 @@ void zn_tx_close(struct bus *b)
 	zn_mutex_unlock(b->tx_lock);
 }
 
-/* Writes one command's frames, up to ZN_CAN_BURST_MAX per zn_can_send_burst (Linux: one
- * sendmmsg), copied to burst; returns whether the bus took them all. The slots are the
- * transmitter's until released (the callback only fills free ones). */
 /* What is left of a command's deadline (ms, at least 1), or -1 when it has none. */
 static int64_t lifetime_left_ms(const struct tx_cmd *c)
 {
@@ -249,43 +298,29 @@ static int64_t lifetime_left_ms(const struct tx_cmd *c)
 	return left > 0 ? left : 1;
 }
 
-static int transmit_command(struct bus *b, const struct tx_cmd *c, can_message_t *burst)
+/* Writes what is left of one command, a burst (Linux: one sendmmsg) at a time; returns whether
+ * the bus took it all. Its slots are its writer's (the transmitter, or a callback writing
+ * directly) until released; other callbacks only fill free ones. */
+static int transmit_command(struct bus *b, struct tx_cmd *c, can_message_t *burst)
 {
-	uint32_t slot = c->first, done = 0;
-	while (done < c->count) {
-		uint32_t k = 0, after = slot;
-		for (; k < ZN_CAN_BURST_MAX && done + k < c->count; k++) {
-			burst[k] = b->txq[after].msg;
-			after = b->txq[after].next;
-		}
+	while (c->count > 0) {
 		/* a busy bus may hold a frame: never past the command's deadline, so a command
 		 * that goes stale waiting for the bus is refused, not written late */
 		int64_t left_ms = lifetime_left_ms(c), age_ms = 0;
 		int timeout_ms = left_ms >= 0 && left_ms < CAN_TRANSMIT_TIMEOUT_MS ? (int)left_ms : CAN_TRANSMIT_TIMEOUT_MS;
-		size_t sent = 0;
-		zn_mutex_lock(b->can_lock);
-		esp_err_t rc = stale(c->source_ns, &age_ms) ? ESP_ERR_TIMEOUT
-							     : zn_can_send_burst(b->can, burst, k, &sent, timeout_ms);
-		zn_mutex_unlock(b->can_lock);
-		zn_mutex_lock(b->tx_lock);
-		for (size_t i = 0; i < sent; i++) { /* the slots written, in chain order */
-			uint32_t next = b->txq[slot].next;
-			release(b, slot, 1);
-			slot = next;
-		}
-		if (rc != ESP_OK)
-			release(b, slot, c->count - done - (uint32_t)sent);
-		zn_mutex_unlock(b->tx_lock);
-		COUNT_N(b->n.tx_frames, sent);
-		done += (uint32_t)sent;
+		esp_err_t rc = stale(c->source_ns, &age_ms) ? ESP_ERR_TIMEOUT : write_burst(b, c, burst, timeout_ms);
 		if (rc == ESP_OK)
 			continue;
+		uint32_t left = c->count;
+		zn_mutex_lock(b->tx_lock);
+		release(b, c->first, left);
+		zn_mutex_unlock(b->tx_lock);
 		if (rc == ESP_ERR_TIMEOUT && timeout_ms < CAN_TRANSMIT_TIMEOUT_MS) { /* the deadline bounded the wait */
 			stale(c->source_ns, &age_ms);
-			refuse_stale(b, age_ms, c->count - done, "waiting for the bus");
+			refuse_stale(b, age_ms, left, "waiting for the bus");
 			return 1; /* the deadline ran out, not the bus */
 		}
-		COUNT_N(b->n.tx_abandoned, c->count - done - 1);
+		COUNT_N(b->n.tx_abandoned, left - 1);
 		if (COUNT(b->n.can_tx_errors) == 0)
 			zn_log("W",
 			       "%s: CAN transmit failed (bus stalled or gone): the rest of that command is abandoned "
@@ -299,28 +334,28 @@ static int transmit_command(struct bus *b, const struct tx_cmd *c, can_message_t
 void zn_tx_transmitter_thread(void *arg)
 {
 	struct bus *b = arg;
-	int failed = 0; /* the last frame written failed */
-	can_message_t *burst = malloc(ZN_CAN_BURST_MAX * sizeof(*burst)); /* off the stack: a small task's budget */
-	if (!burst) {
-		zn_log("E", "%s: out of memory for the transmitter", b->name);
-		return;
-	}
 	for (;;) {
 		zn_mutex_lock(b->tx_lock);
-		while (b->tx_waiting == 0 && !b->tx_stop)
+		/* a callback writing directly (tx_direct) has the bus until it hands over; at stop none
+		 * is (zn_tx_close waited for them) */
+		while ((b->tx_direct || (b->tx_waiting == 0 && b->tx_rest.count == 0)) && !b->tx_stop)
 			zn_cond_wait(b->tx_ready, b->tx_lock, -1);
-		if (b->tx_waiting == 0 || (b->tx_stop && failed)) {
+		if ((b->tx_waiting == 0 && b->tx_rest.count == 0) || (b->tx_stop && b->tx_failed)) {
 			uint32_t left = b->tx_len; /* stopping: the bus does not take them */
 			b->tx_waiting = 0;
+			b->tx_rest.count = 0;
 			b->tx_len = 0;
 			zn_mutex_unlock(b->tx_lock);
 			COUNT_N(b->n.tx_abandoned, left);
-			free(burst);
 			return;
 		}
-		struct tx_cmd c = heap_pop(b);
+		/* a command's rest is partly on the bus: its deadline is judged per burst
+		 * (transmit_command), so it is refused as a whole only before any frame went */
+		int rest = b->tx_rest.count > 0;
+		struct tx_cmd c = rest ? b->tx_rest : heap_pop(b);
+		b->tx_rest.count = 0;
 		int64_t age_ms = 0;
-		int too_old = stale(c.source_ns, &age_ms);
+		int too_old = !rest && stale(c.source_ns, &age_ms);
 		if (too_old)
 			release(b, c.first, c.count);
 		zn_mutex_unlock(b->tx_lock);
@@ -328,6 +363,10 @@ void zn_tx_transmitter_thread(void *arg)
 			refuse_stale(b, age_ms, c.count, "in the transmit queue");
 			continue;
 		}
-		failed = !transmit_command(b, &c, burst);
+		if (!transmit_command(b, &c, b->tx_burst)) { /* the bus's one burst buffer: one writer at a time */
+			zn_mutex_lock(b->tx_lock);
+			b->tx_failed = 1;
+			zn_mutex_unlock(b->tx_lock);
+		}
 	}
 }

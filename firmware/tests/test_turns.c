@@ -1,0 +1,264 @@
+/* test_turns.c - batching mode's turns (zn_rx.c) on mock ports, with zn_put
+ * wrapped (-Wl,--wrap=zn_put) so a put can be held as a frozen router holds it:
+ * a period wakes one of the bridge's threads, which reads the port and puts
+ * the batch itself; a stalled put never leaves the port unread (counted in
+ * direct_stalls); stop during a stalled put waits for it and loses nothing. */
+#include <dirent.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "check.h"
+#include "le64.h"
+#include "zn_mock.h"
+#include "zn_node.h"
+
+#define WAIT_MS 5000
+#define PERIOD_MS 10
+#define TOKEN "vehicle/can/bridges/zenoh-node/vcan0/client"
+
+/* ---- the put gate: closed, every put waits until it opens ---- */
+static pthread_mutex_t gate_lock = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t gate_cond = PTHREAD_COND_INITIALIZER;
+static int gate_closed, held; /* puts waiting at the gate now */
+
+int __real_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		  size_t attachment_len);
+int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		  size_t attachment_len);
+int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
+		  size_t attachment_len)
+{
+	pthread_mutex_lock(&gate_lock);
+	if (gate_closed) {
+		held++;
+		pthread_cond_broadcast(&gate_cond);
+		while (gate_closed)
+			pthread_cond_wait(&gate_cond, &gate_lock);
+		held--;
+	}
+	pthread_mutex_unlock(&gate_lock);
+	return __real_zn_put(pub, payload, len, attachment, attachment_len);
+}
+
+static void gate(int closed)
+{
+	pthread_mutex_lock(&gate_lock);
+	gate_closed = closed;
+	pthread_cond_broadcast(&gate_cond);
+	pthread_mutex_unlock(&gate_lock);
+}
+
+/* Waits until a put is held at the closed gate (the bridge is inside a stalled put). */
+static int wait_held(void)
+{
+	struct timespec deadline = mock_deadline(WAIT_MS);
+	pthread_mutex_lock(&gate_lock);
+	while (!held && pthread_cond_timedwait(&gate_cond, &gate_lock, &deadline) == 0)
+		;
+	int got = held;
+	pthread_mutex_unlock(&gate_lock);
+	return got;
+}
+
+/* ---- helpers ---- */
+static int64_t now_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+}
+
+static zn_node_config_t batching(void)
+{
+	zn_node_config_t cfg;
+	zn_node_default_config(&cfg);
+	cfg.publish_period_ms = PERIOD_MS;
+	cfg.rx_queue_frames = 4096;
+	return cfg;
+}
+
+/* Voluntary context switches so far of the bridge's CAN reader and publisher threads. */
+static long bridge_switches(void)
+{
+	long total = 0;
+	DIR *d = opendir("/proc/self/task");
+	struct dirent *e;
+	while (d && (e = readdir(d))) {
+		char path[300], comm[32] = "", line[128];
+		snprintf(path, sizeof(path), "/proc/self/task/%s/comm", e->d_name);
+		FILE *f = fopen(path, "r");
+		if (!f)
+			continue;
+		int got = fgets(comm, sizeof(comm), f) != NULL;
+		fclose(f);
+		if (!got || (strncmp(comm, "zn-can", 6) != 0 && strncmp(comm, "zn-pub", 6) != 0))
+			continue;
+		snprintf(path, sizeof(path), "/proc/self/task/%s/status", e->d_name);
+		if (!(f = fopen(path, "r")))
+			continue;
+		while (fgets(line, sizeof(line), f))
+			if (strncmp(line, "voluntary_ctxt_switches:", 24) == 0)
+				total += atol(line + 24);
+		fclose(f);
+	}
+	if (d)
+		closedir(d);
+	return total;
+}
+
+/* Frame i of a run: its id and data say i, its stamp is first_stamp + i. */
+static void inject(size_t i, int64_t first_stamp)
+{
+	can_message_t m;
+	memset(&m, 0, sizeof(m));
+	m.identifier = (uint32_t)(i & 0x7FF);
+	m.data_length_code = 2;
+	m.data[0] = (uint8_t)i;
+	m.data[1] = (uint8_t)(i >> 8);
+	mock_can_inject("vcan0", &m, first_stamp + (int64_t)i);
+}
+
+static void pace_ms(long ms)
+{
+	nanosleep(&(struct timespec){ .tv_nsec = ms * 1000000 }, NULL); /* the load's pace, not a wait */
+}
+
+/* Every frame published once, in order, with its sequence number and stamp. */
+static void check_published(size_t frames, int64_t first_stamp)
+{
+	size_t seen = 0, puts = 0;
+	while (seen < frames && mock_zenoh_wait_puts(puts + 1, WAIT_MS) > puts) {
+		const struct mock_put *p = mock_zenoh_put(puts++);
+		size_t n = p->len / 16;
+		CHECK(le64(p->attachment + 4) == seen);
+		for (size_t k = 0; k < n; k++) {
+			CHECK(le64(p->attachment + 12 + 8 * k) == (uint64_t)(first_stamp + (int64_t)(seen + k)));
+			CHECK(p->payload[16 * k + 8] == (uint8_t)(seen + k));
+		}
+		seen += n;
+	}
+	CHECK(seen == frames);
+	if (seen != frames)
+		fprintf(stderr, "published %zu of %zu frames in %zu puts\n", seen, frames, puts);
+}
+
+/* A counter of the bus's stats (the first of that name), or -1 when absent. */
+static long long counter(const char *name)
+{
+	char buf[8192], key[64];
+	size_t n = mock_zenoh_query("vehicle/can/bridges/zenoh-node/stats", buf, sizeof(buf) - 1);
+	buf[n] = '\0';
+	snprintf(key, sizeof(key), "\"%s\": ", name);
+	const char *at = strstr(buf, key);
+	return at ? atoll(at + strlen(key)) : -1;
+}
+
+/* ---- tests ---- */
+
+/* A frame a millisecond, 10 a period: once the stretch's first short sleeps are over, a
+ * period wakes one thread once (it drains and puts), not the reader and the publisher each
+ * (2 a period before: the reader drained, the publisher was woken to put). */
+static void test_one_wakeup_per_period(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = batching();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	size_t frames = 0;
+	for (; frames < 100; frames++) { /* the stretch starts, its sleeps grow to the period */
+		inject(frames, 1000);
+		pace_ms(1);
+	}
+	long switches = bridge_switches();
+	int64_t start = now_ns();
+	for (; frames < 500; frames++) {
+		inject(frames, 1000);
+		pace_ms(1);
+	}
+	double periods = (double)(now_ns() - start) / (PERIOD_MS * 1e6);
+	double per_period = (double)(bridge_switches() - switches) / periods;
+	check_published(frames, 1000);
+	printf("test_one_wakeup_per_period: %.2f voluntary switches of zn-can and zn-pub per period (%.0f periods)\n",
+	       per_period, periods);
+	CHECK(per_period <= 1.5);
+	zn_node_stop();
+}
+
+/* A put held for 300 ms (a frozen router): the port, which holds 64 frames (64 ms of this
+ * load), is read meanwhile, nothing is lost, the stall is counted, and once the put returns
+ * everything goes out in order. */
+static void test_stalled_put_keeps_reading(void)
+{
+	mock_reset();
+	mock_can_set_capacity("vcan0", 64);
+	zn_node_config_t cfg = batching();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	size_t frames = 0;
+	for (; frames < 50; frames++) {
+		inject(frames, 5000);
+		pace_ms(1);
+	}
+	gate(1);
+	inject(frames++, 5000);
+	CHECK(wait_held() == 1);
+	for (int i = 0; i < 300; i++, frames++) {
+		inject(frames, 5000);
+		pace_ms(1);
+	}
+	gate(0);
+	check_published(frames, 5000);
+	CHECK(mock_can_rx_drops("vcan0") == 0);
+	if (mock_can_rx_drops("vcan0"))
+		fprintf(stderr, "the port dropped %zu frames while a put stalled\n", mock_can_rx_drops("vcan0"));
+	CHECK(counter("rx_queue_drops") == 0);
+	CHECK(counter("direct_stalls") >= 1); /* counted: the other thread read for the stalled put */
+	if (counter("direct_stalls") < 1)
+		fprintf(stderr, "direct_stalls %lld after a put held 300 ms\n", counter("direct_stalls"));
+	zn_node_stop();
+}
+
+static void *open_gate_once_stopping(void *arg)
+{
+	(void)arg;
+	/* zn_node_stop withdraws the token first: from then on the node is stopping */
+	for (int waited_ms = 0; waited_ms < WAIT_MS && mock_zenoh_has_token(TOKEN); waited_ms++)
+		mock_zenoh_wait_puts(MOCK_MAX_PUTS, 1); /* a bounded 1 ms poll of the token */
+	gate(0);
+	return NULL;
+}
+
+/* Stop while a put is stalled: stop waits for the put (nothing reads for a stuck put while
+ * stopping), then every frame read goes out, in order. */
+static void test_stop_during_stalled_put(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = batching();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	size_t frames = 0;
+	for (; frames < 30; frames++) {
+		inject(frames, 9000);
+		pace_ms(1);
+	}
+	gate(1);
+	inject(frames++, 9000);
+	CHECK(wait_held() == 1);
+	for (int i = 0; i < 40; i++, frames++) {
+		inject(frames, 9000);
+		pace_ms(1);
+	}
+	pthread_t opener;
+	CHECK(pthread_create(&opener, NULL, open_gate_once_stopping, NULL) == 0);
+	zn_node_stop();
+	pthread_join(opener, NULL);
+	check_published(frames, 9000);
+}
+
+int main(void)
+{
+	test_one_wakeup_per_period();
+	test_stalled_put_keeps_reading();
+	test_stop_during_stalled_put();
+	CHECK_DONE("test_turns");
+}
