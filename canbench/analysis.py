@@ -10,7 +10,7 @@ from pathlib import Path
 
 from . import oracle, signals, wire
 from .capture import iter_zenoh_capture
-from .commands import delivered_late, explained_refusals, stale_at_put, stamp_ages_ns
+from .commands import delivered_late, explained_refusals, read_arrivals, stale_at_put, stamp_ages_ns
 from .faults import disruptive
 from .runkeys import rx_key, tx_key
 from .scenario import Scenario
@@ -33,8 +33,9 @@ class BusResult:
     bus_frames: list[oracle.Observed] = field(default_factory=list)  # the whole bus capture
     ecu_frames_not_captured: int = 0  # frames an ECU logged as sent that the bus capture lacks
     # commands the bridge refused as stale after a late delivery (commands.delivered_late), with the
-    # upper bound of their age in ms: not lost (zenoh_to_can), explained (no_stale_commands)
-    refused_late: list[tuple[oracle.Observed, float]] = field(default_factory=list)
+    # upper bound of their age in ms and what showed it ("bus", "fence"): not lost (zenoh_to_can),
+    # explained (no_stale_commands)
+    refused_late: list[tuple[oracle.Observed, float, str]] = field(default_factory=list)
 
 
 @dataclass
@@ -128,6 +129,7 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
     commands = [(r.bus, oracle.Observed(r.frame, r.t_ns, i, line=r.log_line, origin="commands.tsv"))
                 for i, r in enumerate(oracle.read_sent_log(commands_log) if commands_log.exists() else [])]
     answers = expected_answers(scenario, commands)
+    arrivals = read_arrivals(commands_log)
     buses = []
     for bus in scenario.bus_names:
         key = rx_key(prefix, bus, n)
@@ -156,7 +158,8 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             kept = [o for o in tx.lost if (bus, o.frame.can_id, o.frame.extended) not in stale]
             tx.counts["lost"] -= len(tx.lost) - len(kept)  # metrics.json's count, as the check's list
             tx.lost = kept
-        refused_late = _refused_late(scenario, bus, bus_commands, tx, stale, bridge_stats) if tx is not None else []
+        refused_late = (_refused_late(scenario, bus, bus_commands, tx, stale, bridge_stats, arrivals.get(bus))
+                        if tx is not None else [])
         not_captured = sum((sent_by_ecus - Counter(oracle.frame_key(o.frame) for o in can_frames)).values())
         buses.append(BusResult(bus, key, from_ecus, zenoh_frames, comparison, problems, bus_commands, tx, round_trip,
                                _cycle_times(from_ecus, comparison.matched), can_frames, not_captured, refused_late))
@@ -191,11 +194,13 @@ def bus_stats(bridge_stats: dict | None, bus: str) -> dict | None:
 
 
 def _refused_late(scenario: Scenario, bus: str, commands: list[oracle.Observed], tx: oracle.Comparison,
-                  stale: set, bridge_stats: dict | None) -> list[tuple[oracle.Observed, float]]:
+                  stale: set, bridge_stats: dict | None,
+                  arrived_by_ns: int | None = None) -> list[tuple[oracle.Observed, float, str]]:
     """The lost commands the bridge refused as stale because the link delivered them late (a stalled
     router or machine, outside any fault window), taken out of tx.lost: as many as the bridge's
     tx_rejected.stale leaves unexplained by commands stamped too old and fault windows, each one
-    shown late by the next command of its id (commands.delivered_late). A bridge that loses commands
+    shown late by the next command of its id or, for a stream's last ones, by the commander's fence
+    (arrived_by_ns; commands.delivered_late). A bridge that loses commands
     without counting them as stale, or refuses fresh ones, is not excused."""
     if not scenario.tx_max_age_ms or not tx.lost:
         return []
@@ -204,9 +209,10 @@ def _refused_late(scenario: Scenario, bus: str, commands: list[oracle.Observed],
     budget = refused - stamped_refused - len(in_faults)
     if budget <= 0:
         return []
-    late = delivered_late(bus, tx.lost, tx.matched, stamp_ages_ns(scenario), scenario.tx_max_age_ms * 1_000_000)
+    late = delivered_late(bus, tx.lost, tx.matched, stamp_ages_ns(scenario), scenario.tx_max_age_ms * 1_000_000,
+                          arrived_by_ns)
     late = late[:budget]
-    excused = {id(o) for o, _ in late}
+    excused = {id(o) for o, _, _ in late}
     tx.lost = [o for o in tx.lost if id(o) not in excused]
     tx.counts["lost"] -= len(late)
     return late

@@ -453,8 +453,11 @@ def freshness(result: RunResult) -> dict:
             "lost_in_faults": len(in_faults),
             "lost_per_window": per_window,
             "refused_after_late_delivery": len(refused_late),
-            "refused_late_examples": [f"{describe(o)}: the next {o.frame.can_id:X} reached the bus {upper:.1f} ms "
-                                      "after this one's source time" for o, upper in refused_late[:10]],
+            "refused_late_examples": [f"{describe(o)}: " + (
+                f"the next {o.frame.can_id:X} reached the bus {upper:.1f} ms after this one's source time"
+                if shown_by == "bus" else
+                f"the bridge counted every command of the bus only {upper:.1f} ms after this one's source time "
+                "(the commander's fence)") for o, upper, shown_by in refused_late[:10]],
         }
     result.metrics["freshness"] = out
     return out

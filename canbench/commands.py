@@ -8,6 +8,7 @@ time, the put time (less the entry's stamp_age_ms), which the bridge's deadline
 from __future__ import annotations
 
 import bisect
+import json
 import threading
 import time
 from pathlib import Path
@@ -15,7 +16,7 @@ from typing import TYPE_CHECKING
 
 from . import periodic, restbus, wire
 from .plans import SENT_LOG_HEADER, frame_of, sent_line, timed_plan
-from .runkeys import tx_key
+from .runkeys import bridge_stats, tx_key
 from .scenario import Commands, Scenario
 from .trace import read_trace
 
@@ -63,12 +64,16 @@ def explained_refusals(bus: str, commands: list, tx, stale: set[tuple[str, int, 
     return stamped_refused, [o for o in tx.lost_in_faults if key(o) not in stale]
 
 
-def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_ns: int) -> list[tuple]:
-    """(command, upper bound of its age at the bridge in ms) for each lost command a late link explains:
+def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_ns: int,
+                   arrived_by_ns: int | None = None) -> list[tuple]:
+    """(command, upper bound of its age at the bridge in ms, "bus" or "fence": which bound showed it) for
+    each lost command a late link explains:
     every command of its id put after it (one publisher, one QoS: none can overtake it) reached the bus
     more than the deadline after the lost one's source time, so the lost one reached the bridge at least as late,
-    as far as the bench can see: stale, and refused as the bridge must. Oldest first. A lost command
-    with no later one of its id on the bus is not explained."""
+    as far as the bench can see: stale, and refused as the bridge must. arrived_by_ns (the commander's
+    fence: by then the bridge counted every command of the bus) bounds the same way, the only bound of a
+    stream's last commands; the tighter of the two is taken. Oldest first. A lost command with neither
+    bound is not explained."""
     delivered: dict[tuple[int, bool], list[tuple[int, int]]] = {}
     for s, r in matched:
         delivered.setdefault((s.frame.can_id, s.frame.extended), []).append((s.index, r.t_ns))
@@ -85,11 +90,13 @@ def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_
     for o in lost:
         indices, earliest = by_id.get((o.frame.can_id, o.frame.extended), ([], []))
         k = bisect.bisect_right(indices, o.index)
-        if k == len(indices):
+        bounds = ([earliest[k]] if k < len(indices) else []) + ([arrived_by_ns] if arrived_by_ns else [])
+        if not bounds:
             continue
         source_ns = o.t_ns - ages_ns.get((bus, o.frame.can_id, o.frame.extended), 0)
-        if earliest[k] - source_ns > deadline_ns:
-            out.append((o, round((earliest[k] - source_ns) / 1e6, 3)))
+        if min(bounds) - source_ns > deadline_ns:
+            shown_by = "bus" if k < len(indices) and earliest[k] == min(bounds) else "fence"
+            out.append((o, round((min(bounds) - source_ns) / 1e6, 3), shown_by))
     return sorted(out, key=lambda item: -item[1])
 
 
@@ -101,16 +108,39 @@ def _messages(c: Commands):
     return ((0, m) for m in periodic.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
 
 
+ARRIVAL_FENCE_TIMEOUT_S = 5.0  # a bridge that never counts every command (a lost sample) leaves no fence
+ARRIVAL_FENCE_STEP_S = 0.005
+
+
+def arrivals_path(commands_log: Path) -> Path:
+    """Where the commander writes, per bus, by when every command had reached the bridge."""
+    return commands_log.with_name("commands-arrived.json")
+
+
+def read_arrivals(commands_log: Path) -> dict[str, int]:
+    """bus -> wall time (ns) by which every command of that bus had reached the bridge (none: {})."""
+    path = arrivals_path(commands_log)
+    if not path.exists():
+        return {}
+    return {bus: a["all_arrived_by_ns"] for bus, a in json.loads(path.read_text()).items()
+            if a.get("all_arrived_by_ns")}
+
+
 class Commander(threading.Thread):
-    """Publishes the plan in a thread; .error holds what stopped it early, if anything."""
+    """Publishes the plan in a thread; .error holds what stopped it early, if anything. After the
+    last put it fences the stream: per bus, the receipt time of the first stats reply in which the
+    bridge counts every command put on it (tx_samples), an upper bound on when each one reached the
+    bridge (commands-arrived.json; delivered_late's bound for a stream's last commands)."""
 
     def __init__(self, session: zenoh.Session, scenario: Scenario, log_path: Path, prefix: str = "vehicle/can"):
         super().__init__(name="commander", daemon=True)
         self.items = _aged_plan(scenario)
         self.log_path = log_path
+        self.session, self.prefix = session, prefix
         buses = scenario.bus_names
         self.publishers = {b: session.declare_publisher(tx_key(prefix, b, len(buses))) for b in buses}
         self.sent = 0
+        self.sent_per_bus = dict.fromkeys(buses, 0)
         self.error: BaseException | None = None
 
     def run(self) -> None:
@@ -129,9 +159,31 @@ class Commander(threading.Thread):
                     seq[bus] += 1
                     self.publishers[bus].put(wire.encode(frame), attachment=attachment)
                     self.sent += 1
+                    self.sent_per_bus[bus] += 1
                     log.write(sent_line(line, now_ns, frame, bus))
+            self._fence()
         except BaseException as e:  # reported by the orchestrator, never lost in a thread
             self.error = e
         finally:
             for pub in self.publishers.values():
                 pub.undeclare()
+
+    def _fence(self) -> None:
+        """Writes commands-arrived.json: per bus with commands, when the bridge's stats first counted
+        all of them (the reply's receipt time; None if they never did within the fence's timeout)."""
+        waiting = {bus for bus, n in self.sent_per_bus.items() if n}
+        arrived: dict[str, int | None] = dict.fromkeys(waiting)
+        deadline = time.monotonic() + ARRIVAL_FENCE_TIMEOUT_S
+        while waiting and time.monotonic() < deadline:
+            for reply in self.session.get(bridge_stats(self.prefix), timeout=ARRIVAL_FENCE_TIMEOUT_S):
+                if not reply.ok:
+                    continue
+                now_ns = time.time_ns()
+                for entry in json.loads(bytes(reply.ok.payload.to_bytes())).get("buses", []):
+                    if entry.get("bus") in waiting and entry.get("tx_samples", 0) >= self.sent_per_bus[entry["bus"]]:
+                        arrived[entry["bus"]] = now_ns
+                        waiting.discard(entry["bus"])
+            if waiting:
+                time.sleep(ARRIVAL_FENCE_STEP_S)  # polling the bridge's counters, bounded by the deadline
+        arrivals_path(self.log_path).write_text(json.dumps(
+            {bus: {"sent": self.sent_per_bus[bus], "all_arrived_by_ns": t} for bus, t in arrived.items()}, indent=1))

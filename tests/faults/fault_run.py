@@ -24,6 +24,7 @@ INVALID_RETRIES = 2
 class FaultRun:
     metrics: dict                              # the run's metrics.json
     orchestrator: subprocess.CompletedProcess  # the checks' pytest: exit 0 when every check passed
+    run_dir: Path
 
     @property
     def failed(self) -> set[str]:
@@ -71,7 +72,7 @@ def _run_once(bus, router, run_dir: Path, bridge_binary: Path, scenario_path: Pa
                                timeout=RUN_TIMEOUT_S, cwd=REPO)
         for ecu in ecus:
             assert ecu.wait(timeout=RUN_TIMEOUT_S) == 0, ecu.stderr.read()
-        return FaultRun(json.loads((run_dir / "metrics.json").read_text()), orchestrator)
+        return FaultRun(json.loads((run_dir / "metrics.json").read_text()), orchestrator, run_dir)
     finally:
         for ecu in ecus:
             if ecu.poll() is None:

@@ -9,6 +9,7 @@ flip inside EngineSpeed) and restbus-cycle.yaml / restbus-wrong-cycle.yaml (a re
 ECU at the DBC's cycles, and the same ECU with a wrong one: the ECU's fault)."""
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import yaml
 from conftest import BRIDGE, REPO
 from fault_run import run_case
 
-from canbench import scenario
+from canbench import oracle, scenario
 
 FAULTY = Path(os.environ.get("ZN_BRIDGE_FAULTY", BRIDGE.with_name("zenoh-node-faulty")))
 SMOKE = REPO / "scenarios" / "smoke.yaml"
@@ -81,6 +82,11 @@ def test_seeded_fault_fails_exactly_its_checks(bus, router, tmp_path, case):
     print(run.orchestrator.stdout[-6000:], run.orchestrator.stderr[-3000:])
     assert run.failed == CASES[case], metrics["problems"]
     assert (run.orchestrator.returncode == 0) == (not CASES[case])
+    if sc.commands:  # the commander's fence: the bridge counted every command soon after the last put
+        arrived = json.loads((run.run_dir / "commands-arrived.json").read_text())
+        last_put_ns = max(r.t_ns for r in oracle.read_sent_log(run.run_dir / "commands.tsv"))
+        for bus_name, a in arrived.items():
+            assert 0 <= a["all_arrived_by_ns"] - last_put_ns < 2 * 10**9, (bus_name, a, last_put_ns)
     # failures point at the frames: bus capture or command log lines, or sequence numbers on the Zenoh side
     for check in CASES[case] & {"integrity", "ordering", "zenoh_to_can", "round_trip"}:
         assert any("can.log:" in p or "commands.tsv:" in p or "seq" in p for p in metrics["problems"][check]), \

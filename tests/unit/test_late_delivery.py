@@ -4,10 +4,12 @@ reached the bus more than the deadline after the refused one's source time) and 
 it (tx_rejected.stale). Fresh commands refused, or commands lost without being counted, still fail."""
 from __future__ import annotations
 
+import json
+
 import pytest
 from synthetic import write_command_run
 
-from canbench import analysis, checks, scenario, wire
+from canbench import analysis, checks, commands, scenario, wire
 
 SCENARIO = """name: late
 description: commands through a link that stalls
@@ -23,9 +25,10 @@ expect: {integrity: true}
 T0, MS = 1_700_000_000 * 10**9, 1_000_000
 
 
-def late_run(run_dir, delays_ms: list[int | None], refused: int):
+def late_run(run_dir, delays_ms: list[int | None], refused: int, fence_ms: float | None = None):
     """Commands 6A0 put every 20 ms, each written to the bus delays_ms[i] after its put (None: never);
-    refused: the bridge's tx_rejected.stale."""
+    refused: the bridge's tx_rejected.stale; fence_ms: the commander's fence (commands-arrived.json),
+    that long after the last put (None: no file, as a run before the fence)."""
     path = run_dir / "late.yaml"
     path.write_text(SCENARIO)
     sc = scenario.load(path)
@@ -34,6 +37,10 @@ def late_run(run_dir, delays_ms: list[int | None], refused: int):
         put = T0 + i * 20 * MS
         sent.append((i + 2, put, wire.Frame(0x6A0, 1, bytes([i])), None if delay is None else put + delay * MS))
     write_command_run(run_dir, T0, 20, sent)
+    if fence_ms is not None:
+        last_put = T0 + (len(delays_ms) - 1) * 20 * MS
+        commands.arrivals_path(run_dir / "commands.tsv").write_text(json.dumps(
+            {"vcan0": {"sent": len(delays_ms), "all_arrived_by_ns": last_put + int(fence_ms * MS)}}))
     written = sum(d is not None for d in delays_ms)
     stats = {"buses": [{"bus": "vcan0", "published_frames": 20, "tx_frames": written,
                         "tx_rejected": {"stale": refused}}]}
@@ -79,3 +86,35 @@ def test_a_last_command_refused_has_no_later_evidence(tmp_path):
     result = late_run(tmp_path, [1, 1, 1, 1, 1, 1, 1, 1, 1, None], refused=1)
     assert "1 commands never reached the bus" in checks.zenoh_to_can(result)[0]
     assert "only 0 are explained" in checks.no_stale_commands(result)[0]
+
+
+# the stream's last three commands held 130 ms by a stalled link and refused: no later 6A0 on the bus,
+# but the commander's fence (the bridge counted every command only 130 ms after the last put) shows it
+TAIL_HELD = [1, 1, 1, 1, 1, 1, 1, None, None, None]
+
+
+def test_a_stream_s_last_commands_refused_after_a_stall_are_shown_late_by_the_fence(tmp_path):
+    result = late_run(tmp_path, TAIL_HELD, refused=3, fence_ms=130)
+    assert checks.zenoh_to_can(result) == []
+    assert checks.no_stale_commands(result) == []
+    fresh = result.metrics["freshness"]["vcan0"]
+    assert fresh["refused_after_late_delivery"] == 3
+    assert "only 130.0 ms after this one's source time (the commander's fence)" in fresh["refused_late_examples"][-1]
+
+
+@pytest.mark.parametrize("fence_ms", [None, 3])
+def test_a_stream_s_last_commands_refused_fresh_fail_with_or_without_the_fence(tmp_path, fence_ms):
+    # the fence 3 ms after the last put: the bridge had all of them young, yet refused three
+    result = late_run(tmp_path, TAIL_HELD, refused=3, fence_ms=fence_ms)
+    lost = checks.zenoh_to_can(result)
+    assert lost and "commands never reached the bus" in lost[0]
+    assert "only" in checks.no_stale_commands(result)[0]
+
+
+def test_the_fence_bounds_only_as_far_as_it_reaches(tmp_path):
+    # fence 60 ms after the last put: the last (put 0 ms before it) and the one put 20 ms before are
+    # 60 and 80 ms old at most there, under the 100 ms deadline; the one 40 ms before, 100 ms: not over
+    result = late_run(tmp_path, TAIL_HELD, refused=3, fence_ms=60)
+    assert "3 commands never reached the bus" in checks.zenoh_to_can(result)[0]
+    result = late_run(tmp_path, TAIL_HELD, refused=3, fence_ms=61)  # the first of them 101 ms old
+    assert "2 commands never reached the bus" in checks.zenoh_to_can(result)[0]
