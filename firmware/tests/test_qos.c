@@ -232,7 +232,15 @@ static void test_default_one_publisher(void)
 	CHECK(!strcmp(mock_zenoh_publisher(0)->key, "vehicle/can/rx"));
 	CHECK(qos_is(&mock_zenoh_publisher(0)->qos, 4, ZN_CONGESTION_BLOCK, 0, 0));
 	char buf[16384];
-	CHECK(zn_node_stats_json(buf, sizeof(buf)) > 0 && !strstr(buf, "rx_classes"));
+	size_t len = zn_node_stats_json(buf, sizeof(buf));
+	CHECK(len > 0 && len < sizeof(buf) && !strstr(buf, "rx_classes"));
+	/* too small: nothing but "", and the length it needs (snprintf's contract; uptime_ms may
+	 * gain a digit meanwhile) */
+	char small[64];
+	size_t need = zn_node_stats_json(small, sizeof(small));
+	CHECK(need >= len && need <= len + 1 && small[0] == '\0');
+	need = zn_node_stats_json(small, 0);
+	CHECK(need >= len && need <= len + 1);
 	zn_node_stop();
 }
 

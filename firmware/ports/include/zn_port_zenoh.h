@@ -45,7 +45,9 @@ typedef struct {
  * 0 when the sample carries no timestamp. */
 typedef void (*zn_sample_cb)(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
 			     uint64_t source_time_ns, void *ctx);
-/* Writes the reply into buf (at most cap bytes) and returns its length. */
+/* Writes the reply into buf (at most cap bytes) and returns its length; a length
+ * of cap or more means it did not fit, and the port calls again with a buffer of
+ * at least length + 1 bytes (snprintf's contract). */
 typedef size_t (*zn_query_cb)(char *buf, size_t cap, void *ctx);
 
 /* Opens a session. In client mode it retries until the router answers (with a

@@ -134,10 +134,19 @@ void zn_log(const char *level, const char *fmt, ...)
 	gmtime_r(&ts.tv_sec, &tm);
 	int n = snprintf(line, sizeof(line), "%02d:%02d:%02d.%03ld %s zenoh-node: ", tm.tm_hour, tm.tm_min, tm.tm_sec,
 			 ts.tv_nsec / 1000000, level);
-	va_list ap;
+	if (n < 0 || (size_t)n >= sizeof(line))
+		return;
+	va_list ap, again;
 	va_start(ap, fmt);
-	if (n > 0 && (size_t)n < sizeof(line))
-		vsnprintf(line + n, sizeof(line) - (size_t)n, fmt, ap);
+	va_copy(again, ap);
+	int m = vsnprintf(line + n, sizeof(line) - (size_t)n, fmt, ap);
 	va_end(ap);
-	fprintf(stderr, "%s\n", line); /* one write per line: lines from threads never interleave */
+	char *big = NULL; /* a long line (the final stats of many buses) is printed whole, not cut */
+	if (m > 0 && (size_t)(n + m) >= sizeof(line) && (big = malloc((size_t)n + (size_t)m + 1))) {
+		memcpy(big, line, (size_t)n);
+		vsnprintf(big + n, (size_t)m + 1, fmt, again);
+	}
+	va_end(again);
+	fprintf(stderr, "%s\n", big ? big : line); /* one write per line: lines from threads never interleave */
+	free(big);
 }

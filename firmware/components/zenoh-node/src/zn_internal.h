@@ -169,6 +169,8 @@ uint32_t zn_tx_arbitration_key(const can_message_t *msg);
 /* zn_stats.c */
 void zn_stats_monitor_thread(void *arg);
 size_t zn_stats_on_query(char *buf, size_t cap, void *ctx);
+/* The stats JSON in a buffer of its size (malloc'd; NULL when out of memory). */
+char *zn_stats_json_alloc(void);
 
 /* zn_ros2.c: the ROS 2 output (keys, tokens, samples) */
 esp_err_t zn_ros2_declare_bus(struct bus *b);

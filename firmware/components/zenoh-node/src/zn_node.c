@@ -8,7 +8,6 @@
 
 #include "zn_internal.h"
 
-#define STATS_JSON_MAX 16384 /* the stats queryable's reply (Linux port: 16 KiB): 8 buses of 8 QoS classes */
 
 struct node zn_node;
 const char *const zn_mode_names[3] = { "client", "peer", "router" };
@@ -93,8 +92,8 @@ static void release(int final_stats)
 			zn_undeclare_publisher(b->ros_pub);
 	}
 	zn_undeclare_queryable(zn_node.stats_q);
-	char *stats = final_stats ? malloc(STATS_JSON_MAX) : NULL;
-	if (stats && zn_node_stats_json(stats, STATS_JSON_MAX))
+	char *stats = final_stats ? zn_stats_json_alloc() : NULL;
+	if (stats)
 		zn_log("I", "final stats: %s", stats);
 	free(stats);
 	zn_close(zn_node.session);

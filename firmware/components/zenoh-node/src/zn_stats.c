@@ -3,19 +3,20 @@
 #include <inttypes.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "zn_internal.h"
 
 #define MONITOR_PERIOD_MS 500
+#define STATS_JSON_GUESS 4096 /* one bus without a QoS table takes about 1 KiB */
 
+/* Appends at off; past cap it only counts, so the caller learns the length it needs. */
 static size_t append(char *buf, size_t cap, size_t off, const char *fmt, ...)
 {
-	if (off >= cap)
-		return off;
 	va_list ap;
 	va_start(ap, fmt);
-	int n = vsnprintf(buf + off, cap - off, fmt, ap);
+	int n = off < cap ? vsnprintf(buf + off, cap - off, fmt, ap) : vsnprintf(NULL, 0, fmt, ap);
 	va_end(ap);
 	return n < 0 ? off : off + (size_t)n;
 }
@@ -60,11 +61,25 @@ size_t zn_node_stats_json(char *buf, size_t cap)
 		off = append(buf, cap, off, "}");
 	}
 	off = append(buf, cap, off, "]}");
-	if (off >= cap && cap) {
+	if (off >= cap && cap)
 		buf[0] = '\0'; /* never hand out a truncated object */
-		return 0;
-	}
 	return off;
+}
+
+char *zn_stats_json_alloc(void)
+{
+	size_t cap = STATS_JSON_GUESS;
+	for (int attempt = 0; attempt < 3; attempt++) { /* counters may grow a digit between two calls */
+		char *buf = malloc(cap);
+		if (!buf)
+			return NULL;
+		size_t len = zn_node_stats_json(buf, cap);
+		if (len < cap)
+			return buf;
+		free(buf);
+		cap = len + 256;
+	}
+	return NULL;
 }
 
 size_t zn_stats_on_query(char *buf, size_t cap, void *ctx)

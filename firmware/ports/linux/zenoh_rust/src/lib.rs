@@ -52,7 +52,9 @@ struct Ctx(*mut c_void);
 unsafe impl Send for Ctx {}
 unsafe impl Sync for Ctx {}
 
-const STATS_REPLY_MAX: usize = 16384;
+const STATS_REPLY_FIRST: usize = 16384;
+/// A bound on a reply's buffer (the stats of 8 buses with 8 QoS classes each are about 21 KiB).
+const STATS_REPLY_MAX: usize = 1 << 20;
 const OPEN_RETRY_MIN: std::time::Duration = std::time::Duration::from_millis(250);
 const OPEN_RETRY_MAX: std::time::Duration = std::time::Duration::from_millis(4000);
 
@@ -380,6 +382,27 @@ pub extern "C" fn zn_declare_token(s: *mut ZnSession, key: *const c_char, out: *
     }
 }
 
+/// The callback's reply, in a buffer grown to the length it asks for (zn_query_cb's contract:
+/// a length of cap or more did not fit), at most STATS_REPLY_MAX; empty when it never fits.
+fn reply_text(cb: QueryCb, ctx: *mut c_void) -> Vec<u8> {
+    let mut cap = STATS_REPLY_FIRST;
+    for _ in 0..3 {
+        // counters may grow a digit between two calls: a little room over what it asked for
+        let mut buf = vec![0u8; cap];
+        let n = cb(buf.as_mut_ptr() as *mut c_char, buf.len(), ctx);
+        if n < cap {
+            buf.truncate(n);
+            return buf;
+        }
+        if cap == STATS_REPLY_MAX {
+            break;
+        }
+        cap = n.saturating_add(256).min(STATS_REPLY_MAX);
+    }
+    eprintln!("zenoh-node: a query's reply does not fit in {STATS_REPLY_MAX} bytes: replied empty");
+    Vec::new()
+}
+
 #[no_mangle]
 pub extern "C" fn zn_declare_queryable(
     s: *mut ZnSession,
@@ -397,10 +420,7 @@ pub extern "C" fn zn_declare_queryable(
         .declare_queryable(key.to_owned())
         .callback(move |query| {
             let ctx = ctx;
-            let mut buf = vec![0u8; STATS_REPLY_MAX];
-            let n = cb(buf.as_mut_ptr() as *mut c_char, buf.len(), ctx.0).min(buf.len());
-            buf.truncate(n);
-            let _ = query.reply(query.key_expr().clone(), buf).wait();
+            let _ = query.reply(query.key_expr().clone(), reply_text(cb, ctx.0)).wait();
         })
         .wait();
     match result {
