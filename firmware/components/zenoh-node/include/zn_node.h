@@ -79,7 +79,7 @@ bool zn_node_id_allowed(const zn_node_config_t *cfg, const can_message_t *msg);
 
 /* Writes the counters as one JSON object and returns its length. A length of cap
  * or more means it did not fit: buf holds "" and length + 1 bytes are needed
- * (snprintf's contract; 8 buses with 8 QoS classes each take about 21 KiB). */
+ * (snprintf's contract; 8 buses with 8 QoS classes each take 12 to 18 KiB). */
 size_t zn_node_stats_json(char *buf, size_t cap);
 
 /* Flushes pending batches, undeclares everything, closes the session. */

@@ -52,8 +52,9 @@ struct Ctx(*mut c_void);
 unsafe impl Send for Ctx {}
 unsafe impl Sync for Ctx {}
 
-const STATS_REPLY_FIRST: usize = 16384;
-/// A bound on a reply's buffer (the stats of 8 buses with 8 QoS classes each are about 21 KiB).
+/// A reply's first buffer: one bus's stats take about 1.2 KiB; more grow it (reply_text).
+const STATS_REPLY_FIRST: usize = 4096;
+/// A bound on a reply's buffer (the stats of 8 buses with 8 QoS classes each are 12-18 KiB).
 const STATS_REPLY_MAX: usize = 1 << 20;
 const OPEN_RETRY_MIN: std::time::Duration = std::time::Duration::from_millis(250);
 const OPEN_RETRY_MAX: std::time::Duration = std::time::Duration::from_millis(4000);
