@@ -3,6 +3,8 @@ sequence number per bus, and its source time, the put time logged in commands.ts
 stamp_age_ms. The bridge's deadline is judged on that time (docs/bridge.md, Freshness)."""
 from __future__ import annotations
 
+import json
+import time
 from pathlib import Path
 
 import pytest
@@ -24,12 +26,29 @@ class Publisher:
         pass
 
 
+class Reply:
+    """A stats reply: the bridge counted every command put so far (tx_samples)."""
+
+    def __init__(self, samples: int):
+        self.ok = self
+        self.payload = self
+        self.text = json.dumps({"buses": [{"bus": "vcan0", "tx_samples": samples}]}).encode()
+
+    def to_bytes(self) -> bytes:
+        return self.text
+
+
 class Session:
     def __init__(self):
         self.puts: list = []
+        self.gets: list[str] = []
 
     def declare_publisher(self, key: str) -> Publisher:
         return Publisher(self.puts)
+
+    def get(self, key: str, timeout: float | None = None) -> list[Reply]:
+        self.gets.append(key)
+        return [Reply(len(self.puts))]
 
 
 def test_every_command_carries_its_source_time_and_sequence(tmp_path):
@@ -50,3 +69,7 @@ def test_every_command_carries_its_source_time_and_sequence(tmp_path):
         seqs.append(a.first_seq)
     assert seqs == list(range(40))  # one bus: numbered in put order
     assert commands.stale_at_put(sc) == {("vcan0", 0x6B0, False)}
+    # the fence: one stats query after the last put, which counted all 40
+    assert session.gets == ["vehicle/can/bridges/*/stats"]
+    arrived = commands.read_arrivals(tmp_path / "commands.tsv")
+    assert logged[-1].t_ns <= arrived["vcan0"] <= time.time_ns()
