@@ -70,13 +70,14 @@ def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_
     each lost command a late link explains:
     every command of its id put after it (one publisher, one QoS: none can overtake it) reached the bus
     more than the deadline after the lost one's source time, so the lost one reached the bridge at least as late,
-    as far as the bench can see: stale, and refused as the bridge must. arrived_by_ns (the commander's
-    fence: by then the bridge counted every command of the bus) bounds the same way, the only bound of a
-    stream's last commands; the tighter of the two is taken. Oldest first. A lost command with neither
-    bound is not explained."""
+    as far as the bench can see: stale, and refused as the bridge must. A stream's last commands, put after
+    the last of the bus's commands that reached the bus, have no such command: for them arrived_by_ns (the
+    commander's fence: by then the bridge counted every command of the bus) is the bound. Oldest first. A
+    lost command with neither bound is not explained."""
     delivered: dict[tuple[int, bool], list[tuple[int, int]]] = {}
     for s, r in matched:
         delivered.setdefault((s.frame.can_id, s.frame.extended), []).append((s.index, r.t_ns))
+    last_reached = max((s.index for s, _ in matched), default=-1)
     # per id, in put order: the earliest bus time of any command put at or after each position
     # (one bisect per lost command, not a scan: a lossy bridge may lose thousands)
     by_id = {}
@@ -90,13 +91,15 @@ def delivered_late(bus: str, lost: list, matched: list, ages_ns: dict, deadline_
     for o in lost:
         indices, earliest = by_id.get((o.frame.can_id, o.frame.extended), ([], []))
         k = bisect.bisect_right(indices, o.index)
-        bounds = ([earliest[k]] if k < len(indices) else []) + ([arrived_by_ns] if arrived_by_ns else [])
-        if not bounds:
+        if k < len(indices):
+            bound, shown_by = earliest[k], "bus"
+        elif arrived_by_ns and o.index > last_reached:  # the fence bounds only the stream's tail
+            bound, shown_by = arrived_by_ns, "fence"
+        else:
             continue
         source_ns = o.t_ns - ages_ns.get((bus, o.frame.can_id, o.frame.extended), 0)
-        if min(bounds) - source_ns > deadline_ns:
-            shown_by = "bus" if k < len(indices) and earliest[k] == min(bounds) else "fence"
-            out.append((o, round((min(bounds) - source_ns) / 1e6, 3), shown_by))
+        if bound - source_ns > deadline_ns:
+            out.append((o, round((bound - source_ns) / 1e6, 3), shown_by))
     return sorted(out, key=lambda item: -item[1])
 
 
@@ -108,7 +111,7 @@ def _messages(c: Commands):
     return ((0, m) for m in periodic.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
 
 
-ARRIVAL_FENCE_TIMEOUT_S = 5.0  # a bridge that never counts every command (a lost sample) leaves no fence
+ARRIVAL_FENCE_TIMEOUT_S = 2.0  # a bridge that never counts every command (a lost sample) leaves no fence
 ARRIVAL_FENCE_STEP_S = 0.005
 
 
@@ -124,6 +127,15 @@ def read_arrivals(commands_log: Path) -> dict[str, int]:
         return {}
     return {bus: a["all_arrived_by_ns"] for bus, a in json.loads(path.read_text()).items()
             if a.get("all_arrived_by_ns")}
+
+
+def _tx_samples(reply) -> dict[str, int]:
+    """bus -> tx_samples of one stats reply; {} for an error, an empty or a foreign reply."""
+    try:
+        buses = json.loads(bytes(reply.ok.payload.to_bytes()))["buses"] if reply.ok else []
+        return {b["bus"]: int(b["tx_samples"]) for b in buses}
+    except (ValueError, KeyError, TypeError):
+        return {}
 
 
 class Commander(threading.Thread):
@@ -174,15 +186,13 @@ class Commander(threading.Thread):
         waiting = {bus for bus, n in self.sent_per_bus.items() if n}
         arrived: dict[str, int | None] = dict.fromkeys(waiting)
         deadline = time.monotonic() + ARRIVAL_FENCE_TIMEOUT_S
-        while waiting and time.monotonic() < deadline:
-            for reply in self.session.get(bridge_stats(self.prefix), timeout=ARRIVAL_FENCE_TIMEOUT_S):
-                if not reply.ok:
-                    continue
+        while waiting and (left_s := deadline - time.monotonic()) > 0:
+            for reply in self.session.get(bridge_stats(self.prefix), timeout=left_s):
                 now_ns = time.time_ns()
-                for entry in json.loads(bytes(reply.ok.payload.to_bytes())).get("buses", []):
-                    if entry.get("bus") in waiting and entry.get("tx_samples", 0) >= self.sent_per_bus[entry["bus"]]:
-                        arrived[entry["bus"]] = now_ns
-                        waiting.discard(entry["bus"])
+                for bus, samples in _tx_samples(reply).items():
+                    if bus in waiting and samples >= self.sent_per_bus[bus]:
+                        arrived[bus] = now_ns
+                        waiting.discard(bus)
             if waiting:
                 time.sleep(ARRIVAL_FENCE_STEP_S)  # polling the bridge's counters, bounded by the deadline
         arrivals_path(self.log_path).write_text(json.dumps(

@@ -86,6 +86,7 @@ def test_seeded_fault_fails_exactly_its_checks(bus, router, tmp_path, case):
         arrived = json.loads((run.run_dir / "commands-arrived.json").read_text())
         last_put_ns = max(r.t_ns for r in oracle.read_sent_log(run.run_dir / "commands.tsv"))
         for bus_name, a in arrived.items():
+            assert a["all_arrived_by_ns"] is not None, (bus_name, a, "the fence timed out")
             assert 0 <= a["all_arrived_by_ns"] - last_put_ns < 2 * 10**9, (bus_name, a, last_put_ns)
     # failures point at the frames: bus capture or command log lines, or sequence numbers on the Zenoh side
     for check in CASES[case] & {"integrity", "ordering", "zenoh_to_can", "round_trip"}:

@@ -9,7 +9,7 @@ import json
 import pytest
 from synthetic import write_command_run
 
-from canbench import analysis, checks, commands, scenario, wire
+from canbench import analysis, checks, commands, oracle, scenario, wire
 
 SCENARIO = """name: late
 description: commands through a link that stalls
@@ -118,3 +118,18 @@ def test_the_fence_bounds_only_as_far_as_it_reaches(tmp_path):
     assert "3 commands never reached the bus" in checks.zenoh_to_can(result)[0]
     result = late_run(tmp_path, TAIL_HELD, refused=3, fence_ms=61)  # the first of them 101 ms old
     assert "2 commands never reached the bus" in checks.zenoh_to_can(result)[0]
+
+
+def test_the_fence_bounds_only_commands_put_after_the_bus_s_last_one_on_the_bus():
+    # 7E1 every 100 ms, its last put 90 ms before the stream's last 600 (which reached the bus): a fence
+    # 20 ms after that is 110 ms after the lost 7E1, yet it says nothing of it, only of the stream's tail
+    def cmd(i, can_id, t_ms):
+        return oracle.Observed(wire.Frame(can_id, 1, bytes([i])), T0 + t_ms * MS, i, line=i + 2, origin="commands.tsv")
+    last_7e1, last_600 = cmd(0, 0x7E1, 0), cmd(1, 0x600, 90)
+    on_bus = oracle.Observed(last_600.frame, last_600.t_ns + MS, 0)
+    fence_ns = last_600.t_ns + 20 * MS
+    assert commands.delivered_late("vcan0", [last_7e1], [(last_600, on_bus)], {}, 100 * MS, fence_ns) == []
+    # the same 7E1 put after the last command that reached the bus: the tail, which the fence bounds
+    tail_7e1 = cmd(2, 0x7E1, 95)
+    late = commands.delivered_late("vcan0", [tail_7e1], [(last_600, on_bus)], {}, 10 * MS, fence_ns)
+    assert late == [(tail_7e1, 15.0, "fence")]

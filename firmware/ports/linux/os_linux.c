@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "zn_port_os.h"
 
@@ -142,11 +143,22 @@ void zn_log(const char *level, const char *fmt, ...)
 	int m = vsnprintf(line + n, sizeof(line) - (size_t)n, fmt, ap);
 	va_end(ap);
 	char *big = NULL; /* a long line (the final stats of many buses) is printed whole, not cut */
-	if (m > 0 && (size_t)(n + m) >= sizeof(line) && (big = malloc((size_t)n + (size_t)m + 1))) {
+	if (m > 0 && (size_t)(n + m) >= sizeof(line) && (big = malloc((size_t)n + (size_t)m + 2))) {
 		memcpy(big, line, (size_t)n);
 		vsnprintf(big + n, (size_t)m + 1, fmt, again);
+		big[n + m] = '\n';
+		/* one write(2), not stdio (which writes an unbuffered stream through an 8 KiB buffer) */
+		for (size_t off = 0, len = (size_t)n + (size_t)m + 1; off < len;) {
+			ssize_t w = write(2, big + off, len - off);
+			if (w < 0 && errno == EINTR)
+				continue;
+			if (w <= 0)
+				break;
+			off += (size_t)w;
+		}
 	}
 	va_end(again);
-	fprintf(stderr, "%s\n", big ? big : line); /* one write per line: lines from threads never interleave */
+	if (!big)
+		fprintf(stderr, "%s\n", line); /* one write per line: lines from threads never interleave */
 	free(big);
 }

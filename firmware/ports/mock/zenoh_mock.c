@@ -293,7 +293,13 @@ size_t mock_zenoh_query(const char *key, char *buf, size_t cap)
 			ctx = queryables[i]->ctx;
 		}
 	pthread_mutex_unlock(&lock);
-	return cb ? cb(buf, cap, ctx) : 0;
+	size_t n = cb ? cb(buf, cap, ctx) : cap; /* none answers: as a reply that did not fit */
+	if (n >= cap) { /* did not fit (zn_query_cb's contract): "" as a port that gave up */
+		if (cap)
+			buf[0] = '\0';
+		return 0;
+	}
+	return n;
 }
 
 size_t mock_zenoh_publisher_count(void)

@@ -94,6 +94,8 @@ const struct mock_publisher *mock_zenoh_publisher(size_t i);
 void mock_zenoh_open_result(int rc);
 /* The session configuration of the last zn_open. */
 zn_session_config_t mock_zenoh_last_open(void);
+/* Queries a declared queryable: the reply's length, NUL-terminated in buf; 0 and "" when
+ * none answers or the reply does not fit in cap. */
 size_t mock_zenoh_query(const char *key, char *buf, size_t cap);
 
 #endif
