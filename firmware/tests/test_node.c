@@ -11,6 +11,7 @@
 #include "zn_node.h"
 #include "zn_wire.h"
 #include "zn_mock.h"
+#include "published.h"
 
 #define WAIT_MS 5000
 
@@ -157,22 +158,6 @@ static void test_flush_on_stop(void)
 	CHECK(mock_zenoh_put_count() == 1 && mock_zenoh_put(0)->len == 48);
 }
 
-/* Every frame of the run published once, in order, with its own sequence number and
- * receive stamp (first_stamp + i): bursts change how frames are read, not what is sent. */
-static void check_published(size_t frames, int64_t first_stamp)
-{
-	size_t seen = 0, puts = 0;
-	while (seen < frames && mock_zenoh_wait_puts(puts + 1, WAIT_MS) > puts) {
-		const struct mock_put *p = mock_zenoh_put(puts++);
-		size_t n = p->len / 16;
-		CHECK(le64(p->attachment + 4) == seen);
-		for (size_t k = 0; k < n; k++)
-			CHECK(le64(p->attachment + 12 + 8 * k) == (uint64_t)(first_stamp + (int64_t)(seen + k)));
-		seen += n;
-	}
-	CHECK(seen == frames);
-}
-
 static void inject_paced(size_t frames, size_t per_burst, long gap_ns, int64_t first_stamp)
 {
 	can_message_t m[64];
@@ -194,7 +179,7 @@ static void test_burst_immediate(void)
 	CHECK(zn_node_init(&cfg) == ESP_OK);
 	size_t before = mock_can_reads("vcan0");
 	inject_paced(200, 64, 0, 7000);
-	check_published(200, 7000);
+	check_published_frames(200, 7000, 0, WAIT_MS);
 	size_t reads = mock_can_reads("vcan0") - before;
 	CHECK(reads >= 1 && reads <= 4); /* 200 frames in ceil(200 / 64) reads; one each before */
 	if (reads > 4)
@@ -209,7 +194,7 @@ static void test_burst_batching(void)
 	zn_node_config_t cfg = base_config(20);
 	CHECK(zn_node_init(&cfg) == ESP_OK);
 	inject_paced(200, 1, 1000000, 9000); /* 200 frames, one a millisecond: 10 periods */
-	check_published(200, 9000);
+	check_published_frames(200, 9000, 0, WAIT_MS);
 	size_t reads = mock_can_reads("vcan0");
 	/* ~10 period ends, plus a stretch's first frame and its short first sleeps (1, 2, 4, 8 ms) */
 	CHECK(reads >= 1 && reads <= 30);
@@ -230,7 +215,7 @@ static void test_burst_port_capacity(void)
 	/* 800 frames/s: the port is full in 160 ms, so the reader wakes about every 80 ms (half
 	 * of it), with 80 ms to spare for a late wakeup on a busy machine */
 	inject_paced(256, 8, 10000000, 3000);
-	check_published(256, 3000);
+	check_published_frames(256, 3000, 0, WAIT_MS);
 	CHECK(mock_can_rx_drops("vcan0") == 0);
 	if (mock_can_rx_drops("vcan0"))
 		fprintf(stderr, "test_burst_port_capacity: the port dropped %zu frames\n", mock_can_rx_drops("vcan0"));

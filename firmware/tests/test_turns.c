@@ -13,6 +13,7 @@
 #include "check.h"
 #include "le64.h"
 #include "zn_mock.h"
+#include "published.h"
 #include "zn_node.h"
 
 #define WAIT_MS 5000
@@ -126,25 +127,6 @@ static void pace_ms(long ms)
 	nanosleep(&(struct timespec){ .tv_nsec = ms * 1000000 }, NULL); /* the load's pace, not a wait */
 }
 
-/* Every frame published once, in order, with its sequence number and stamp. */
-static void check_published(size_t frames, int64_t first_stamp)
-{
-	size_t seen = 0, puts = 0;
-	while (seen < frames && mock_zenoh_wait_puts(puts + 1, WAIT_MS) > puts) {
-		const struct mock_put *p = mock_zenoh_put(puts++);
-		size_t n = p->len / 16;
-		CHECK(le64(p->attachment + 4) == seen);
-		for (size_t k = 0; k < n; k++) {
-			CHECK(le64(p->attachment + 12 + 8 * k) == (uint64_t)(first_stamp + (int64_t)(seen + k)));
-			CHECK(p->payload[16 * k + 8] == (uint8_t)(seen + k));
-		}
-		seen += n;
-	}
-	CHECK(seen == frames);
-	if (seen != frames)
-		fprintf(stderr, "published %zu of %zu frames in %zu puts\n", seen, frames, puts);
-}
-
 /* A counter of the bus's stats (the first of that name), or -1 when absent. */
 static long long counter(const char *name)
 {
@@ -178,7 +160,7 @@ static void test_one_wakeup_per_period(void)
 	}
 	double periods = (double)(now_ns() - start) / (PERIOD_MS * 1e6);
 	double per_period = (double)(bridge_switches() - switches) / periods;
-	check_published(frames, 1000);
+	check_published_frames(frames, 1000, 1, WAIT_MS);
 	printf("test_one_wakeup_per_period: %.2f voluntary switches of zn-can and zn-pub per period (%.0f periods)\n",
 	       per_period, periods);
 	CHECK(per_period <= 1.5);
@@ -207,7 +189,7 @@ static void test_stalled_put_keeps_reading(void)
 		pace_ms(1);
 	}
 	gate(0);
-	check_published(frames, 5000);
+	check_published_frames(frames, 5000, 1, WAIT_MS);
 	CHECK(mock_can_rx_drops("vcan0") == 0);
 	if (mock_can_rx_drops("vcan0"))
 		fprintf(stderr, "the port dropped %zu frames while a put stalled\n", mock_can_rx_drops("vcan0"));
@@ -251,7 +233,7 @@ static void test_stop_during_stalled_put(void)
 	CHECK(pthread_create(&opener, NULL, open_gate_once_stopping, NULL) == 0);
 	zn_node_stop();
 	pthread_join(opener, NULL);
-	check_published(frames, 9000);
+	check_published_frames(frames, 9000, 1, WAIT_MS);
 }
 
 int main(void)
