@@ -167,6 +167,25 @@ static void test_one_wakeup_per_period(void)
 	zn_node_stop();
 }
 
+/* Frames at 1 per ms: `before` of them, then one whose batch's put is held (returns once a
+ * put is held), then `during` more while it is; returns how many were injected. */
+static size_t load_around_a_held_put(size_t before, size_t during, int64_t first_stamp)
+{
+	size_t frames = 0;
+	for (; frames < before; frames++) {
+		inject(frames, first_stamp);
+		pace_ms(1);
+	}
+	gate(1);
+	inject(frames++, first_stamp);
+	CHECK(wait_held() == 1);
+	for (size_t i = 0; i < during; i++, frames++) {
+		inject(frames, first_stamp);
+		pace_ms(1);
+	}
+	return frames;
+}
+
 /* A put held for 300 ms (a frozen router): the port, which holds 64 frames (64 ms of this
  * load), is read meanwhile, nothing is lost, the stall is counted, and once the put returns
  * everything goes out in order. */
@@ -176,18 +195,7 @@ static void test_stalled_put_keeps_reading(void)
 	mock_can_set_capacity("vcan0", 64);
 	zn_node_config_t cfg = batching();
 	CHECK(zn_node_init(&cfg) == ESP_OK);
-	size_t frames = 0;
-	for (; frames < 50; frames++) {
-		inject(frames, 5000);
-		pace_ms(1);
-	}
-	gate(1);
-	inject(frames++, 5000);
-	CHECK(wait_held() == 1);
-	for (int i = 0; i < 300; i++, frames++) {
-		inject(frames, 5000);
-		pace_ms(1);
-	}
+	size_t frames = load_around_a_held_put(50, 300, 5000);
 	gate(0);
 	check_published_frames(frames, 5000, 1, WAIT_MS);
 	CHECK(mock_can_rx_drops("vcan0") == 0);
@@ -217,18 +225,7 @@ static void test_stop_during_stalled_put(void)
 	mock_reset();
 	zn_node_config_t cfg = batching();
 	CHECK(zn_node_init(&cfg) == ESP_OK);
-	size_t frames = 0;
-	for (; frames < 30; frames++) {
-		inject(frames, 9000);
-		pace_ms(1);
-	}
-	gate(1);
-	inject(frames++, 9000);
-	CHECK(wait_held() == 1);
-	for (int i = 0; i < 40; i++, frames++) {
-		inject(frames, 9000);
-		pace_ms(1);
-	}
+	size_t frames = load_around_a_held_put(30, 40, 9000);
 	pthread_t opener;
 	CHECK(pthread_create(&opener, NULL, open_gate_once_stopping, NULL) == 0);
 	zn_node_stop();
