@@ -133,3 +133,33 @@ def test_the_fence_bounds_only_commands_put_after_the_bus_s_last_one_on_the_bus(
     tail_7e1 = cmd(2, 0x7E1, 95)
     late = commands.delivered_late("vcan0", [tail_7e1], [(last_600, on_bus)], {}, 10 * MS, fence_ns)
     assert late == [(tail_7e1, 15.0, "fence")]
+
+
+def flood_windows(start_ms: float, end_ms: float) -> dict:
+    return {"windows": [{"action": "can_flood", "service": "orchestrator", "start_s": start_ms / 1000,
+                         "end_s": end_ms / 1000, "start_ns": T0 + int(start_ms * MS),
+                         "end_ns": T0 + int(end_ms * MS), "error": ""}]}
+
+
+def test_a_command_late_behind_a_flood_is_the_emulated_bus_s_not_the_bridge_s(tmp_path):
+    """A flood on the emulated bus (first come, first served) holds a written command behind its
+    backlog: late while the flood lasts is counted, not failed; the same lateness without a flood fails."""
+    delays = [1, 1, 1, 127, 1, 1]  # command 4 reaches the bus 127 ms after its put
+    plain = late_run(tmp_path, delays, refused=0)
+    stale = checks.no_stale_commands(plain)
+    assert stale and "1 of 6 commands reached the bus older than the deadline" in stale[0]
+    flooded_dir = tmp_path / "flooded"
+    flooded_dir.mkdir()
+    flooded = late_run(flooded_dir, delays, refused=0)
+    flooded.metrics["faults"] = flood_windows(50, 150)
+    assert checks.no_stale_commands(flooded) == []
+    fresh = flooded.metrics["freshness"]["vcan0"]
+    assert fresh["late"] == 0 and fresh["late_in_floods"] == 1
+    assert "during a flood" in fresh["late_in_floods_examples"][0]
+
+
+def test_a_command_late_well_after_a_flood_still_fails(tmp_path):
+    result = late_run(tmp_path, [1, 1, 1, 127, 1, 1], refused=0)
+    result.metrics["faults"] = flood_windows(-3000, -2000)  # ended 2 s before: more than the settle time
+    stale = checks.no_stale_commands(result)
+    assert stale and "1 of 6 commands reached the bus older than the deadline" in stale[0]
