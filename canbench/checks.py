@@ -438,8 +438,10 @@ def freshness(result: RunResult) -> dict:
         pairs = list(c.matched) + [(s, r) for s, r, _ in c.corrupted]
         aged = [(s, r, (r.t_ns - s.t_ns + ages.get(key(s), 0)) / 1e6) for s, r in pairs]
         over = sorted((a for a in aged if a[2] > deadline_ms + FRESHNESS_SLACK_MS), key=lambda a: -a[2])
-        late = [a for a in over if not any(start <= a[1].t_ns <= end for start, end in floods)]
-        late_in_floods = [a for a in over if any(start <= a[1].t_ns <= end for start, end in floods)]
+        late: list[tuple] = []
+        late_in_floods: list[tuple] = []
+        for a in over:
+            (late_in_floods if any(start <= a[1].t_ns <= end for start, end in floods) else late).append(a)
         per_window = [{"action": w["action"], "start_s": w.get("start_s"), "lost": 0} for w in windows]
         stamped_refused, in_faults = explained_refusals(b.bus, b.commands, c, aged_out)
         refused_late = getattr(b, "refused_late", [])
