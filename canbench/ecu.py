@@ -112,12 +112,10 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
 def _send(bus: can.BusABC, msg: can.Message) -> float:
     """Sends msg and returns how long a full bus held it (s): 0.0 when the socket took it at once.
     A busy bus makes a sender wait, as on a real one (a hub paces its senders by not reading them)."""
-    if select.select([], [bus], [], 0)[1]:
-        bus.send(msg, timeout=SEND_TIMEOUT_S)
-        return 0.0
-    waited = time.perf_counter()
+    ready = bool(select.select([], [bus], [], 0)[1])
+    began = time.perf_counter()
     bus.send(msg, timeout=SEND_TIMEOUT_S)
-    return time.perf_counter() - waited
+    return 0.0 if ready else time.perf_counter() - began
 
 
 def _own_copies(bus: can.BusABC, last: can.Message, timeout: float) -> int:
