@@ -162,6 +162,8 @@ BRIDGE = Path(os.environ.get("ZN_BRIDGE", REPO / "build" / "firmware" / "zenoh-n
 class Router(rig.Router):
     """zenohd on a loopback port of the test's directory (skips where there is no zenohd)."""
 
+    args: tuple[str, ...] = ()  # what the test's fixture started it with
+
     def __init__(self, workdir: Path):
         binary = rig.find_zenohd()
         if not binary:
@@ -216,10 +218,17 @@ class Bridge:
         return rc, self.log.read_text()
 
 
+# zenohd's settings for Zenoh's low-latency transport (docs/bridge.md): a test takes them with
+# @pytest.mark.parametrize("router", [(), LOW_LATENCY_ROUTER], indirect=True)
+LOW_LATENCY_ROUTER = ("--cfg", "transport/unicast/lowlatency:true", "--cfg", "transport/unicast/qos/enabled:false")
+
+
 @pytest.fixture
-def router(bus):
+def router(bus, request):
+    """zenohd for the test; an indirect parameter gives it extra arguments (kept as .args)."""
     r = Router(bus.workdir)
-    r.start()
+    r.args = tuple(getattr(request, "param", ()))
+    r.start(*r.args)
     yield r
     r.stop()
     if r.log.exists():

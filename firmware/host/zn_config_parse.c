@@ -11,7 +11,8 @@
 enum opt_id {
 	OPT_ENABLED = 256, OPT_ROUTER, OPT_LISTEN, OPT_MODE, OPT_PERIOD, OPT_BATCH, OPT_PREFIX, OPT_NAME, OPT_CAN,
 	OPT_ALLOW, OPT_DENY, OPT_RX_PRIORITY, OPT_RX_CONGESTION, OPT_RX_EXPRESS, OPT_RX_QUEUE, OPT_TX_QUEUE, OPT_ZENOH_CONFIG,
-	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_TX_MAX_AGE, OPT_RX_QOS, OPT_HELP,
+	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_TX_MAX_AGE, OPT_RX_QOS, OPT_LOW_LATENCY,
+	OPT_HELP,
 };
 
 struct option_spec {
@@ -42,6 +43,7 @@ static const struct option_spec specs[] = {
 	{ OPT_ROS2_DOMAIN, "ros2-domain", "ZENOH_ROS2_DOMAIN", "N", "ROS_DOMAIN_ID of that topic (default 0)" },
 	{ OPT_TX_MAX_AGE, "tx-max-age-ms", "ZENOH_TX_MAX_AGE_MS", "MS", "refuse commands older than MS (source time: attachment, else Zenoh timestamp); 0 = off (default 0)" },
 	{ OPT_RX_QOS, "rx-qos", "ZENOH_RX_QOS", "TABLE", "CAN -> Zenoh QoS per id range, e.g. 0x000-0x0FF:realtime,express;0x100-0x7FF:data,best-effort (default none)" },
+	{ OPT_LOW_LATENCY, "low-latency", "ZENOH_LOW_LATENCY", "0|1", "Zenoh's low-latency transport, no QoS; the router must enable it too (default 0)" },
 	{ OPT_HELP, "help", NULL, NULL, "this help" },
 };
 #define NSPECS (sizeof(specs) / sizeof(specs[0]))
@@ -244,6 +246,11 @@ static int apply(zn_node_config_t *cfg, enum opt_id id, const char *value, const
 	}
 	case OPT_COMPRESSION:
 		if (parse_bool(value, &cfg->compression) == 0)
+			return 0;
+		snprintf(err, err_len, "%s='%s' is not 0 or 1", source, value);
+		return -1;
+	case OPT_LOW_LATENCY:
+		if (parse_bool(value, &cfg->low_latency) == 0)
 			return 0;
 		snprintf(err, err_len, "%s='%s' is not 0 or 1", source, value);
 		return -1;

@@ -50,6 +50,11 @@ static void test_precedence(void)
 				    "e:1FFFFFFF", "--tx-queue-frames", "4096", NULL };
 	CHECK(parse_args(&cfg, err, endpoints) == ZN_CONFIG_OK);
 	CHECK(cfg.deny_count == 1 && cfg.deny[0].first == 0x1FFFFFFF && cfg.tx_queue_frames == 4096);
+	CHECK(!cfg.low_latency);
+	setenv("ZENOH_LOW_LATENCY", "1", 1);
+	CHECK(parse_args(&cfg, err, (const char *[]){ "--rx-express", "1", NULL }) == ZN_CONFIG_OK);
+	CHECK(cfg.low_latency && cfg.rx_qos.express); /* express asks nothing the transport cannot do */
+	unsetenv("ZENOH_LOW_LATENCY");
 }
 
 static void expect_error(const char *const *args, const char *fragment)
@@ -88,6 +93,12 @@ static void test_errors(void)
 	expect_error((const char *[]){ "--router", "bogus/127.0.0.1:7447", NULL }, "'bogus/127.0.0.1:7447'");
 	expect_error((const char *[]){ "--mode", "peer", "--listen", "tcp/0.0.0.0:x", NULL }, "listen endpoint");
 	expect_error((const char *[]){ "--tx-queue-frames", "10", NULL }, "tx queue 10 frames");
+	/* the low-latency transport has no QoS and no compression: refused, never silently ignored */
+	expect_error((const char *[]){ "--low-latency", "fast", NULL }, "--low-latency='fast' is not 0 or 1");
+	expect_error((const char *[]){ "--low-latency", "1", "--rx-priority", "2", NULL }, "low-latency transport has no QoS");
+	expect_error((const char *[]){ "--low-latency", "1", "--rx-congestion", "drop", NULL }, "has no QoS");
+	expect_error((const char *[]){ "--low-latency", "1", "--rx-qos", "0x000-0x0FF:realtime", NULL }, "has no QoS");
+	expect_error((const char *[]){ "--low-latency", "1", "--compression", "1", NULL }, "does not compress");
 	setenv("ZENOH_NODE_ENABLED", "perhaps", 1);
 	expect_error((const char *[]){ NULL }, "ZENOH_NODE_ENABLED='perhaps'");
 	clear_env();

@@ -57,6 +57,7 @@ typedef struct {
 	uint32_t tx_max_age_ms; /* CONFIG_ZENOH_TX_MAX_AGE_MS: refuse commands older than this (0 = off) */
 	char zenoh_config_file[ZN_ENDPOINTS_MAX]; /* optional JSON5 (TLS, auth) */
 	bool compression;			  /* CONFIG_ZENOH_COMPRESSION: compress the Zenoh transport */
+	bool low_latency; /* CONFIG_ZENOH_LOW_LATENCY: Zenoh's low-latency transport (no QoS) */
 	char ros2_topic[ZN_NAME_MAX]; /* CONFIG_ZENOH_ROS2_TOPIC: also publish can_msgs/msg/Frame here ("" = off) */
 	uint32_t ros2_domain;	      /* CONFIG_ZENOH_ROS2_DOMAIN: ROS_DOMAIN_ID of that topic */
 } zn_node_config_t;

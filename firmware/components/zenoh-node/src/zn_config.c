@@ -46,6 +46,9 @@ void zn_node_default_config(zn_node_config_t *cfg)
 #ifdef CONFIG_ZENOH_COMPRESSION
 	cfg->compression = CONFIG_ZENOH_COMPRESSION;
 #endif
+#ifdef CONFIG_ZENOH_LOW_LATENCY
+	cfg->low_latency = CONFIG_ZENOH_LOW_LATENCY;
+#endif
 #ifdef CONFIG_ZENOH_ROS2_TOPIC
 	copy_str(cfg->ros2_topic, sizeof(cfg->ros2_topic), CONFIG_ZENOH_ROS2_TOPIC);
 	cfg->ros2_domain = CONFIG_ZENOH_ROS2_DOMAIN;
@@ -174,6 +177,14 @@ esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t er
 	zn_qos_table_t qos;
 	if (zn_qos_parse(cfg->rx_qos_table, &cfg->rx_qos, &qos, err, err_len) != 0)
 		return ESP_ERR_INVALID_ARG;
+	/* the low-latency transport writes every sample at once, reliably, with no priorities and no
+	 * compression: a setting it cannot honour is refused, not silently ignored */
+	if (cfg->low_latency && (cfg->rx_qos_table[0] || cfg->rx_qos.priority != 5 ||
+				 cfg->rx_qos.congestion != ZN_CONGESTION_BLOCK || cfg->rx_qos.best_effort))
+		BAD("low latency: Zenoh's low-latency transport has no QoS; leave the rx QoS table, priority "
+		    "and congestion control at their defaults");
+	if (cfg->low_latency && cfg->compression)
+		BAD("low latency: Zenoh's low-latency transport does not compress; turn compression off");
 	const zn_id_range_t *lists[2] = { cfg->allow, cfg->deny };
 	size_t counts[2] = { cfg->allow_count, cfg->deny_count };
 	for (int l = 0; l < 2; l++)

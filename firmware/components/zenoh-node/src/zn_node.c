@@ -135,6 +135,7 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		.config_file = cfg->zenoh_config_file[0] ? cfg->zenoh_config_file : NULL,
 		.compression = cfg->compression,
 		.rx_message_max = ZN_RX_MESSAGE_MAX,
+		.low_latency = cfg->low_latency,
 	};
 	int open_rc = zn_open(&scfg, &zn_node.session);
 	if (open_rc == ZN_PORT_ERR_CONFIG)

@@ -33,6 +33,7 @@ pub struct ZnSessionConfig {
     config_file: *const c_char,
     compression: c_int,
     rx_message_max: usize,
+    low_latency: c_int,
 }
 
 #[repr(C)]
@@ -113,6 +114,13 @@ fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
     }
     if cfg.compression != 0 {
         set("transport/unicast/compression/enabled", "true".into())?;
+    }
+    // Zenoh's low-latency transport writes each sample from the caller's thread: no transmit
+    // task to wake per put (docs/bridge.md). It has no QoS, and Zenoh refuses both at once.
+    // Negotiated: with a router that does not enable it too, the link is the universal one.
+    if cfg.low_latency != 0 {
+        set("transport/unicast/lowlatency", "true".into())?;
+        set("transport/unicast/qos/enabled", "false".into())?;
     }
     // A fragmented message larger than the bridge can use is dropped by Zenoh's
     // defragmenter instead of being reassembled whole (its default allows 1 GiB).

@@ -1,0 +1,179 @@
+"""Zenoh's low-latency transport (docs/bridge.md): with --low-latency 1 and a router that enables
+it too, the thread that puts writes the link itself, so Zenoh's transmit threads (tx-*) stay
+asleep while frames flow both ways; the same bridge with a router that does not enable it falls
+back to the universal transport (negotiated), still forwards, and its transmit thread wakes for
+every sample: the contrast that shows the first test's measure can fail. A frozen router: the put
+blocks in the link's write (its send queue full), whichever thread makes it; the CAN port is still
+read, every frame accounted for and delivered in order once the router runs again, and a SIGTERM in
+the freeze exits 0 once it ends (the universal transport's rescue: test_direct_put.py)."""
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from conftest import LOW_LATENCY_ROUTER, wait_for
+from test_bridge_host import Collector
+
+from canbench import wire
+
+FRAMES = 600  # CAN -> Zenoh, paced 1 ms apart by cangen
+COMMANDS = 200  # Zenoh -> CAN, one frame each
+
+
+def transmit_switches(pid: int) -> int:
+    """Context switches so far of Zenoh's transmit threads (its TX runtime names them tx-N)."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            if not (task / "comm").read_text().startswith("tx-"):
+                continue
+            total += sum(int(line.split()[1]) for line in (task / "status").read_text().splitlines()
+                         if line.startswith(("voluntary_ctxt_switches:", "nonvoluntary_ctxt_switches:")))
+        except OSError:  # a thread that ended meanwhile
+            pass
+    return total
+
+
+def forward_both_ways(bus, bridge, session) -> int:
+    """FRAMES CAN -> Zenoh and COMMANDS Zenoh -> CAN through a --low-latency bridge, each whole and
+    in order; returns how often Zenoh's transmit threads switched meanwhile."""
+    rx = Collector(session, "vehicle/can/rx")
+    bridge.start("--can", "vcan0", "--publish-period-ms", "0", "--low-latency", "1")
+    bridge.wait_ready(session)
+    before = transmit_switches(bridge.proc.pid)
+    bus.run(["cangen", "vcan0", "-I", "321", "-L", "8", "-D", "i", "-g", "1", "-n", str(FRAMES)], timeout=60)
+    got = rx.wait_frames(FRAMES)
+    assert [int.from_bytes(f.data, "little") for f, _, _ in got] == list(range(FRAMES))
+    for n in range(COMMANDS):
+        session.put("vehicle/can/tx", wire.encode(wire.Frame(0x123, 2, n.to_bytes(2, "little"))))
+    wait_for(lambda: bridge.stats(session)["buses"][0]["tx_frames"] == COMMANDS, f"{COMMANDS} commands on CAN")
+    return transmit_switches(bridge.proc.pid) - before
+
+
+@pytest.mark.parametrize("router", [LOW_LATENCY_ROUTER], indirect=True, ids=["low-latency router"])
+def test_with_a_low_latency_router_zenohs_transmit_threads_stay_asleep(bus, bridge, router, session):
+    switches = forward_both_ways(bus, bridge, session)
+    # keep-alives and the stats replies' few wakeups, never one per sample (the fallback below: >= 1)
+    assert switches < FRAMES // 20, f"Zenoh's transmit threads switched {switches} times for {FRAMES} frames"
+
+
+def test_with_a_default_router_the_link_falls_back_and_still_forwards(bus, bridge, router, session):
+    switches = forward_both_ways(bus, bridge, session)
+    assert switches >= FRAMES // 2, f"only {switches} transmit-thread switches for {FRAMES} frames"
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--rx-priority", "2"], "low-latency transport has no QoS"),
+    (["--rx-congestion", "drop"], "low-latency transport has no QoS"),
+    (["--rx-qos", "0x000-0x0FF:realtime"], "low-latency transport has no QoS"),
+    (["--compression", "1"], "low-latency transport does not compress"),
+])
+def test_what_the_transport_cannot_honour_is_refused(bus, bridge, args, message):
+    proc = bridge.start("--low-latency", "1", *args)
+    assert proc.wait(timeout=30) == 2
+    lines = bridge.log.read_text().strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], lines
+
+
+LOAD, GAP_MS = 20_000, "0.2"  # paced by cangen: about 5000 frames/s, 4 s of load
+SNDBUF = 4096  # the bridge's TCP send buffer, the kernel's floor
+ROUTER_RCVBUF = 4096  # the router's receive buffer: a frozen router's link fills within a second
+MAX_BACKLOG = 1000  # frames the hub may hold for the bridge during the freeze (0.2 s of the load)
+FULL_S = 5.0  # the link must fill within this, well inside Zenoh's 10 s lease (it fills in a fraction of a second;
+# a freeze beyond the lease closes every client's link, the subscriber's too, and loses what it held)
+HOLD_S = 1.0  # the freeze goes on this long once the link is full
+
+
+def link_send_queue(pid: int, port: int) -> int:
+    """Bytes the kernel holds unsent on the process's TCP connections to this port (its link)."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = fd.readlink().as_posix()
+        except OSError:  # closed meanwhile
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    queued = 0
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[9] in inodes and int(f[2].rsplit(":", 1)[1], 16) == port:
+                queued += int(f[4].split(":")[0], 16)
+    return queued
+
+
+def freeze_until_the_link_is_full(bus, bridge, router, backlog: list[int]) -> None:
+    """SIGSTOP the router and keep it stopped until the bridge's link has been full for HOLD_S
+    (its puts then block in the write), noting the hub's backlog for the bridge meanwhile."""
+    router.proc.send_signal(signal.SIGSTOP)
+    end, full = time.monotonic() + FULL_S, False
+    while time.monotonic() < end:  # sampled for as long as the router stays frozen
+        if bus.mode == "userspace":
+            client = next(c for c in bus.stats()["clients"] if c["pid"] == bridge.proc.pid)
+            backlog.append(client["queued"])
+        if not full and link_send_queue(bridge.proc.pid, router.port) >= SNDBUF:
+            full, end = True, time.monotonic() + HOLD_S
+        time.sleep(0.01)  # the sampling period of the measurement, within the fault's length
+    assert full, "the bridge's link never filled: the freeze blocked no put"
+
+
+FROZEN = pytest.mark.parametrize(
+    "router", [LOW_LATENCY_ROUTER + ("--cfg", f"transport/link/tcp/so_rcvbuf:{ROUTER_RCVBUF}")], indirect=True,
+    ids=["low-latency router"])
+
+
+def start_loaded(bus, bridge, session, tmp_path, period: str):
+    """The bridge on the low-latency transport with a small send buffer, frames flowing."""
+    config = tmp_path / "zenoh.json5"
+    config.write_text(f"{{transport: {{link: {{tcp: {{so_sndbuf: {SNDBUF}}}}}}}}}\n")
+    bridge.start("--zenoh-config", str(config), "--can", "vcan0", "--publish-period-ms", period, "--low-latency", "1")
+    bridge.wait_ready(session)
+    load = bus.popen(["cangen", "vcan0", "-I", "i", "-L", "8", "-D", "i", "-g", GAP_MS, "-n", str(LOAD)])
+    wait_for(lambda: bridge.stats(session)["buses"][0]["published_frames"] > 0, "the first frames published")
+    return load
+
+
+@FROZEN
+@pytest.mark.parametrize("period", ["0", "10"], ids=["immediate", "batching"])
+def test_a_frozen_router_blocks_the_puts_in_the_link_not_the_can_side(bus, bridge, router, session, tmp_path,
+                                                                       period):
+    """Whichever thread's put blocks in the write (the reader's own or the publisher's), the CAN port
+    is still read, every frame is accounted for, and what was published arrives in order."""
+    rx = Collector(session, "vehicle/can/rx")
+    load = start_loaded(bus, bridge, session, tmp_path, period)
+    backlog: list[int] = []
+    try:
+        freeze_until_the_link_is_full(bus, bridge, router, backlog)
+    finally:
+        router.proc.send_signal(signal.SIGCONT)
+    assert load.wait(timeout=60) == 0
+    stats = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and
+                     s["published_frames"] + s["rx_queue_drops"] == s["can_rx_frames"] == LOAD and s,
+                     "the bridge to account for every frame")
+    assert max(backlog, default=0) <= MAX_BACKLOG, f"the hub held up to {max(backlog)} frames for the bridge"
+    got = rx.wait_frames(stats["published_frames"])
+    seqs = [seq for _, seq, _ in got]
+    assert seqs == sorted(set(seqs)) and len(seqs) == stats["published_frames"], "out of order or twice"
+    assert seqs[-1] + 1 - len(seqs) <= stats["rx_queue_drops"]
+
+
+@FROZEN
+@pytest.mark.parametrize("period", ["0", "10"], ids=["immediate", "batching"])
+def test_sigterm_while_a_put_is_blocked_in_the_link_exits_cleanly(bus, bridge, router, session, tmp_path, period):
+    Collector(session, "vehicle/can/rx")  # a subscriber: without one the bridge's puts never leave it
+    load = start_loaded(bus, bridge, session, tmp_path, period)
+    try:
+        freeze_until_the_link_is_full(bus, bridge, router, [])
+        bridge.proc.send_signal(signal.SIGTERM)
+        wait_for(lambda: "zenoh-node: stopping" in bridge.log.read_text(), "the bridge to start stopping",
+                 timeout=10)
+    finally:
+        router.proc.send_signal(signal.SIGCONT)
+    rc, log = bridge.stop()  # waits up to 20 s
+    load.kill()
+    load.wait()
+    assert rc == 0, log[-2000:]
+    assert "final stats" in log
