@@ -15,14 +15,23 @@ vehicle computer with more buses would. Systems: zenoh-node in immediate mode
 Python reference.
 
 Zenoh -> CAN, the same loads the other way: zn-flood publishes stamped
-commands on every bus's tx key (9000/s per bus, all keys interleaved, one
-Zenoh session) and one can-load reader counts them on all buses, checking
+commands on every bus's tx key (9000 frames/s per bus, all keys interleaved,
+one Zenoh session) and one can-load reader counts them on all buses, checking
 that each bus's stamps only rise (no reordering, no duplicates). Systems:
-zenoh-node (its publish period batches only CAN -> Zenoh) and the reference.
+zenoh-node and the reference with one frame per command, and both with the
+commands a bridge in batching mode publishes (-batch10: one sample per bus
+per BATCH_MS holding that period's 90 frames, as when one bridge's batches
+drive another bus); each is compared with the reference given the same
+commands. Every zenoh-node system also runs on Zenoh's low-latency transport
+(-low-latency: --low-latency 1, its zenohd with the transport on).
 
 Per system, direction and load: frames offered, received, lossless or not,
-the bridges' CPU time per forwarded frame (utime + stime from /proc, all
-instances) and peak RSS (the largest instance).
+the bridges' CPU time per forwarded frame (every thread's run time from
+/proc/<pid>/task/*/schedstat, all instances; the kernel's share from the
+tick-counted utime/stime), context switches per frame and peak RSS (the
+largest instance). Then one bridge's context switches per frame at 10, 50
+and 90 % of one bus (bench.wakeups' runs), in batching mode against the
+target of 0.05, and in immediate mode for the record, on both transports.
 Ratios zenoh-node / reference are computed within the run; absolute numbers
 are only a record of this machine.
 
@@ -40,39 +49,45 @@ import tempfile
 import time
 from pathlib import Path
 
-from canbench import wire
-from canbench.capture import iter_zenoh_capture
 from canbench.errors import RunError
-from canbench.rig import Rig, Router, start_bridge, zn_capture
+from canbench.rig import LOW_LATENCY_ROUTER, Rig, Router, start_bridge, zn_capture
 from canbench.runkeys import open_session
 
+from . import wakeups
 from .common import (
     REPO,
     add_tool_arguments,
-    cpu_s,
     cpu_split_s,
+    ctx_switches,
     machine_line,
     rss_mib,
     run_id_and_output,
+    run_ns,
     settle,
 )
-from .stamps import load_rate, zenoh_stamps
+from .stamps import count_frames, load_rate, zenoh_stamps
 
 BUS_COUNTS = (1, 2, 4, 8, 16, 24, 32, 48, 64)  # can-load: at most 64 interfaces
 BUSES_PER_NODE = 8  # ZN_MAX_BUSES
 FRAMES_PER_S = 9000  # ~ one saturated 1 Mbit/s bus of 8-byte frames
 LOAD_S = 2.0
 BATCH_MS = 10
-SYSTEMS = ("zenoh-node", f"zenoh-node-batch{BATCH_MS}", "python-ref")
-ZENOH_TO_CAN_SYSTEMS = ("zenoh-node", "python-ref")  # the publish period batches CAN -> Zenoh only
-DIRECTIONS = ("can-to-zenoh", "zenoh-to-can")
+BATCH = f"-batch{BATCH_MS}"
+LOW_LATENCY = "-low-latency"  # the bridge and its router on Zenoh's low-latency transport (docs/bridge.md)
+REFERENCE = "python-ref"
+BRIDGES = ("zenoh-node", f"zenoh-node{BATCH}", f"zenoh-node{LOW_LATENCY}", f"zenoh-node{LOW_LATENCY}{BATCH}")
+SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}")
+# CAN -> Zenoh the reference publishes one sample per frame whatever the bridge's mode; Zenoh -> CAN
+# "-batch" is the commands' shape, given to both
+DIRECTION_SYSTEMS = {"can-to-zenoh": (*BRIDGES, REFERENCE), "zenoh-to-can": SYSTEMS}
+DIRECTIONS = tuple(DIRECTION_SYSTEMS)
+SWITCH_TARGET = 0.05  # context switches per frame in batching mode (issue #24)
 SETTLE_S = 10.0
 
 
-def count_frames(path: Path) -> int:
-    if not path.exists():
-        return 0
-    return sum(len(s.payload) // wire.WIRE_SIZE for s in iter_zenoh_capture(path, growing=True))
+def reference_of(system: str, direction: str) -> str:
+    """The reference a system is compared with: Zenoh -> CAN the one given the same commands."""
+    return f"{REFERENCE}{BATCH}" if direction == "zenoh-to-can" and system.endswith(BATCH) else REFERENCE
 
 
 def bus_keys(prefix: str, group: list[str], direction: str) -> list[str]:
@@ -100,7 +115,8 @@ class Bench(Rig):
         names = [f"vcan{i}" for i in range(buses)]
         self.hub.start(names)
         router = Router(self.args.zenohd)
-        self.procs.add(router.start())
+        low_latency = LOW_LATENCY in system
+        self.procs.add(router.start(*(LOW_LATENCY_ROUTER if low_latency else ())))
         endpoint = router.endpoint
         session = open_session(endpoint)
         capture_file = self.workdir / f"{system}-{buses}.tsv"
@@ -112,9 +128,9 @@ class Bench(Rig):
         bridges = []
         for k, group in enumerate(groups):
             if system.startswith("zenoh-node"):
-                period = system.removeprefix("zenoh-node").removeprefix("-batch") or "0"
+                period = str(BATCH_MS) if system.endswith(BATCH) else "0"
                 cmd = [self.args.bridge, "--router", endpoint, "--can", ",".join(group), "--publish-period-ms",
-                       period, "--name", f"zenoh-node-{k}"]
+                       period, "--name", f"zenoh-node-{k}", "--low-latency", str(int(low_latency))]
             else:
                 cmd = [sys.executable, "-m", "bench.refbridge", "--router", endpoint, "--can", ",".join(group)]
             try:
@@ -125,8 +141,9 @@ class Bench(Rig):
                 sys.exit(f"{system} with {buses} buses did not come up: {e}")
         per_bus = int(FRAMES_PER_S * LOAD_S)
         offered = per_bus * buses
-        sys0 = sum(cpu_split_s(b.pid)[1] for b in bridges)
-        cpu0 = sum(cpu_s(b.pid) for b in bridges)
+        ticks0 = [sum(cpu_split_s(b.pid)[i] for b in bridges) for i in (0, 1)]
+        run0 = sum(run_ns(b.pid) for b in bridges)
+        switches0 = sum(sum(ctx_switches(b.pid).values()) for b in bridges)
         peak_rss = 0.0
 
         def sample_rss() -> None:
@@ -147,9 +164,10 @@ class Bench(Rig):
                                       stdout=subprocess.PIPE, text=True)
             self.hub.wait_bound(before + buses)
             keys = [key for group in groups for key in bus_keys("vehicle/can", group, "tx")]
+            shape = ["--frames-per-sample", FRAMES_PER_S * BATCH_MS // 1000] if system.endswith(BATCH) else []
             gen = self.procs.spawn([self.args.zn_flood, "--connect", endpoint, "--key", ",".join(keys), "--count",
-                              per_bus, "--rate", FRAMES_PER_S, "--stamp-data", "--id", "200"],
-                             stdout=subprocess.PIPE, text=True)
+                                    per_bus, "--rate", FRAMES_PER_S, "--stamp-data", "--id", "200", *shape],
+                                   stdout=subprocess.PIPE, text=True)
             while gen.poll() is None:
                 sample_rss()
                 time.sleep(0.05)  # sampling period of the RSS probe
@@ -157,8 +175,9 @@ class Bench(Rig):
                 sys.exit(f"zn-flood exited {gen.returncode}")
             offered_fps = load_rate(gen.stdout.read(), offered)
             counted = json.loads(reader.communicate(timeout=SETTLE_S + 5)[0])  # stops after 1 s idle
-        cpu = sum(cpu_s(b.pid) for b in bridges) - cpu0
-        system_cpu = sum(cpu_split_s(b.pid)[1] for b in bridges) - sys0
+        cpu = (sum(run_ns(b.pid) for b in bridges) - run0) / 1e9
+        user_ticks, system_ticks = (sum(cpu_split_s(b.pid)[i] for b in bridges) - ticks0[i] for i in (0, 1))
+        switches = sum(sum(ctx_switches(b.pid).values()) for b in bridges) - switches0
         self.procs.close()
         session.close()
         if direction == "can-to-zenoh":
@@ -175,7 +194,9 @@ class Bench(Rig):
                 "delivered_fps": delivered, "offered_fps": offered_fps, "instances": len(bridges),
                 "received": received, "lossless": received == offered and in_order,
                 "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2),
-                "kernel_share": round(system_cpu / cpu, 2) if cpu else None, "peak_rss_mib": round(peak_rss, 1)}
+                "switches_per_frame": round(switches / max(received, 1), 3),
+                "kernel_share": round(system_ticks / (user_ticks + system_ticks), 2) if user_ticks + system_ticks
+                else None, "peak_rss_mib": round(peak_rss, 1)}
 
     def cleanup(self) -> None:
         for p in self.procs.procs:
@@ -200,13 +221,13 @@ def first_loss(results: list[dict], system: str) -> str:
 
 def table(results: list[dict]) -> str:
     rows = ["| direction | system | buses | instances | offered frames/s | received | lossless | delivered frames/s | "
-            "CPU µs/frame | of it in the kernel | RSS MiB |", "|" + "---|" * 11]
+            "CPU µs/frame | of it in the kernel | switches/frame | RSS MiB |", "|" + "---|" * 12]
     for r in sorted(results, key=lambda r: (DIRECTIONS.index(r.get("direction", DIRECTIONS[0])),
                                             SYSTEMS.index(r["system"]), r["buses"])):
         rows.append(f"| {r.get('direction', DIRECTIONS[0])} | {r['system']} | {r['buses']} | {r['instances']} | "
                     f"{r['offered_fps']} | {r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | "
-                    f"{r['delivered_fps']} | {r['cpu_us_per_frame']} | {r['kernel_share']} | {r['peak_rss_mib']} |")
-    ref = "python-ref"
+                    f"{r['delivered_fps']} | {r['cpu_us_per_frame']} | {r['kernel_share']} | "
+                    f"{r.get('switches_per_frame', '-')} | {r['peak_rss_mib']} |")
     for direction in DIRECTIONS:
         runs = [r for r in results if r.get("direction", DIRECTIONS[0]) == direction]
         if not runs:
@@ -219,19 +240,58 @@ def table(results: list[dict]) -> str:
                  "|---|" + "---|" * (len(systems) + 1),
                  "| highest lossless frames/s | " + " | ".join(str(best[s]) for s in systems) + target,
                  "| first load with loss | " + " | ".join(first_loss(runs, s) for s in systems) + " | |",
-                 "| ... relative to the Python reference | "
-                 + " | ".join(f"{best[s] / best[ref]:.1f}x" if best.get(ref) else "-" for s in systems)
+                 "| ... relative to the Python reference (given the same commands) | "
+                 + " | ".join(f"{best[s] / best[reference_of(s, direction)]:.1f}x"
+                              if best.get(reference_of(s, direction)) else "-" for s in systems)
                  + " | >= 3x |"]
         ratios = []
         for s in systems:
+            ref = reference_of(s, direction)
             common = [(by[(s, n)]["cpu_us_per_frame"], by[(ref, n)]["cpu_us_per_frame"]) for (sys_, n) in by
                       if sys_ == s and (ref, n) in by and by[(s, n)]["lossless"] and by[(ref, n)]["lossless"]]
             ratios.append(f"{statistics.median(a / b for a, b in common):.2f}" if common else "-")
         rows.append("| CPU time per frame relative to the reference (median over loads both forward losslessly) | "
-                    + " | ".join(ratios) + " | <= 0.1 |")
+                    + " | ".join(ratios) + " | <= 0.1 batching, <= 0.33 immediate |")
         rows.append("| peak RSS MiB (any load) | " + " | ".join(
             str(max([r["peak_rss_mib"] for r in runs if r["system"] == s], default=0)) for s in systems)
             + " | <= 32 |")
+    return "\n".join(rows)
+
+
+SWITCH_RUNS = (("can-to-zenoh", "batching"), ("zenoh-to-can", "batching"), ("can-to-zenoh", "immediate"))
+
+
+def switch_runs(args, rates: list[int]) -> list[dict]:
+    """One bridge at 10, 50 and 90 % of one bus, on either transport: its context switches per frame
+    (bench.wakeups)."""
+    results = []
+    for low_latency in (False, True):
+        for direction, mode in SWITCH_RUNS:
+            for rate in rates:
+                with tempfile.TemporaryDirectory(prefix="bench-wakeups-", dir="/tmp") as tmp:  # short: unix socket
+                    run = wakeups.Run(args, Path(tmp))
+                    try:
+                        results.append(run.one(direction, mode, rate, low_latency))
+                    finally:
+                        run.close()
+                print(json.dumps(results[-1]), flush=True)
+    return results
+
+
+def switch_table(results: list[dict]) -> str:
+    """Switches per frame against the batching target, next to the floor a period sets: at least one
+    wakeup per period while frames flow."""
+    rows = [f"| one bridge, one bus | mode | Zenoh transport | frames/s | received | context switches per frame | "
+            f"floor: one per {BATCH_MS} ms period | by thread (top 3) | CPU µs/frame | target |", "|" + "---|" * 10]
+    for r in results:
+        batching = r["mode"] == "batching"
+        floor = f"{1000 / BATCH_MS / r['rate']:.3f}" if batching else "-"
+        verdict = ("met" if r["ctx_per_frame"] <= SWITCH_TARGET and r["lossless"] else "not met") if batching else "-"
+        threads = ", ".join(f"{name} {n}" for name, n in list(r["ctx_per_frame_by_thread"].items())[:3])
+        rows.append(f"| {r['direction']} | {r['mode']} | {r.get('transport', 'universal')} | {r['rate']} | "
+                    f"{r['received']}/{r['frames']} | "
+                    f"{r['ctx_per_frame']} | {floor} | {threads} | {r['cpu_us_per_frame']} | "
+                    f"{f'<= {SWITCH_TARGET}: {verdict}' if batching else 'for the record'} |")
     return "\n".join(rows)
 
 
@@ -265,6 +325,8 @@ def main() -> int:
     ap.add_argument("--systems", default=",".join(SYSTEMS), help="which systems (comma-separated; ratios need "
                     "python-ref)")
     ap.add_argument("--zenoh-runtime", default="", help="ZENOH_RUNTIME for zenoh-node only (docs/benchmark.md)")
+    ap.add_argument("--switch-rates", default=",".join(map(str, wakeups.RATES)),
+                    help="frames/s of one bus for the context-switch runs (empty: none)")
     ap.add_argument("--update-readme", action="store_true",
                     help="replace README's performance table (between the bench markers) with this run's")
     args = ap.parse_args()
@@ -276,7 +338,7 @@ def main() -> int:
     for direction in args.directions.split(","):
         lossy: set[str] = set()  # systems past their first load with loss: no higher load for them
         for buses in [int(b) for b in args.buses.split(",")]:
-            for system in SYSTEMS if direction == "can-to-zenoh" else ZENOH_TO_CAN_SYSTEMS:
+            for system in DIRECTION_SYSTEMS[direction]:
                 if system in lossy or system not in systems:
                     continue
                 with tempfile.TemporaryDirectory(prefix="bench-bridge-") as tmp:
@@ -289,12 +351,14 @@ def main() -> int:
                 results.append(r)
                 if not r["lossless"]:
                     lossy.add(system)
-    md = table(results)
+    switches = switch_runs(args, [int(rate) for rate in args.switch_rates.split(",") if rate])
+    md = table(results) + (f"\n\n{switch_table(switches)}" if switches else "")
     for direction in args.directions.split(","):
         plot(results, out / f"throughput_{direction.replace('-', '_')}.png", direction)
     machine = machine_line()
     (out / "bench.json").write_text(json.dumps({"run_id": run_id, "machine": machine,
-                                                "zenoh_runtime": args.zenoh_runtime, "results": results}, indent=2))
+                                                "zenoh_runtime": args.zenoh_runtime, "results": results,
+                                                "switches": switches}, indent=2))
     runtime = f" (zenoh-node with ZENOH_RUNTIME={args.zenoh_runtime})" if args.zenoh_runtime else ""
     (out / "bench.md").write_text(f"Bridge benchmark {run_id} on {machine}{runtime}\n\n{md}\n")
     print(md)

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import subprocess
 import sys
 import tempfile
@@ -35,6 +34,7 @@ from canbench.runkeys import open_session
 
 from .bus import start_hub
 from .common import add_tool_arguments, machine_line, run_id_and_output, settle
+from .stamps import load_rate
 
 TARGET_FPS = 100_000
 ZENOH_RATES = (50_000, 100_000, 150_000)
@@ -62,7 +62,6 @@ def zenoh_run(args, workdir: Path, rate: int, block: bool) -> dict:
         flood = subprocess.run([args.zn_flood, "--connect", endpoint, "--key", "bench/flood", "--count",
                                 str(ZENOH_COUNT), "--rate", str(rate), *(["--block"] if block else [])],
                                capture_output=True, text=True, timeout=120, check=True)
-        seconds = float(re.match(r"\d+ samples in ([\d.]+) s", flood.stdout).group(1))
         wait_lines(tsv, ZENOH_COUNT)
         stop(capture, close_stdin=True)
         times, seqs = [], []
@@ -70,7 +69,9 @@ def zenoh_run(args, workdir: Path, rate: int, block: bool) -> dict:
             times.append(sample.t_ns)
             seqs.append(int.from_bytes(sample.attachment or b"", "little"))  # zn-flood's attachment: its counter
         gaps = sum(1 for a, b in zip(seqs, seqs[1:], strict=False) if b != a + 1)
-        offered = ZENOH_COUNT / seconds
+        offered = load_rate(flood.stdout, ZENOH_COUNT)
+        if not offered:
+            sys.exit(f"zn-flood reported no rate: {flood.stdout!r}")
         sustained = (len(times) - 1) / ((times[-1] - times[0]) / 1e9) if len(times) > 1 else 0
         return {"side": "zenoh", "load": "as fast as possible (Block)" if block else f"paced {rate}/s (Drop)",
                 "offered_fps": round(offered), "recorded_fps": round(sustained),

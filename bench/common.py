@@ -23,6 +23,32 @@ def cpu_s(pid: int) -> float:
     return sum(cpu_split_s(pid))
 
 
+def ctx_switches(pid: int) -> dict[str, int]:
+    """Voluntary + involuntary context switches so far of every thread of a process, by thread
+    name (Zenoh's runtimes name theirs, e.g. tx-0, rx-1, app-0; the bridge's are the process's)."""
+    by_name: dict[str, int] = {}
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            name = (task / "comm").read_text().strip()
+            switches = sum(int(line.split()[1]) for line in (task / "status").read_text().splitlines()
+                           if line.startswith(("voluntary_ctxt_switches:", "nonvoluntary_ctxt_switches:")))
+        except OSError:  # a thread that just ended
+            continue
+        by_name[name] = by_name.get(name, 0) + switches
+    return by_name
+
+
+def run_ns(pid: int) -> int:
+    """CPU time of every thread of a process so far, ns (schedstat: not tick-rounded)."""
+    total = 0
+    for stat in Path(f"/proc/{pid}/task").glob("*/schedstat"):
+        try:
+            total += int(stat.read_text().split()[0])
+        except OSError:  # a thread that just ended
+            pass
+    return total
+
+
 def rss_mib(pid: int) -> float:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):

@@ -11,7 +11,10 @@ candump's SO_TIMESTAMP) gives a latency per frame and loss is counted by stamp.
   8100 frames/s), LATENCY_S each, per bridge mode (client via zenohd, peer
   with a direct link, bridge as router) and path: CAN -> Zenoh, Zenoh -> CAN,
   round trip (Zenoh -> bridge -> CAN -> echo ECU -> CAN -> bridge -> Zenoh);
-  CAN -> Zenoh also in batching mode (--publish-period-ms BATCH_MS).
+  CAN -> Zenoh also in batching mode (--publish-period-ms BATCH_MS); every path
+  in client mode also on Zenoh's low-latency transport (zenoh-node-low-latency:
+  --low-latency 1, its zenohd with the transport enabled; the loads and
+  captures keep the universal one on their own links).
   Side by side: the bus alone (can-load -> hub -> candump), raw Zenoh
   (zn-flood -> zenohd -> zn-capture, the floor) and the Python reference
   bridge (client mode). Bridge CPU % and peak RSS at each level.
@@ -35,7 +38,7 @@ from pathlib import Path
 import zenoh
 
 from canbench.errors import RunError
-from canbench.rig import Rig, Router, candump, free_port, start_bridge, stop, zn_capture
+from canbench.rig import LOW_LATENCY_ROUTER, Rig, Router, candump, free_port, start_bridge, stop, zn_capture
 from canbench.runkeys import open_session
 
 from .common import REPO, add_tool_arguments, cpu_s, machine_line, rss_mib, run_id_and_output, settle
@@ -51,6 +54,7 @@ SETTLE_S = 5.0
 BRIDGE_UP_S = 30.0  # a bridge's start to its token, at most
 CAN_TO_ZENOH_ID, COMMAND_ID, ECHO_ID = 0x100, 0x321, 0x322
 BATCH_MS = 10  # zenoh-node's batching mode: one sample per bus every 10 ms
+LOW_LATENCY = "-low-latency"  # zenoh-node and its router on Zenoh's low-latency transport (docs/bridge.md)
 
 
 def latency_summary(stamps: list[tuple[int, int]], sent: int) -> dict:
@@ -82,18 +86,20 @@ class PathRig(Rig):
     def start(self, bridge: str | None, mode: str = "client") -> None:
         self.hub.start(["vcan0"])
         router = f"tcp/127.0.0.1:{free_port()}"
+        low_latency = bridge is not None and LOW_LATENCY in bridge
         if mode != "router":
             zenohd = Router(self.args.zenohd)
             router = zenohd.endpoint
-            self.procs.add(zenohd.start())
+            self.procs.add(zenohd.start(*(LOW_LATENCY_ROUTER if low_latency else ())))
         self.endpoint = router
         if bridge is None:
             return
         if bridge == "python-ref":
             cmd = [sys.executable, "-m", "bench.refbridge", "--router", router, "--can", "vcan0"]
         else:
-            period = bridge.removeprefix("zenoh-node").removeprefix("-batch") or "0"
-            cmd = [self.args.bridge, "--mode", mode, "--can", "vcan0", "--publish-period-ms", period]
+            period = str(BATCH_MS) if bridge.endswith(f"-batch{BATCH_MS}") else "0"
+            cmd = [self.args.bridge, "--mode", mode, "--can", "vcan0", "--publish-period-ms", period,
+                   "--low-latency", str(int(low_latency))]
             if mode == "client":
                 cmd += ["--router", router]
             else:  # peer and router: the captures and loads link to the bridge itself
@@ -306,6 +312,7 @@ def main() -> int:
     plan: list[tuple[str, str | None, str]] = [("bus", None, "client"), ("zenoh", None, "client")]
     plan += [(p, "zenoh-node", m) for m in modes for p in ("can-to-zenoh", "zenoh-to-can", "round-trip")]
     plan += [("can-to-zenoh", f"zenoh-node-batch{BATCH_MS}", "client")]
+    plan += [(p, f"zenoh-node{LOW_LATENCY}", "client") for p in ("can-to-zenoh", "zenoh-to-can", "round-trip")]
     plan += [(p, "python-ref", "client") for p in ("can-to-zenoh", "zenoh-to-can", "round-trip")]
     latency = []
     for path, system, mode in plan:

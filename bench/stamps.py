@@ -28,6 +28,13 @@ def zenoh_frames(path: Path):
             yield f.can_id, int.from_bytes(f.data, "little"), sample.t_ns, can_rx
 
 
+def count_frames(path: Path) -> int:
+    """Frames so far in a zn-capture TSV (possibly still being written; batched samples hold several)."""
+    if not path.exists():
+        return 0
+    return sum(len(s.payload) // wire.WIRE_SIZE for s in iter_zenoh_capture(path, growing=True))
+
+
 def zenoh_stamps(path: Path, can_id: int | None = None) -> list[tuple[int, int]]:
     """(send stamp, receive ns) per frame in a zn-capture TSV."""
     return [(sent, recv) for fid, sent, recv, _ in zenoh_frames(path) if can_id is None or fid == can_id]
@@ -54,6 +61,6 @@ def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
 
 
 def load_rate(report: str, count: int) -> int | None:
-    """The rate a load really offered, from its own report (can-load: JSON; zn-flood: "N samples in S s")."""
-    m = re.search(r'"seconds": ([\d.]+)', report) or re.search(r"samples in ([\d.]+) s", report)
+    """The rate a load really offered, from its own report (can-load: JSON; zn-flood: "N frames in S s")."""
+    m = re.search(r'"seconds": ([\d.]+)', report) or re.search(r"frames in ([\d.]+) s", report)
     return round(count / float(m.group(1))) if m and float(m.group(1)) > 0 else None

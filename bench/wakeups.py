@@ -6,9 +6,11 @@ One bus on the userspace hub, zenohd on loopback, one bridge. CAN -> Zenoh: can-
 RATES frames/s (10, 50 and 90 % of a 1 Mbit/s bus of 8-byte frames) for LOAD_S seconds,
 zn-capture counts them on Zenoh; immediate mode and batching mode (BATCH_MS). Zenoh -> CAN:
 commands of COMMAND_FRAMES frames each at TX_RATE frames/s from one Zenoh session, can-load
-counts them on the bus. Per run, over the bridge process (all its threads): context switches
-per frame (voluntary + involuntary, /proc/<pid>/task/*/status), CPU time per frame (utime +
-stime) and its kernel share, and whether every frame arrived. Compare two builds by running it
+counts them on the bus (bench.bridge also runs it in batching mode: a command per BATCH_MS
+holding that period's frames, as a bridge in batching mode publishes them). Per run, over the
+bridge process (all its threads): context switches per frame (voluntary + involuntary,
+/proc/<pid>/task/*/status), CPU time per frame and its kernel share, and whether every frame
+arrived. Compare two builds by running it
 twice (--bridge, --ucan-build: the bridge and the hub/preload it runs on).
 
 --can-side: the CAN side alone, zenoh-node-memzenoh (the bridge on the real CAN port with Zenoh
@@ -34,11 +36,11 @@ import time
 from pathlib import Path
 
 from canbench import wire
-from canbench.rig import Rig, Router, start_bridge, stop, zn_capture
+from canbench.rig import LOW_LATENCY_ROUTER, Rig, Router, start_bridge, stop, zn_capture
 from canbench.runkeys import open_session
 
-from .bridge import count_frames
-from .common import add_tool_arguments, cpu_split_s, machine_line, run_id_and_output, settle
+from .common import add_tool_arguments, cpu_split_s, ctx_switches, machine_line, run_id_and_output, run_ns, settle
+from .stamps import count_frames
 
 RATES = (900, 4500, 8100)  # frames/s: 10, 50, 90 % of a saturated 1 Mbit/s bus of 8-byte frames
 CAN_SIDE_FAST = 50000  # frames/s: an unthrottled userspace bus, frames queue between wakeups
@@ -47,32 +49,6 @@ BATCH_MS = 10
 TX_RATE = 8000  # frames/s Zenoh -> CAN
 COMMAND_FRAMES = 16  # frames per command Zenoh -> CAN
 SETTLE_S = 10.0
-
-
-def ctx_switches(pid: int) -> dict[str, int]:
-    """Voluntary + involuntary context switches so far of every thread of a process, by thread
-    name (Zenoh's runtimes name theirs, e.g. tx-0, rx-1, app-0; the bridge's are the process's)."""
-    by_name: dict[str, int] = {}
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            name = (task / "comm").read_text().strip()
-            switches = sum(int(line.split()[1]) for line in (task / "status").read_text().splitlines()
-                           if line.startswith(("voluntary_ctxt_switches:", "nonvoluntary_ctxt_switches:")))
-        except OSError:  # a thread that just ended
-            continue
-        by_name[name] = by_name.get(name, 0) + switches
-    return by_name
-
-
-def run_ns(pid: int) -> int:
-    """CPU time of every thread of a process so far, ns (schedstat: not tick-rounded)."""
-    total = 0
-    for stat in Path(f"/proc/{pid}/task").glob("*/schedstat"):
-        try:
-            total += int(stat.read_text().split()[0])
-        except OSError:  # a thread that just ended
-            pass
-    return total
 
 
 class Probe:
@@ -111,10 +87,11 @@ class Run(Rig):
         # Zenoh's thread pools of the bridge alone (zenoh-runtime: ZENOH_RUNTIME), never the router's
         self.bridge_env = {**self.env, **({"ZENOH_RUNTIME": args.zenoh_runtime} if args.zenoh_runtime else {})}
 
-    def one(self, direction: str, mode: str, rate: int) -> dict:
+    def one(self, direction: str, mode: str, rate: int, low_latency: bool = False) -> dict:
+        """One run; low_latency: the bridge and the router on Zenoh's low-latency transport."""
         self.hub.start(["vcan0"])
         router = Router(self.args.zenohd)
-        self.procs.add(router.start())
+        self.procs.add(router.start(*(LOW_LATENCY_ROUTER if low_latency else ())))
         endpoint = router.endpoint
         session = open_session(endpoint)
         capture = self.workdir / "zenoh.tsv"
@@ -123,11 +100,12 @@ class Run(Rig):
                        "bench/capture")
         period = str(BATCH_MS) if mode == "batching" else "0"
         bridge = start_bridge(self.procs, [self.args.bridge, "--router", endpoint, "--can", "vcan0",
-                                           "--publish-period-ms", period], self.bridge_env, self.workdir / "bridge.log",
-                              session, "vehicle/can/bridges/*/vcan0/**")
+                                           "--publish-period-ms", period, "--low-latency", str(int(low_latency))],
+                              self.bridge_env, self.workdir / "bridge.log", session, "vehicle/can/bridges/*/vcan0/**")
         frames = int(rate * LOAD_S)
+        command_frames = rate * BATCH_MS // 1000 if mode == "batching" else COMMAND_FRAMES
         if direction == "zenoh-to-can":
-            frames -= frames % COMMAND_FRAMES
+            frames -= frames % command_frames
         probe = Probe(bridge.pid)
         if direction == "can-to-zenoh":
             self.procs.spawn([self.args.can_load, "send", "vcan0", "100", rate, frames], env=self.env,
@@ -139,11 +117,12 @@ class Run(Rig):
                                       stdout=subprocess.PIPE, text=True)
             self.hub.wait_bound(before + 1)
             pub = session.declare_publisher("vehicle/can/tx")
-            gap = COMMAND_FRAMES / rate
+            gap = command_frames / rate
             start = time.monotonic()
-            for k in range(frames // COMMAND_FRAMES):
-                payload = b"".join(wire.encode(wire.Frame(0x200 + i, 8, (k * COMMAND_FRAMES + i).to_bytes(8, "little")))
-                                   for i in range(COMMAND_FRAMES))
+            for k in range(frames // command_frames):
+                payload = b"".join(wire.encode(wire.Frame(0x200 + i % 16, 8,
+                                                          (k * command_frames + i).to_bytes(8, "little")))
+                                   for i in range(command_frames))
                 due = start + k * gap
                 if due > time.monotonic():
                     time.sleep(due - time.monotonic())  # the load's pace, not a synchronisation
@@ -154,8 +133,8 @@ class Run(Rig):
         measured = probe.end(received)
         self.procs.close()
         session.close()
-        return {"direction": direction, "mode": mode, "rate": rate, "frames": frames, "received": received,
-                "lossless": received == frames, **measured}
+        return {"direction": direction, "mode": mode, "transport": "low-latency" if low_latency else "universal",
+                "rate": rate, "frames": frames, "received": received, "lossless": received == frames, **measured}
 
     def can_side(self, mode: str, rate: int, strace: bool) -> dict:
         """CAN -> Zenoh into zenoh-node-memzenoh: the reader, the queue and the publisher, no Zenoh."""

@@ -131,6 +131,11 @@ class Hub:
             stop(self.proc, sig=sig)
 
 
+# zenohd's settings for Zenoh's low-latency transport (docs/bridge.md): a bridge with --low-latency 1
+# uses it only with a router that enables it too
+LOW_LATENCY_ROUTER = ("--cfg", "transport/unicast/lowlatency:true", "--cfg", "transport/unicast/qos/enabled:false")
+
+
 class Router:
     """zenohd on a free loopback port; multicast scouting off (network safety)."""
 

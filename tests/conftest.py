@@ -218,9 +218,9 @@ class Bridge:
         return rc, self.log.read_text()
 
 
-# zenohd's settings for Zenoh's low-latency transport (docs/bridge.md): a test takes them with
-# @pytest.mark.parametrize("router", [(), LOW_LATENCY_ROUTER], indirect=True)
-LOW_LATENCY_ROUTER = ("--cfg", "transport/unicast/lowlatency:true", "--cfg", "transport/unicast/qos/enabled:false")
+# a test gives its router Zenoh's low-latency transport with
+# @pytest.mark.parametrize("router", [LOW_LATENCY_ROUTER], indirect=True)
+LOW_LATENCY_ROUTER = rig.LOW_LATENCY_ROUTER
 
 
 @pytest.fixture

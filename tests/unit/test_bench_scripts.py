@@ -46,7 +46,7 @@ def test_latency_summary_counts_loss_duplicates_and_percentiles():
 
 def test_load_rate_reads_both_loads_reports():
     assert stamps.load_rate('{"frames": 9000, "seconds": 1.0000, "enobufs_retries": 0}', 9000) == 9000
-    assert stamps.load_rate("144000 samples in 2.000 s\n", 144000) == 72000
+    assert stamps.load_rate("144000 frames in 2.000 s (1600 samples)\n", 144000) == 72000
     assert stamps.load_rate("garbage", 10) is None
 
 
@@ -122,6 +122,39 @@ def test_bridge_table_reports_each_direction_against_the_reference():
     assert cpu_row.split(" | ")[1:3] == ["0.25", "1.00"]  # only the 1-bus load: both lossless there
     c2z = next(s for s in sections if s.startswith("| can-to-zenoh |"))
     assert "| 9000 |" in c2z and "18000" not in c2z
+
+
+def test_bridge_table_compares_batched_commands_with_the_reference_given_the_same_commands():
+    ref, node = "python-ref", "zenoh-node"
+    ref_batch, node_batch = f"{ref}{bench_bridge.BATCH}", f"{node}{bench_bridge.BATCH}"
+    results = [dict(result(ref, 1, True, 40), direction="zenoh-to-can"),
+               dict(result(node, 1, True, 10), direction="zenoh-to-can"),
+               dict(result(ref_batch, 1, True, 20), direction="zenoh-to-can"),
+               dict(result(node_batch, 1, True, 1), direction="zenoh-to-can"),
+               result(ref, 1, True, 60), result(node_batch, 1, True, 3)]
+    z2c, c2z = (next(s for s in bench_bridge.table(results).split("\n\n") if s.startswith(f"| {d} |"))
+                for d in ("zenoh-to-can", "can-to-zenoh"))
+    cpu_row = next(line for line in z2c.splitlines() if line.startswith("| CPU time per frame"))
+    # each against its own reference: 10/40 and 1/20, not 1/40
+    assert cpu_row.split(" | ")[1:5] == ["0.25", "0.05", "1.00", "1.00"]
+    cpu_row = next(line for line in c2z.splitlines() if line.startswith("| CPU time per frame"))
+    assert cpu_row.split(" | ")[1:3] == ["0.05", "1.00"]  # CAN -> Zenoh the reference publishes per frame
+
+
+def switch_run(mode: str, rate: int, switches: float, lossless: bool = True) -> dict:
+    return {"direction": "can-to-zenoh", "mode": mode, "rate": rate, "frames": rate * 3,
+            "received": rate * 3 if lossless else rate, "lossless": lossless, "ctx_per_frame": switches,
+            "ctx_per_frame_by_thread": {"tx-0": switches / 2, "zn-can": switches / 2}, "cpu_us_per_frame": 2.0}
+
+
+def test_switch_table_judges_batching_against_the_target_and_shows_the_periods_floor():
+    rows = bench_bridge.switch_table([switch_run("batching", 900, 0.2), switch_run("batching", 4500, 0.04),
+                                      switch_run("batching", 8100, 0.03, lossless=False),
+                                      switch_run("immediate", 900, 3.0)]).splitlines()[2:]
+    cells = [row.split(" | ") for row in rows]
+    assert [c[6] for c in cells] == ["0.111", "0.022", "0.012", "-"]  # 100 periods a second over frames/s
+    assert [c[-1] for c in cells] == ["<= 0.05: not met |", "<= 0.05: met |", "<= 0.05: not met |",
+                                      "for the record |"]
 
 
 def test_bridge_keys_and_sustained_rate():

@@ -1,6 +1,6 @@
-//! zn-flood: publishes COUNT samples shaped like the bridge's (16-byte frame,
+//! zn-flood: publishes COUNT frames shaped like the bridge's (16-byte frame,
 //! 8-byte sequence attachment) on each key of KEYS (comma separated, all keys
-//! interleaved) at RATE samples/s per key (0 = as fast as it can), then exits. A benchmark load: bounded in count, loopback or the
+//! interleaved) at RATE frames/s per key (0 = as fast as it can), then exits. A benchmark load: bounded in count, loopback or the
 //! bench's own router only, multicast scouting off.
 //!
 //!   zn-flood --connect tcp/127.0.0.1:7447 --key bench/flood --count 300000 --rate 100000
@@ -11,9 +11,12 @@
 //! the trip through the bridge and the CAN bus, so every capture point reads
 //! the latency from the frame itself. --id sets the CAN id (hex, default 123;
 //! ID+i on the i-th key, so a reader tells the keys' streams apart),
-//! --mode client|peer the Zenoh mode (default client).
+//! --mode client|peer the Zenoh mode (default client). --frames-per-sample N
+//! (with --stamp-data) puts N frames in each sample, as a bridge in batching
+//! mode publishes a period's frames: COUNT and RATE stay frames per key, one
+//! sample per key every N / RATE seconds, each frame its own stamp.
 //!
-//! Prints "<samples> samples in <seconds> s" on stdout when done.
+//! Prints "<frames> frames in <seconds> s (<samples> samples)" on stdout when done.
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use zenoh::qos::CongestionControl;
@@ -25,8 +28,8 @@ const SLICE: Duration = Duration::from_millis(1);
 
 fn usage() -> ! {
     eprintln!(
-        "usage: zn-flood --connect ENDPOINT --key KEY[,KEY...] --count N_PER_KEY [--rate SAMPLES_PER_S] [--block] [--stamp-data] \
-         [--id HEX] [--mode client|peer]"
+        "usage: zn-flood --connect ENDPOINT --key KEY[,KEY...] --count N_PER_KEY [--rate FRAMES_PER_S] [--block] [--stamp-data] \
+         [--id HEX] [--mode client|peer] [--frames-per-sample N]"
     );
     std::process::exit(2);
 }
@@ -34,6 +37,7 @@ fn usage() -> ! {
 fn main() {
     let (mut connect, mut key, mut count, mut rate, mut block) = (String::new(), String::new(), 0u64, 0u64, false);
     let (mut stamp_data, mut can_id, mut mode) = (false, 0x123u32, "client".to_string());
+    let mut per_sample = 1u64;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
         if flag == "--block" {
@@ -52,10 +56,12 @@ fn main() {
             "--rate" => rate = value.parse().unwrap_or_else(|_| usage()),
             "--id" => can_id = u32::from_str_radix(&value, 16).unwrap_or_else(|_| usage()),
             "--mode" if value == "client" || value == "peer" => mode = value,
+            "--frames-per-sample" => per_sample = value.parse().unwrap_or_else(|_| usage()),
             _ => usage(),
         }
     }
-    if connect.is_empty() || key.is_empty() || count == 0 {
+    // several frames per sample only as stamped commands (a sequence attachment numbers samples, not frames)
+    if connect.is_empty() || key.is_empty() || count == 0 || per_sample == 0 || (per_sample > 1 && !stamp_data) {
         usage();
     }
     let mut config = Config::default();
@@ -84,28 +90,36 @@ fn main() {
         })
         .collect();
     let keys = publishers.len() as u64;
-    let (count, rate) = (count * keys, rate * keys);
+    // samples in all (the last one per key may hold fewer frames) and their rate, all keys interleaved
+    let samples = count.div_ceil(per_sample) * keys;
+    let sample_rate = rate as f64 * keys as f64 / per_sample as f64;
     let start = Instant::now();
     let mut seq = 0u64;
     let mut last_stamp = 0u64;
-    while seq < count {
+    while seq < samples {
         // send what is due by now (everything when unpaced), then sleep a slice
-        let due = if rate == 0 { count } else { (start.elapsed().as_secs_f64() * rate as f64) as u64 + 1 };
-        while seq < due.min(count) {
-            // the bridge's wire format: id (LE u32), dlc, flags, 2 reserved, 8 data bytes
-            let mut frame = [0u8; 16];
+        let due = if rate == 0 { samples } else { (start.elapsed().as_secs_f64() * sample_rate) as u64 + 1 };
+        while seq < due.min(samples) {
             let slot = (seq % keys) as usize;
-            frame[0..4].copy_from_slice(&(can_id + slot as u32).to_le_bytes());
-            frame[4] = 8;
-            let data = if stamp_data {
-                let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
-                last_stamp = now.max(last_stamp + 1);
-                last_stamp
-            } else {
-                seq
-            };
-            frame[8..16].copy_from_slice(&data.to_le_bytes());
-            let put = publishers[slot].put(frame.to_vec());
+            let first = seq / keys * per_sample; // this key's frames before this sample
+            let frames = per_sample.min(count - first);
+            let mut payload = Vec::with_capacity(16 * frames as usize);
+            for _ in 0..frames {
+                // the bridge's wire format: id (LE u32), dlc, flags, 2 reserved, 8 data bytes
+                let mut frame = [0u8; 16];
+                frame[0..4].copy_from_slice(&(can_id + slot as u32).to_le_bytes());
+                frame[4] = 8;
+                let data = if stamp_data {
+                    let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+                    last_stamp = now.max(last_stamp + 1);
+                    last_stamp
+                } else {
+                    seq
+                };
+                frame[8..16].copy_from_slice(&data.to_le_bytes());
+                payload.extend_from_slice(&frame);
+            }
+            let put = publishers[slot].put(payload);
             // a stamped frame is its own identity, and a bare payload is a valid bridge command
             let put = if stamp_data { put } else { put.attachment(seq.to_le_bytes().to_vec()) };
             if let Err(e) = put.wait() {
@@ -114,12 +128,13 @@ fn main() {
             }
             seq += 1;
         }
-        if seq < count {
-            std::thread::sleep(SLICE.min(Duration::from_secs_f64(1.0 / rate as f64)));
+        if seq < samples {
+            std::thread::sleep(SLICE.min(Duration::from_secs_f64(1.0 / sample_rate.max(1.0))));
         }
     }
+    let count = count * keys;
     let elapsed = start.elapsed().as_secs_f64();
-    println!("{count} samples in {elapsed:.3} s");
+    println!("{count} frames in {elapsed:.3} s ({samples} samples)");
     drop(publishers);
     let _ = session.close().wait();
 }
