@@ -38,7 +38,7 @@ from pathlib import Path
 import zenoh
 
 from canbench.errors import RunError
-from canbench.rig import LOW_LATENCY_ROUTER, Rig, Router, candump, free_port, start_bridge, stop, zn_capture
+from canbench.rig import Rig, Router, candump, free_port, start_bridge, stop, transport_args, zn_capture
 from canbench.runkeys import open_session
 
 from .common import REPO, add_tool_arguments, cpu_s, machine_line, rss_mib, run_id_and_output, settle
@@ -86,11 +86,11 @@ class PathRig(Rig):
     def start(self, bridge: str | None, mode: str = "client") -> None:
         self.hub.start(["vcan0"])
         router = f"tcp/127.0.0.1:{free_port()}"
-        low_latency = bridge is not None and LOW_LATENCY in bridge
+        router_args, bridge_args = transport_args(bridge is not None and LOW_LATENCY in bridge)
         if mode != "router":
             zenohd = Router(self.args.zenohd)
             router = zenohd.endpoint
-            self.procs.add(zenohd.start(*(LOW_LATENCY_ROUTER if low_latency else ())))
+            self.procs.add(zenohd.start(*router_args))
         self.endpoint = router
         if bridge is None:
             return
@@ -98,8 +98,7 @@ class PathRig(Rig):
             cmd = [sys.executable, "-m", "bench.refbridge", "--router", router, "--can", "vcan0"]
         else:
             period = str(BATCH_MS) if bridge.endswith(f"-batch{BATCH_MS}") else "0"
-            cmd = [self.args.bridge, "--mode", mode, "--can", "vcan0", "--publish-period-ms", period,
-                   "--low-latency", str(int(low_latency))]
+            cmd = [self.args.bridge, "--mode", mode, "--can", "vcan0", "--publish-period-ms", period, *bridge_args]
             if mode == "client":
                 cmd += ["--router", router]
             else:  # peer and router: the captures and loads link to the bridge itself

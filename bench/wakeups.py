@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 from canbench import wire
-from canbench.rig import LOW_LATENCY_ROUTER, Rig, Router, start_bridge, stop, zn_capture
+from canbench.rig import Rig, Router, start_bridge, stop, transport_args, zn_capture
 from canbench.runkeys import open_session
 
 from .common import add_tool_arguments, cpu_split_s, ctx_switches, machine_line, run_id_and_output, run_ns, settle
@@ -90,8 +90,9 @@ class Run(Rig):
     def one(self, direction: str, mode: str, rate: int, low_latency: bool = False) -> dict:
         """One run; low_latency: the bridge and the router on Zenoh's low-latency transport."""
         self.hub.start(["vcan0"])
+        router_args, bridge_args = transport_args(low_latency)
         router = Router(self.args.zenohd)
-        self.procs.add(router.start(*(LOW_LATENCY_ROUTER if low_latency else ())))
+        self.procs.add(router.start(*router_args))
         endpoint = router.endpoint
         session = open_session(endpoint)
         capture = self.workdir / "zenoh.tsv"
@@ -100,10 +101,10 @@ class Run(Rig):
                        "bench/capture")
         period = str(BATCH_MS) if mode == "batching" else "0"
         bridge = start_bridge(self.procs, [self.args.bridge, "--router", endpoint, "--can", "vcan0",
-                                           "--publish-period-ms", period, "--low-latency", str(int(low_latency))],
+                                           "--publish-period-ms", period, *bridge_args],
                               self.bridge_env, self.workdir / "bridge.log", session, "vehicle/can/bridges/*/vcan0/**")
         frames = int(rate * LOAD_S)
-        command_frames = rate * BATCH_MS // 1000 if mode == "batching" else COMMAND_FRAMES
+        command_frames = max(1, rate * BATCH_MS // 1000) if mode == "batching" else COMMAND_FRAMES
         if direction == "zenoh-to-can":
             frames -= frames % command_frames
         probe = Probe(bridge.pid)
@@ -171,14 +172,32 @@ class Run(Rig):
         return row
 
 
+def in_fresh_rig(args, job) -> dict:
+    """job(run) in a rig of its own, its result printed as a JSON line."""
+    with tempfile.TemporaryDirectory(prefix="bench-wakeups-", dir="/tmp") as tmp:  # short: unix socket path
+        run = Run(args, Path(tmp))
+        try:
+            result = job(run)
+        finally:
+            run.close()
+    print(json.dumps(result), flush=True)
+    return result
+
+
+def measure(args, direction: str, mode: str, rate: int, low_latency: bool = False) -> dict:
+    """One run of the bridge with Zenoh (Run.one) in a rig of its own."""
+    return in_fresh_rig(args, lambda run: run.one(direction, mode, rate, low_latency))
+
+
 def table(results: list[dict]) -> str:
-    rows = ["| direction | mode | frames/s | received | context switches per frame | by thread (top 4) | "
-            "CPU µs per frame | of it in the kernel | syscalls per frame |", "|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| direction | mode | Zenoh transport | frames/s | received | context switches per frame | "
+            "by thread (top 4) | CPU µs per frame | of it in the kernel | syscalls per frame |", "|" + "---|" * 10]
     for r in results:
         calls = (f"{r['syscalls_per_frame']} ({', '.join(f'{k} {v}' for k, v in r['syscalls'].items())})"
                  if "syscalls" in r else "")
         threads = ", ".join(f"{name} {n}" for name, n in list(r["ctx_per_frame_by_thread"].items())[:4])
-        rows.append(f"| {r['direction']} | {r['mode']} | {r['rate']} | {r['received']}/{r['frames']} | "
+        rows.append(f"| {r['direction']} | {r['mode']} | {r.get('transport', 'universal')} | {r['rate']} | "
+                    f"{r['received']}/{r['frames']} | "
                     f"{r['ctx_per_frame']} | {threads} | {r['cpu_us_per_frame']} | {r['kernel_share']} | {calls} |")
     return "\n".join(rows)
 
@@ -192,6 +211,8 @@ def main() -> int:
     ap.add_argument("--strace", action="store_true", help="--can-side: syscalls per frame (strace -c)")
     ap.add_argument("--zenoh-runtime", default="", help="ZENOH_RUNTIME for the bridge only, e.g. "
                     "'(rx: (handover: tx), app: (handover: tx), net: (handover: tx), acc: (handover: tx))'")
+    ap.add_argument("--transports", default="universal", help="Zenoh transports of the bridge and its router: "
+                    "universal, low-latency or both (comma-separated; docs/bridge.md)")
     ap.add_argument("--modes", default="immediate,batching,zenoh-to-can",
                     help="which runs: CAN -> Zenoh immediate and batching, Zenoh -> CAN (comma-separated)")
     args = ap.parse_args()
@@ -202,22 +223,22 @@ def main() -> int:
     unknown = set(modes) - {"immediate", "batching", "zenoh-to-can"}
     if unknown:
         ap.error(f"--modes: unknown {', '.join(sorted(unknown))}")
+    transports = args.transports.split(",")
+    if set(transports) - {"universal", "low-latency"}:
+        ap.error(f"--transports: unknown {', '.join(sorted(set(transports) - {'universal', 'low-latency'}))}")
     can_modes = [m for m in ("immediate", "batching") if m in modes]
-    if args.can_side:
-        plan = [("can-side", mode, rate) for mode in can_modes for rate in rates + [CAN_SIDE_FAST]]
+    if args.can_side:  # no Zenoh: one run per mode and rate, whatever the transports
+        for mode in can_modes:
+            for rate in rates + [CAN_SIDE_FAST]:
+                results.append(in_fresh_rig(args, lambda run, mode=mode, rate=rate: run.can_side(mode, rate,
+                                                                                                 args.strace)))
     else:
         plan = [("can-to-zenoh", mode, rate) for mode in can_modes for rate in rates]
         if "zenoh-to-can" in modes:
             plan.append(("zenoh-to-can", "immediate", TX_RATE))
-    for direction, mode, rate in plan:
-        with tempfile.TemporaryDirectory(prefix="bench-wakeups-", dir="/tmp") as tmp:  # short: unix socket path
-            run = Run(args, Path(tmp))
-            try:
-                results.append(run.can_side(mode, rate, args.strace) if direction == "can-side"
-                               else run.one(direction, mode, rate))
-            finally:
-                run.close()
-        print(json.dumps(results[-1]), flush=True)
+        for low_latency in [t == "low-latency" for t in transports]:
+            for direction, mode, rate in plan:
+                results.append(measure(args, direction, mode, rate, low_latency))
     text = f"wakeups {run_id} {args.label} ({machine_line()})\n\n" + table(results)
     (out / "wakeups.json").write_text(json.dumps({"run_id": run_id, "label": args.label, "results": results},
                                                  indent=1))

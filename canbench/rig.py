@@ -136,6 +136,12 @@ class Hub:
 LOW_LATENCY_ROUTER = ("--cfg", "transport/unicast/lowlatency:true", "--cfg", "transport/unicast/qos/enabled:false")
 
 
+def transport_args(low_latency: bool) -> tuple[tuple[str, ...], list[str]]:
+    """(zenohd's arguments, zenoh-node's) for the Zenoh transport a run uses; the universal one adds
+    none, so a bridge built before --low-latency existed still runs."""
+    return (LOW_LATENCY_ROUTER, ["--low-latency", "1"]) if low_latency else ((), [])
+
+
 class Router:
     """zenohd on a free loopback port; multicast scouting off (network safety)."""
 

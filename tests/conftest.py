@@ -162,8 +162,6 @@ BRIDGE = Path(os.environ.get("ZN_BRIDGE", REPO / "build" / "firmware" / "zenoh-n
 class Router(rig.Router):
     """zenohd on a loopback port of the test's directory (skips where there is no zenohd)."""
 
-    args: tuple[str, ...] = ()  # what the test's fixture started it with
-
     def __init__(self, workdir: Path):
         binary = rig.find_zenohd()
         if not binary:
@@ -225,10 +223,9 @@ LOW_LATENCY_ROUTER = rig.LOW_LATENCY_ROUTER
 
 @pytest.fixture
 def router(bus, request):
-    """zenohd for the test; an indirect parameter gives it extra arguments (kept as .args)."""
+    """zenohd for the test; an indirect parameter gives it extra arguments."""
     r = Router(bus.workdir)
-    r.args = tuple(getattr(request, "param", ()))
-    r.start(*r.args)
+    r.start(*getattr(request, "param", ()))
     yield r
     r.stop()
     if r.log.exists():

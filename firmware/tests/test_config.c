@@ -10,7 +10,8 @@
 static void clear_env(void)
 {
 	const char *vars[] = { "ZENOH_NODE_ENABLED", "ZENOH_ROUTER_ADDRESS", "ZENOH_NODE_MODE", "ZENOH_PUBLISH_PERIOD_MS",
-			       "ZENOH_NODE_CAN", "ZENOH_KEY_PREFIX", "ZENOH_RX_CONGESTION", "ZENOH_NODE_ALLOW_IDS" };
+			       "ZENOH_NODE_CAN", "ZENOH_KEY_PREFIX", "ZENOH_RX_CONGESTION", "ZENOH_NODE_ALLOW_IDS",
+			       "ZENOH_LOW_LATENCY" };
 	for (size_t i = 0; i < sizeof(vars) / sizeof(vars[0]); i++)
 		unsetenv(vars[i]);
 }

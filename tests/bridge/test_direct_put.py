@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import signal
 import time
+from pathlib import Path
 
 import pytest
 from conftest import wait_for
@@ -22,6 +23,35 @@ FREEZE_S = 3.0  # the router stops once the reader puts, for 3 s (well inside Ze
 AFTER = 100  # frames once the router runs again
 MAX_BACKLOG = 1000  # frames: 0.2 s of the load unread (the stall is seen within about 20 ms)
 SNDBUF = 4096  # bytes, the kernel's floor: the puts block once Zenoh's queue and the router's socket are full
+
+
+def small_send_buffer(tmp_path) -> Path:
+    """A Zenoh config giving the bridge's link the smallest TCP send buffer."""
+    config = tmp_path / "zenoh.json5"
+    config.write_text(f"{{transport: {{link: {{tcp: {{so_sndbuf: {SNDBUF}}}}}}}}}\n")
+    return config
+
+
+def wait_accounted(bridge, session, total: int) -> dict:
+    """The bus's stats once every frame read from CAN is published or counted as dropped."""
+    seen: list[dict] = []
+
+    def accounted():
+        seen.append(bridge.stats(session)["buses"][0])
+        s = seen[-1]
+        return s if s["published_frames"] + s["rx_queue_drops"] == s["can_rx_frames"] == total else None
+    try:
+        return wait_for(accounted, "the bridge to account for every frame", timeout=30)
+    except TimeoutError:
+        raise AssertionError(f"last stats: {seen[-1] if seen else None}") from None
+
+
+def check_published_in_order(rx, stats: dict) -> None:
+    """What was published arrived in order, each frame once, with gaps only where drops were counted."""
+    got = rx.wait_frames(stats["published_frames"])
+    seqs = [seq for _, seq, _ in got]
+    assert seqs == sorted(set(seqs)) and len(seqs) == stats["published_frames"], "out of order or twice"
+    assert seqs[-1] + 1 - len(seqs) <= stats["rx_queue_drops"]
 
 
 def reader_putting(bridge, session) -> None:
@@ -46,9 +76,7 @@ def stalled_for_good(bridge) -> bool:
 @pytest.mark.parametrize("period", ["0", "10"], ids=["immediate", "batching"])
 def test_a_frozen_router_never_stops_the_can_side_and_order_is_kept(bus, bridge, router, session, tmp_path, period):
     rx = Collector(session, "vehicle/can/rx")
-    config = tmp_path / "zenoh.json5"
-    config.write_text(f"{{transport: {{link: {{tcp: {{so_sndbuf: {SNDBUF}}}}}}}}}\n")
-    bridge.start("--zenoh-config", str(config), "--can", "vcan0", "--publish-period-ms", period)
+    bridge.start("--zenoh-config", str(small_send_buffer(tmp_path)), "--can", "vcan0", "--publish-period-ms", period)
     bridge.wait_ready(session)
     load = bus.popen(["cangen", "vcan0", "-I", "i", "-L", "8", "-D", "i", "-g", GAP_MS, "-n", str(FRAMES)])
     assert router.proc is not None
@@ -76,16 +104,7 @@ def test_a_frozen_router_never_stops_the_can_side_and_order_is_kept(bus, bridge,
     finally:
         router.proc.send_signal(signal.SIGCONT)
     assert load.wait(timeout=60) == 0, load.stderr.read() if load.stderr else ""
-    seen: list[dict] = []
-
-    def accounted():
-        seen.append(bridge.stats(session)["buses"][0])
-        s = seen[-1]
-        return s if s["published_frames"] + s["rx_queue_drops"] == s["can_rx_frames"] == FRAMES else None
-    try:
-        stats = wait_for(accounted, "the bridge to account for every frame", timeout=30)
-    except TimeoutError:
-        raise AssertionError(f"last stats: {seen[-1] if seen else None}") from None
+    stats = wait_accounted(bridge, session, FRAMES)
     # the reader, or the publisher in its place, kept reading: a reader blocked in a put leaves
     # the hub holding thousands (4746 in a run without the rescue), a kernel socket drops them
     assert backlog <= MAX_BACKLOG, f"the hub held up to {backlog} frames for the bridge during the freeze"
@@ -93,10 +112,7 @@ def test_a_frozen_router_never_stops_the_can_side_and_order_is_kept(bus, bridge,
     if bus.mode == "userspace":  # nothing vanished before the bridge read it
         bridge_client = next(c for c in bus.stats()["clients"] if c["pid"] == bridge.proc.pid)
         assert bridge_client["rx_drops"] == 0, bridge_client
-    got = rx.wait_frames(stats["published_frames"])
-    seqs = [seq for _, seq, _ in got]
-    assert seqs == sorted(set(seqs)) and len(seqs) == stats["published_frames"], "out of order or twice"
-    assert seqs[-1] + 1 - len(seqs) <= stats["rx_queue_drops"]
+    check_published_in_order(rx, stats)
     assert stalled(bridge)
     # the session is healthy again: frames flow again (in immediate mode the reader puts itself again)
     bus.run(["cangen", "vcan0", "-I", "7AB", "-L", "1", "-g", "1", "-n", str(AFTER)], timeout=60)
@@ -112,9 +128,7 @@ def test_sigterm_while_a_put_is_stalled_exits_cleanly(bus, bridge, router, sessi
     for the stuck put any more, the put is waited for, and the bridge exits 0 once the router runs
     again. Immediate mode says when it stopped reading for the put (a log line)."""
     Collector(session, "vehicle/can/rx")  # a subscriber: without one the bridge's puts never leave it
-    config = tmp_path / "zenoh.json5"
-    config.write_text(f"{{transport: {{link: {{tcp: {{so_sndbuf: {SNDBUF}}}}}}}}}\n")
-    bridge.start("--zenoh-config", str(config), "--can", "vcan0", "--publish-period-ms", period)
+    bridge.start("--zenoh-config", str(small_send_buffer(tmp_path)), "--can", "vcan0", "--publish-period-ms", period)
     bridge.wait_ready(session)
     load = bus.popen(["cangen", "vcan0", "-I", "i", "-L", "8", "-D", "i", "-g", GAP_MS, "-n", str(FRAMES)])
     assert router.proc is not None and bridge.proc is not None

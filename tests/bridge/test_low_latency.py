@@ -15,7 +15,9 @@ from pathlib import Path
 import pytest
 from conftest import LOW_LATENCY_ROUTER, wait_for
 from test_bridge_host import Collector
+from test_direct_put import HOLD_S, MAX_BACKLOG, SNDBUF, check_published_in_order, small_send_buffer, wait_accounted
 
+from bench.common import ctx_switches
 from canbench import wire
 
 FRAMES = 600  # CAN -> Zenoh, paced 1 ms apart by cangen
@@ -24,16 +26,7 @@ COMMANDS = 200  # Zenoh -> CAN, one frame each
 
 def transmit_switches(pid: int) -> int:
     """Context switches so far of Zenoh's transmit threads (its TX runtime names them tx-N)."""
-    total = 0
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            if not (task / "comm").read_text().startswith("tx-"):
-                continue
-            total += sum(int(line.split()[1]) for line in (task / "status").read_text().splitlines()
-                         if line.startswith(("voluntary_ctxt_switches:", "nonvoluntary_ctxt_switches:")))
-        except OSError:  # a thread that ended meanwhile
-            pass
-    return total
+    return sum(n for name, n in ctx_switches(pid).items() if name.startswith("tx-"))
 
 
 def forward_both_ways(bus, bridge, session) -> int:
@@ -78,12 +71,9 @@ def test_what_the_transport_cannot_honour_is_refused(bus, bridge, args, message)
 
 
 LOAD, GAP_MS = 20_000, "0.2"  # paced by cangen: about 5000 frames/s, 4 s of load
-SNDBUF = 4096  # the bridge's TCP send buffer, the kernel's floor
-ROUTER_RCVBUF = 4096  # the router's receive buffer: a frozen router's link fills within a second
-MAX_BACKLOG = 1000  # frames the hub may hold for the bridge during the freeze (0.2 s of the load)
+ROUTER_RCVBUF = 4096  # the router's receive buffer too: a frozen router's link fills within a second
 FULL_S = 5.0  # the link must fill within this, well inside Zenoh's 10 s lease (it fills in a fraction of a second;
 # a freeze beyond the lease closes every client's link, the subscriber's too, and loses what it held)
-HOLD_S = 1.0  # the freeze goes on this long once the link is full
 
 
 def link_send_queue(pid: int, port: int) -> int:
@@ -127,9 +117,8 @@ FROZEN = pytest.mark.parametrize(
 
 def start_loaded(bus, bridge, session, tmp_path, period: str):
     """The bridge on the low-latency transport with a small send buffer, frames flowing."""
-    config = tmp_path / "zenoh.json5"
-    config.write_text(f"{{transport: {{link: {{tcp: {{so_sndbuf: {SNDBUF}}}}}}}}}\n")
-    bridge.start("--zenoh-config", str(config), "--can", "vcan0", "--publish-period-ms", period, "--low-latency", "1")
+    bridge.start("--zenoh-config", str(small_send_buffer(tmp_path)), "--can", "vcan0", "--publish-period-ms", period,
+                 "--low-latency", "1")
     bridge.wait_ready(session)
     load = bus.popen(["cangen", "vcan0", "-I", "i", "-L", "8", "-D", "i", "-g", GAP_MS, "-n", str(LOAD)])
     wait_for(lambda: bridge.stats(session)["buses"][0]["published_frames"] > 0, "the first frames published")
@@ -150,14 +139,9 @@ def test_a_frozen_router_blocks_the_puts_in_the_link_not_the_can_side(bus, bridg
     finally:
         router.proc.send_signal(signal.SIGCONT)
     assert load.wait(timeout=60) == 0
-    stats = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and
-                     s["published_frames"] + s["rx_queue_drops"] == s["can_rx_frames"] == LOAD and s,
-                     "the bridge to account for every frame")
+    stats = wait_accounted(bridge, session, LOAD)
     assert max(backlog, default=0) <= MAX_BACKLOG, f"the hub held up to {max(backlog)} frames for the bridge"
-    got = rx.wait_frames(stats["published_frames"])
-    seqs = [seq for _, seq, _ in got]
-    assert seqs == sorted(set(seqs)) and len(seqs) == stats["published_frames"], "out of order or twice"
-    assert seqs[-1] + 1 - len(seqs) <= stats["rx_queue_drops"]
+    check_published_in_order(rx, stats)
 
 
 @FROZEN

@@ -26,7 +26,8 @@ typedef struct {
 	size_t rx_message_max;	 /* largest message reassembled from fragments (bytes); larger ones are
 				    dropped by the port, never buffered whole. 0 = the port's default */
 	int low_latency;	 /* 1 = Zenoh's low-latency transport (no QoS: negotiated, used when the
-				    router agrees; a port without it refuses it as a configuration error) */
+				    router agrees); a port without such a transport (the planned ESP32
+				    zenoh-pico one) must refuse it as a configuration error */
 } zn_session_config_t;
 
 /* zn_open's result when the configuration cannot work (invalid, or a file it

@@ -133,7 +133,10 @@ fn main() {
         }
     }
     let count = count * keys;
+    // paced: the last sample carries the frames due up to the end of its interval, so the load
+    // covers at least samples / sample_rate (one interval more than the last put's time)
     let elapsed = start.elapsed().as_secs_f64();
+    let elapsed = if rate == 0 { elapsed } else { elapsed.max(samples as f64 / sample_rate) };
     println!("{count} frames in {elapsed:.3} s ({samples} samples)");
     drop(publishers);
     let _ = session.close().wait();

@@ -14,6 +14,8 @@ static void copy_str(char *dst, size_t cap, const char *src)
 	snprintf(dst, cap, "%s", src ? src : "");
 }
 
+#define RX_PRIORITY_DEFAULT 5 /* Zenoh's data priority */
+
 void zn_node_default_config(zn_node_config_t *cfg)
 {
 	memset(cfg, 0, sizeof(*cfg));
@@ -34,7 +36,7 @@ void zn_node_default_config(zn_node_config_t *cfg)
 	 * queue bounds memory and counts what it cannot keep */
 	/* not express: Zenoh may then put several samples in one write under load. Measured
 	 * (docs/benchmark.md): 4x the sustained rate at a third of the CPU per frame, same latency. */
-	cfg->rx_qos = (zn_qos_t){ .priority = 5, .congestion = ZN_CONGESTION_BLOCK, .express = 0 };
+	cfg->rx_qos = (zn_qos_t){ .priority = RX_PRIORITY_DEFAULT, .congestion = ZN_CONGESTION_BLOCK, .express = 0 };
 #ifdef CONFIG_ZENOH_RX_QOS
 	copy_str(cfg->rx_qos_table, sizeof(cfg->rx_qos_table), CONFIG_ZENOH_RX_QOS);
 #endif
@@ -179,7 +181,7 @@ esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t er
 		return ESP_ERR_INVALID_ARG;
 	/* the low-latency transport writes every sample at once, reliably, with no priorities and no
 	 * compression: a setting it cannot honour is refused, not silently ignored */
-	if (cfg->low_latency && (cfg->rx_qos_table[0] || cfg->rx_qos.priority != 5 ||
+	if (cfg->low_latency && (cfg->rx_qos_table[0] || cfg->rx_qos.priority != RX_PRIORITY_DEFAULT ||
 				 cfg->rx_qos.congestion != ZN_CONGESTION_BLOCK || cfg->rx_qos.best_effort))
 		BAD("low latency: Zenoh's low-latency transport has no QoS; leave the rx QoS table, priority "
 		    "and congestion control at their defaults");
