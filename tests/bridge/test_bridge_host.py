@@ -10,7 +10,7 @@ import threading
 import time
 
 import pytest
-from conftest import wait_for, zenoh_session
+from conftest import READY_TIMEOUT_S, wait_for, zenoh_session
 
 from canbench import wire
 
@@ -56,6 +56,20 @@ class Collector:
     def wait_frames(self, count: int) -> list[tuple[wire.Frame, int, int]]:
         wait_for(lambda: len(self.frames()) >= count, f"{count} frames on Zenoh", timeout=WAIT_S)
         return self.frames()
+
+
+def wait_accounted(bridge, session, total: int, timeout: float = READY_TIMEOUT_S) -> dict:
+    """The bus's stats once every frame read from CAN is published or counted as dropped."""
+    seen: list[dict] = []
+
+    def accounted():
+        seen.append(bridge.stats(session)["buses"][0])
+        s = seen[-1]
+        return s if s["published_frames"] + s["rx_queue_drops"] == s["can_rx_frames"] == total else None
+    try:
+        return wait_for(accounted, "the bridge to account for every frame", timeout=timeout)
+    except TimeoutError:
+        raise AssertionError(f"last stats: {seen[-1] if seen else None}") from None
 
 
 def start_candump(bus, path, frames: int | None = None):
@@ -249,16 +263,7 @@ def test_flood_above_forwarding_rate_drops_counted_memory_bounded(bus, bridge, s
     total = 20_000
     bus.run(["cangen", "vcan0", "-I", "200", "-L", "8", "-D", "i", "-g", "0", "-n", str(total), "-p", "100"],
             timeout=60)
-    seen: list[dict] = []
-
-    def accounted():
-        seen.append(bridge.stats(session)["buses"][0])
-        s = seen[-1]
-        return s if s["published_frames"] + s["rx_queue_drops"] == s["can_rx_frames"] == total else None
-    try:
-        stats = wait_for(accounted, "the bridge to account for every frame")
-    except TimeoutError:
-        raise AssertionError(f"last stats: {seen[-1]}") from None
+    stats = wait_accounted(bridge, session, total)
     assert stats["rx_queue_drops"] > 0, stats  # the flood really exceeded the queue
     if bus.mode == "userspace":  # and nothing vanished before the bridge read it
         bridge_client = next(c for c in bus.stats()["clients"] if c["pid"] == bridge.proc.pid)
