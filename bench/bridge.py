@@ -57,6 +57,7 @@ from . import wakeups
 from .common import (
     REPO,
     add_tool_arguments,
+    cpu_of_run,
     cpu_split_s,
     ctx_switches,
     machine_line,
@@ -175,8 +176,9 @@ class Bench(Rig):
                 sys.exit(f"zn-flood exited {gen.returncode}")
             offered_fps = load_rate(gen.stdout.read(), offered)
             counted = json.loads(reader.communicate(timeout=SETTLE_S + 5)[0])  # stops after 1 s idle
-        cpu = (sum(run_ns(b.pid) for b in bridges) - run0) / 1e9
+        run_s = (sum(run_ns(b.pid) for b in bridges) - run0) / 1e9
         user_ticks, system_ticks = (sum(cpu_split_s(b.pid)[i] for b in bridges) - ticks0[i] for i in (0, 1))
+        cpu, cpu_from_ticks = cpu_of_run(run_s, user_ticks + system_ticks)
         switches = sum(sum(ctx_switches(b.pid).values()) for b in bridges) - switches0
         self.procs.close()
         session.close()
@@ -193,7 +195,7 @@ class Bench(Rig):
         return {"direction": direction, "system": system, "buses": buses, "offered": offered,
                 "delivered_fps": delivered, "offered_fps": offered_fps, "instances": len(bridges),
                 "received": received, "lossless": received == offered and in_order,
-                "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2),
+                "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2), "cpu_from_ticks": cpu_from_ticks,
                 "switches_per_frame": round(switches / max(received, 1), 3),
                 "kernel_share": round(system_ticks / (user_ticks + system_ticks), 2) if user_ticks + system_ticks
                 else None, "peak_rss_mib": round(peak_rss, 1)}
@@ -226,8 +228,8 @@ def table(results: list[dict]) -> str:
                                             SYSTEMS.index(r["system"]), r["buses"])):
         rows.append(f"| {r.get('direction', DIRECTIONS[0])} | {r['system']} | {r['buses']} | {r['instances']} | "
                     f"{r['offered_fps']} | {r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | "
-                    f"{r['delivered_fps']} | {r['cpu_us_per_frame']} | {r['kernel_share']} | "
-                    f"{r.get('switches_per_frame', '-')} | {r['peak_rss_mib']} |")
+                    f"{r['delivered_fps']} | {r['cpu_us_per_frame']}{' (ticks)' if r.get('cpu_from_ticks') else ''} | "
+                    f"{r['kernel_share']} | {r.get('switches_per_frame', '-')} | {r['peak_rss_mib']} |")
     for direction in DIRECTIONS:
         runs = [r for r in results if r.get("direction", DIRECTIONS[0]) == direction]
         if not runs:

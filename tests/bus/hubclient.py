@@ -13,21 +13,35 @@ from conftest import wait_for
 
 IFINDEX_VCAN0 = 10000
 MSG_ACK, MSG_HEADER_MODE = 1, 2
-MSG_BIND, MSG_SETOPT, MSG_FRAME, MSG_IFLIST, MSG_BARRIER, MSG_STATS, MSG_RESET_STATS, MSG_GETOPT = range(10, 18)
+(MSG_BIND, MSG_SETOPT, MSG_FRAME, MSG_IFLIST, MSG_BARRIER, MSG_STATS, MSG_RESET_STATS, MSG_GETOPT,
+ MSG_FRAMES) = range(10, 19)
 COOKIE_MAX = 64
 CTL = struct.Struct("=Ii")          # ucan_ctl
 SOCKOPTS = struct.Struct("=IIIIBBBBBBBBI")  # ucan_sockopts without its filters
 
 
 def sockopts(ifindex: int = IFINDEX_VCAN0, rcvbuf: int = 0, recv_own: bool = False, loopback: bool = True,
-             timestamps: int = 0, kind: int = MSG_BIND) -> bytes:
+             timestamps: int = 0, kind: int = MSG_BIND, fd_frames: bool = False) -> bytes:
     """BIND/SETOPT with the kernel's default filter {0, 0} (everything)."""
-    return SOCKOPTS.pack(kind, ifindex, 0, rcvbuf, int(loopback), int(recv_own), 0, 0, 0, 0, timestamps, 0,
-                         1) + struct.pack("=II", 0, 0)
+    return SOCKOPTS.pack(kind, ifindex, 0, rcvbuf, int(loopback), int(recv_own), int(fd_frames), 0, 0, 0,
+                         timestamps, 0, 1) + struct.pack("=II", 0, 0)
+
+
+def can_frame(can_id: int, data: bytes = b"") -> bytes:
+    """struct can_frame (16 bytes), or struct canfd_frame (72) for more than 8 data bytes."""
+    if len(data) > 8:
+        return struct.pack("=IBBxx64s", can_id, len(data), 0, data)
+    return struct.pack("=IB3x8s", can_id, len(data), data)
 
 
 def frame(can_id: int, data: bytes = b"", ifindex: int = IFINDEX_VCAN0) -> bytes:
-    return struct.pack("=II", MSG_FRAME, ifindex) + struct.pack("=IB3x8s", can_id, len(data), data)
+    return struct.pack("=II", MSG_FRAME, ifindex) + can_frame(can_id, data)
+
+
+def frames(records: list[tuple[int, bytes]], count: int | None = None) -> bytes:
+    """UCAN_MSG_FRAMES: (ifindex, struct can_frame or canfd_frame bytes) records."""
+    body = b"".join(struct.pack("=II", ifindex, len(raw)) + raw for ifindex, raw in records)
+    return struct.pack("=II", MSG_FRAMES, len(records) if count is None else count) + body
 
 
 def barrier(cookie: str, kind: int = MSG_BARRIER) -> bytes:

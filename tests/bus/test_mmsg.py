@@ -10,11 +10,14 @@ import re
 import shutil
 
 import pytest
+from conftest import require_userspace
 
 pytestmark = pytest.mark.bus
 WAIT_S = 30
-BURST = 160
-HUB_MMSG_CHUNK = 64  # ucan/src/preload.c MMSG_CHUNK: hub messages per real syscall
+BURST = 400
+HUB_MMSG_CHUNK = 64  # ucan/src/preload.c MMSG_CHUNK: hub messages per real recvmmsg
+HUB_BATCH_FRAMES = (8192 - 8) // (8 + 16)  # classic frames in one UCAN_MSG_FRAMES (UCAN_MSG_MAX)
+PACED_BURST = 40
 
 
 def probe_lines(bus, *args: str) -> list[str]:
@@ -49,16 +52,38 @@ def syscalls_in_burst(trace: str) -> dict[str, int]:
     return counts
 
 
-@pytest.mark.skipif(shutil.which("strace") is None, reason="needs strace to count syscalls")
-def test_a_burst_takes_a_syscall_per_chunk_not_per_frame(bus, tmp_path):
-    """160 frames out with one sendmmsg and back with one blocking recvmmsg: the kernel takes
-    one syscall each; over the hub at most one real syscall per 64 frames each way. Before,
-    the preload looped: 160 sendto and 160 recvmsg."""
+def burst_syscalls(bus, tmp_path, frames: int) -> tuple[int, int]:
+    """Syscalls (sends, receives) of the probe's burst of frames out with one sendmmsg and
+    back with one blocking recvmmsg."""
     trace = tmp_path / "strace.txt"
     bus.run(["strace", "-f", "-o", str(trace), "-e", "trace=%network,read,write,readv,writev",
-             bus.tool("mmsg_probe"), "burst", "vcan0", str(BURST)], timeout=WAIT_S)
+             bus.tool("mmsg_probe"), "burst", "vcan0", str(frames)], timeout=WAIT_S)
     counts = syscalls_in_burst(trace.read_text())
-    chunks = math.ceil(BURST / HUB_MMSG_CHUNK)
     sends = sum(counts.get(name, 0) for name in ("sendmmsg", "sendmsg", "sendto", "write", "writev"))
     receives = sum(counts.get(name, 0) for name in ("recvmmsg", "recvmsg", "recvfrom", "read", "readv"))
-    assert sends <= chunks and receives <= chunks, counts
+    return sends, receives
+
+
+needs_strace = pytest.mark.skipif(shutil.which("strace") is None, reason="needs strace to count syscalls")
+
+
+@needs_strace
+def test_a_burst_takes_a_syscall_per_chunk_not_per_frame(bus, tmp_path):
+    """400 frames out with one sendmmsg and back with one blocking recvmmsg: the kernel takes
+    one syscall each; over the hub one send per 341 frames (each a single hub message, so
+    the kernel moves one message, not one per frame) and one recvmmsg per 64. Before, the
+    preload looped (400 sendto and 400 recvmsg), then sent one message per frame."""
+    sends, receives = burst_syscalls(bus, tmp_path, BURST)
+    assert sends <= math.ceil(BURST / HUB_BATCH_FRAMES) and receives <= math.ceil(BURST / HUB_MMSG_CHUNK), (
+        sends, receives)
+
+
+@needs_strace
+def test_a_burst_on_a_paced_interface_goes_frame_by_frame(bus, tmp_path):
+    """On a bitrate= interface every frame waits for the wire, and one hub message per frame
+    keeps the backpressure a sender feels (messages in flight to the hub) what it was."""
+    require_userspace(bus, "bitrate emulation")
+    bus.stop_hub()
+    bus.start_hub("vcan0:bitrate=1000000")
+    sends, _ = burst_syscalls(bus, tmp_path, PACED_BURST)
+    assert sends == PACED_BURST, sends

@@ -163,3 +163,16 @@ def test_bridge_keys_and_sustained_rate():
                                                                                "vehicle/can/vcan1/tx"]
     assert bench_bridge.sustained_fps(9000, T0, T0 + 500_000_000) == 18000
     assert bench_bridge.sustained_fps(0, T0, T0) is None
+
+
+def test_cpu_of_a_run_falls_back_to_ticks_when_a_thread_ended_in_it():
+    """schedstat sums the threads alive when it is read: a thread that ended mid-run takes
+    its CPU with it, the process's tick total keeps it."""
+    from bench.common import cpu_of_run
+    assert cpu_of_run(1.000, 1.01) == (1.000, False)  # the ticks' rounding
+    assert cpu_of_run(0.400, 0.390) == (0.400, False)
+    assert cpu_of_run(0.400, 0.600) == (0.600, True)
+    row = {"direction": "can-to-zenoh", "system": "zenoh-node", "buses": 1, "instances": 1, "offered_fps": 9000,
+           "received": 100, "offered": 100, "lossless": True, "delivered_fps": 9000, "cpu_us_per_frame": 6.0,
+           "cpu_from_ticks": True, "kernel_share": 0.8, "switches_per_frame": 1.0, "peak_rss_mib": 19.0}
+    assert "| 6.0 (ticks) |" in bench_bridge.table([row])

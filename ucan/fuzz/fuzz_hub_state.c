@@ -33,6 +33,7 @@
  *        7 more, by a%8, with following bytes (x, y):
  *          0 query kind a/8 (STATS IFLIST RESET_STATS GETOPT) from c(x) about c(y)
  *          1 read c(x) (a/8 == 0: every client)     2 flood 8*(1+y%32) frames from c(x)
+ *            (a/8 odd: in UCAN_MSG_FRAMES batches of up to 64, both interfaces, some FD)
  *          3 setopt c(x), bind flags y               4 raw: c(x), length y, y bytes
  *          5 open 1+a/8 clients with bind flags x    6 frame from c(x): id y, len byte z
  *          7 barrier from c(x) naming c(y)
@@ -182,6 +183,31 @@ static void send_frame(int c, uint8_t id, uint8_t len)
 		conns.shape |= FRAME_SENT;
 }
 
+/* n frames in batches of up to 64: ids 0..n-1, the interface by id as send_frame,
+ * every 16th an FD frame */
+static void send_batches(int c, unsigned n)
+{
+	static uint8_t msg[sizeof(struct ucan_txbatch) + 64 * (sizeof(struct ucan_txrec) + CANFD_MTU)];
+	for (unsigned first = 0; first < n; first += 64) {
+		unsigned count = n - first < 64 ? n - first : 64;
+		struct ucan_txbatch head = { .type = UCAN_MSG_FRAMES, .count = count };
+		size_t at = sizeof(head);
+		memcpy(msg, &head, sizeof(head));
+		for (unsigned i = first; i < first + count; i++) {
+			uint8_t id = (uint8_t)i;
+			int fd_frame = i % 16 == 15 && id < 128; /* vcan1 is classic */
+			struct canfd_frame f = { .can_id = id, .len = fd_frame ? 64 : 8 };
+			struct ucan_txrec rec = { .ifindex = UCAN_IFINDEX_BASE + (id >> 7), .size = fd_frame ? CANFD_MTU : CAN_MTU };
+			memcpy(msg + at, &rec, sizeof(rec));
+			memcpy(msg + at + sizeof(rec), &f, rec.size);
+			at += sizeof(rec) + rec.size;
+		}
+		send_msg(c, msg, at);
+	}
+	if (c >= 0)
+		conns.shape |= FRAME_SENT;
+}
+
 static void send_barrier(int c, int t)
 {
 	struct ucan_barrier b = { .type = UCAN_MSG_BARRIER };
@@ -240,8 +266,11 @@ static void do_more(struct input *in, unsigned a)
 	case 2: {
 		int c = conn_of(next(in));
 		unsigned n = 8 * (1 + next(in) % 32);
-		for (unsigned i = 0; i < n; i++)
-			send_frame(c, (uint8_t)i, 8);
+		if (arg & 1)
+			send_batches(c, n);
+		else
+			for (unsigned i = 0; i < n; i++)
+				send_frame(c, (uint8_t)i, 8);
 		break;
 	}
 	case 3: {

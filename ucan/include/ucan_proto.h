@@ -12,7 +12,8 @@
  *   40 / 96 bytes    ucan_rxhdr + frame: sockets bound to *any*, receiving
  *                    their own messages or asking for timestamps need the source
  *                    interface, the own flag and the frame's one bus stamp
- * Client -> hub messages all start with a uint32_t type.
+ * Client -> hub messages all start with a uint32_t type; none is longer than
+ * UCAN_MSG_MAX.
  */
 #ifndef UCAN_PROTO_H
 #define UCAN_PROTO_H
@@ -39,6 +40,8 @@
 #define UCAN_CTL_RESERVE 64
 /* SO_RCVBUF is honoured up to this (bench captures ask 64 MiB: candump -r) */
 #define UCAN_MAX_RCVBUF (64u << 20)
+/* The longest client -> hub message (a BIND with 512 filters is 4120 bytes) */
+#define UCAN_MSG_MAX 8192
 
 enum ucan_msg_type {
 	UCAN_MSG_ACK = 1,	  /* hub -> client: result of BIND / query */
@@ -51,6 +54,7 @@ enum ucan_msg_type {
 	UCAN_MSG_STATS = 15,	  /* query -> ucan_stats */
 	UCAN_MSG_RESET_STATS = 16,
 	UCAN_MSG_GETOPT = 17,	  /* ucan_barrier-shaped query -> ucan_sockopts of that client */
+	UCAN_MSG_FRAMES = 18,	  /* client -> hub: ucan_txbatch + frames, the burst of one sendmmsg */
 };
 
 struct ucan_ctl {
@@ -77,6 +81,22 @@ struct ucan_txhdr {
 	uint32_t ifindex;
 };
 static_assert(sizeof(struct ucan_txhdr) == 8, "tx header size");
+
+/* Several frames in one message, so a sendmmsg's burst costs the sender one
+ * message rather than one per frame (the kernel's sendmmsg is one syscall).
+ * count records follow the header back to back, each a ucan_txrec and a frame
+ * of rec.size bytes (CAN_MTU or CANFD_MTU). The hub checks the whole message
+ * before it transmits any of it, then transmits the frames in order, as if
+ * they had come as count UCAN_MSG_FRAME messages. */
+struct ucan_txbatch {
+	uint32_t type; /* UCAN_MSG_FRAMES */
+	uint32_t count;
+};
+struct ucan_txrec {
+	uint32_t ifindex;
+	uint32_t size;
+};
+static_assert(sizeof(struct ucan_txbatch) == 8 && sizeof(struct ucan_txrec) == 8, "batch header sizes");
 
 /* Full socket settings, sent at bind and after every change (no deltas). */
 struct ucan_sockopts {

@@ -32,9 +32,8 @@
 #include "ucan_msg.h"
 #include "ucan_proto.h"
 
-#define MSGS_PER_WAKEUP 256	 /* fairness between senders */
+#define FRAMES_PER_WAKEUP 256 /* read from one sender per wakeup (other messages count 1): fairness */
 #define TX_PENDING_SOFT_LIMIT 256 /* bitrate interfaces: pause senders above this */
-#define MAX_MSG 8192		 /* BIND with 512 filters is 4120 bytes */
 #define RECV_BATCH 64		 /* messages read per recvmmsg */
 #define FLUSH_BATCH 64		 /* messages written per sendmmsg */
 #define TAG_LISTEN UINT64_MAX
@@ -59,6 +58,7 @@ struct client {
 	uint32_t queue_cap, queue_head, queue_len, queue_limit;
 	uint64_t tx_frames, rx_frames, rx_bytes, rx_drops;
 	uint32_t arb_epoch;
+	uint32_t frames_per_msg; /* of its last read (batches hold many): sizes the next read to the budget */
 };
 
 struct pending_frame {
@@ -773,7 +773,7 @@ static void handle_stats(uint32_t idx)
 	free(st);
 }
 
-static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused);
+static void drain_client(uint32_t idx, unsigned budget, int even_if_paused);
 static int can_drain_nested(uint32_t idx);
 
 /* Settings of the connection named by a cookie: lets a program that inherited
@@ -808,25 +808,46 @@ static void handle_getopt(uint32_t idx, const uint8_t *msg)
 		client_send_failed(idx, "getopt reply failed");
 }
 
-static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
+/* One frame a client sent (validated): on the wire now, or queued for it. */
+static void transmit_from(uint32_t idx, uint32_t ifindex, const uint8_t *data, size_t size)
+{
+	struct client *c = &hub.clients[idx];
+	struct canfd_frame frame;
+	memset(&frame, 0, sizeof(frame));
+	memcpy(&frame, data, size);
+	/* linux >= 6.0 marks every CAN FD frame it sends (af_can.c can_send) */
+	if (size == CANFD_MTU)
+		frame.flags |= CANFD_FDF;
+	struct iface *ifc = find_iface(ifindex);
+	if (ifc->info.bitrate) {
+		if (queue_for_wire(ifc, idx, &frame, size) < 0)
+			ifc->stats.tx_rejects++;
+	} else {
+		bus_transmit(ifc, idx, c->generation, c->opts.loopback, &frame, size, NULL);
+	}
+}
+
+/* Returns how many frames the message held (1 for any other message): what the
+ * per-wakeup fairness budget counts. */
+static unsigned handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 {
 	struct client *c = &hub.clients[idx];
 	int type = ucan_msg_validate(msg, len, hub.ifinfos, hub.nifs);
 	if (type < 0) {
 		hub.counters.proto_errors++;
 		client_close(idx, ucan_msg_strerror(type));
-		return;
+		return 1;
 	}
 	switch (type) {
 	case UCAN_MSG_BIND:
 		if (c->bound) {
 			hub.counters.proto_errors++;
 			client_close(idx, "second BIND");
-			return;
+			return 1;
 		}
 		apply_sockopts(idx, msg, len);
 		if (hub.clients[idx].fd < 0)
-			return;
+			return 1;
 		c->bound = 1;
 		c->header_mode = needs_header(c);
 		client_send_ctl(idx, UCAN_MSG_ACK, 0);
@@ -834,7 +855,7 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 	case UCAN_MSG_SETOPT:
 		apply_sockopts(idx, msg, len);
 		if (hub.clients[idx].fd < 0)
-			return;
+			return 1;
 		if (c->bound && !c->header_mode && needs_header(c)) {
 			c->header_mode = 1;
 			client_send_ctl(idx, UCAN_MSG_HEADER_MODE, 0);
@@ -842,22 +863,24 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 		break;
 	case UCAN_MSG_FRAME: {
 		struct ucan_txhdr hdr;
-		struct canfd_frame frame;
-		size_t size = len - sizeof(hdr);
 		memcpy(&hdr, msg, sizeof(hdr));
-		memset(&frame, 0, sizeof(frame));
-		memcpy(&frame, msg + sizeof(hdr), size);
-		/* linux >= 6.0 marks every CAN FD frame it sends (af_can.c can_send) */
-		if (size == CANFD_MTU)
-			frame.flags |= CANFD_FDF;
-		struct iface *ifc = find_iface(hdr.ifindex);
-		if (ifc->info.bitrate) {
-			if (queue_for_wire(ifc, idx, &frame, size) < 0)
-				ifc->stats.tx_rejects++;
-		} else {
-			bus_transmit(ifc, idx, c->generation, c->opts.loopback, &frame, size, NULL);
-		}
+		transmit_from(idx, hdr.ifindex, msg + sizeof(hdr), len - sizeof(hdr));
 		break;
+	}
+	case UCAN_MSG_FRAMES: {
+		struct ucan_txbatch batch;
+		memcpy(&batch, msg, sizeof(batch));
+		size_t at = sizeof(batch);
+		uint32_t generation = c->generation;
+		/* a delivery that closes the sender (its own queue overrun) ends the batch */
+		for (uint32_t i = 0; i < batch.count && c->fd >= 0 && c->generation == generation; i++) {
+			struct ucan_txrec rec;
+			memcpy(&rec, msg + at, sizeof(rec));
+			at += sizeof(rec);
+			transmit_from(idx, rec.ifindex, msg + at, rec.size);
+			at += rec.size;
+		}
+		return batch.count;
 	}
 	case UCAN_MSG_IFLIST: {
 		struct ucan_iflist list = { .type = UCAN_MSG_IFLIST, .count = hub.nifs };
@@ -896,6 +919,7 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 		client_send_ctl(idx, UCAN_MSG_ACK, 0);
 		break;
 	}
+	return 1;
 }
 
 /* A BARRIER (read at depth 0) drains the client it names (depth 1) from
@@ -906,18 +930,24 @@ static void handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 #define DRAIN_DEPTH 2
 static unsigned drain_depth;
 
-static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uint8_t (*bufs)[MAX_MSG])
+static void drain_batch(uint32_t idx, unsigned budget, int even_if_paused, uint8_t (*bufs)[UCAN_MSG_MAX])
 {
 	struct mmsghdr msgs[RECV_BATCH];
 	struct iovec iovs[RECV_BATCH];
-	unsigned done = 0, resets = 0;
-	while (done < max_msgs) {
+	uint64_t done = 0; /* frames, or 1 for any other message: a batch counts as what it holds */
+	unsigned resets = 0;
+	while (done < budget) {
 		struct client *c = &hub.clients[idx];
 		if (c->fd < 0 || (c->paused && !even_if_paused))
 			return;
-		unsigned want = max_msgs - done < RECV_BATCH ? max_msgs - done : RECV_BATCH;
+		/* as many messages as the budget's frames need, by the last read's
+		 * frames per message: a sender of batches is read one batch at a time
+		 * once its budget is near, not 64 batches at once */
+		uint64_t per_msg = c->frames_per_msg ? c->frames_per_msg : 1;
+		uint64_t fit = (budget - done + per_msg - 1) / per_msg;
+		unsigned want = fit < RECV_BATCH ? (unsigned)fit : RECV_BATCH;
 		for (unsigned i = 0; i < want; i++) {
-			iovs[i] = (struct iovec){ .iov_base = bufs[i], .iov_len = MAX_MSG };
+			iovs[i] = (struct iovec){ .iov_base = bufs[i], .iov_len = UCAN_MSG_MAX };
 			msgs[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iovs[i], .msg_iovlen = 1 } };
 		}
 		int n = recvmmsg(c->fd, msgs, want, MSG_DONTWAIT, NULL);
@@ -935,6 +965,7 @@ static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uin
 			return;
 		}
 		/* messages already read are handled even if a frame pauses the sender */
+		uint64_t before = done;
 		for (int i = 0; i < n && hub.clients[idx].fd >= 0; i++) {
 			if (msgs[i].msg_len == 0) { /* peer closed after its last message */
 				client_close(idx, NULL);
@@ -945,9 +976,10 @@ static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uin
 				client_close(idx, "message too long");
 				return;
 			}
-			handle_message(idx, bufs[i], msgs[i].msg_len);
+			done += handle_message(idx, bufs[i], msgs[i].msg_len);
 		}
-		done += (unsigned)n;
+		if (hub.clients[idx].fd >= 0)
+			hub.clients[idx].frames_per_msg = (uint32_t)((done - before + (unsigned)n - 1) / (unsigned)n);
 		if ((unsigned)n < want)
 			return; /* drained */
 	}
@@ -955,13 +987,13 @@ static void drain_batch(uint32_t idx, unsigned max_msgs, int even_if_paused, uin
 
 /* even_if_paused: a sender that hung up cannot be slowed down any more; read
  * what it wrote before it went, rather than losing it. */
-static void drain_client(uint32_t idx, unsigned max_msgs, int even_if_paused)
+static void drain_client(uint32_t idx, unsigned budget, int even_if_paused)
 {
-	static uint8_t bufs[DRAIN_DEPTH][RECV_BATCH][MAX_MSG];
+	static uint8_t bufs[DRAIN_DEPTH][RECV_BATCH][UCAN_MSG_MAX];
 	assert(drain_depth < DRAIN_DEPTH);
 	uint32_t generation = hub.clients[idx].generation;
 	hub.clients[idx].draining = 1;
-	drain_batch(idx, max_msgs, even_if_paused, bufs[drain_depth++]);
+	drain_batch(idx, budget, even_if_paused, bufs[drain_depth++]);
 	drain_depth--;
 	if (hub.clients[idx].generation == generation)
 		hub.clients[idx].draining = 0;
@@ -1119,7 +1151,7 @@ int hub_run_once(int timeout_ms)
 			if (ev & EPOLLOUT)
 				client_flush(slot);
 			if (hub.clients[slot].fd >= 0 && (ev & (EPOLLIN | EPOLLHUP | EPOLLERR)))
-				drain_client(slot, MSGS_PER_WAKEUP, !!(ev & (EPOLLHUP | EPOLLERR)));
+				drain_client(slot, FRAMES_PER_WAKEUP, !!(ev & (EPOLLHUP | EPOLLERR)));
 		}
 	}
 	flush_dirty();

@@ -1343,9 +1343,10 @@ PUBLIC ssize_t __recvfrom_chk(int fd, void *buf, size_t len, size_t buflen, int 
 /* ---- sending ---- */
 
 /* Validates one frame the program sends and builds its hub message in msg
- * (ucan_txhdr + frame); returns the frame's size, or -1 with the kernel's errno. */
+ * (ucan_txhdr + frame); returns the frame's size, or -1 with the kernel's errno.
+ * *paced: the interface emulates a wire (bitrate=). */
 static ssize_t tx_build(struct csock *cs, const struct iovec *iov, size_t iovlen, const struct sockaddr *addr,
-			socklen_t addrlen, uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU])
+			socklen_t addrlen, uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU], int *paced)
 {
 	uint32_t ifindex = cs->opts.ifindex;
 	if (addr) {
@@ -1376,6 +1377,7 @@ static ssize_t tx_build(struct csock *cs, const struct iovec *iov, size_t iovlen
 		errno = EINVAL;
 		return -1;
 	}
+	*paced = ifi.bitrate != 0;
 	return (ssize_t)size;
 }
 
@@ -1401,7 +1403,8 @@ static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_
 			const struct sockaddr *addr, socklen_t addrlen)
 {
 	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU];
-	ssize_t size = tx_build(cs, iov, iovlen, addr, addrlen, msg);
+	int paced;
+	ssize_t size = tx_build(cs, iov, iovlen, addr, addrlen, msg, &paced);
 	if (size < 0 || tx_connect(cs, fd) < 0)
 		return -1;
 	ssize_t n = get_send()(fd, msg, sizeof(struct ucan_txhdr) + (size_t)size, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
@@ -1412,46 +1415,79 @@ static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_
 	return size;
 }
 
-/* sendmmsg: up to MMSG_CHUNK frames per real sendmmsg to the hub. As the
- * kernel's: frames go in order; the first that fails (invalid: EINVAL/ENXIO
- * before anything of it is sent; the hub's queue full with MSG_DONTWAIT:
- * ENOBUFS) ends the call, which returns how many went, or -1 if none did. */
+/* sendmmsg: the frames go to the hub as UCAN_MSG_FRAMES messages, as many per
+ * message as UCAN_MSG_MAX holds, one real send each, so a burst costs the
+ * program one syscall and the kernel one message per UCAN_MSG_MAX bytes, as
+ * a kernel sendmmsg costs one syscall. A frame for a bitrate= interface goes
+ * alone, as send() sends it: it waits for the wire anyway, and one message per
+ * frame keeps the backpressure a paced sender feels (frames in flight to the
+ * hub: the unix socket's send buffer in messages) what it was.
+ * As the kernel's: frames go in order; the first that fails (invalid:
+ * EINVAL/ENXIO before anything of it is sent; the hub's socket full with
+ * MSG_DONTWAIT: ENOBUFS) ends the call, which returns how many went, or -1 if
+ * none did. */
+/* One frame, from its record in a batch, as the message send() sends. */
+static ssize_t send_record_alone(int fd, const uint8_t *record, int flags)
+{
+	struct ucan_txrec rec;
+	memcpy(&rec, record, sizeof(rec));
+	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU];
+	struct ucan_txhdr hdr = { .type = UCAN_MSG_FRAME, .ifindex = rec.ifindex };
+	memcpy(msg, &hdr, sizeof(hdr));
+	memcpy(msg + sizeof(hdr), record + sizeof(rec), rec.size);
+	return get_send()(fd, msg, sizeof(hdr) + rec.size, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+}
+
+#define BATCH_FRAMES_MAX ((UCAN_MSG_MAX - sizeof(struct ucan_txbatch)) / (sizeof(struct ucan_txrec) + CAN_MTU))
 static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned vlen, int flags)
 {
 	if (vlen > UIO_MAXIOV)
 		vlen = UIO_MAXIOV;
-	uint8_t msgs[MMSG_CHUNK][sizeof(struct ucan_txhdr) + CANFD_MTU];
-	struct iovec iov[MMSG_CHUNK];
-	struct mmsghdr raw[MMSG_CHUNK];
+	uint8_t batch[UCAN_MSG_MAX];
+	uint8_t one[sizeof(struct ucan_txhdr) + CANFD_MTU];
+	uint8_t sizes[BATCH_FRAMES_MAX];
 	unsigned sent = 0;
 	while (sent < vlen) {
+		size_t used = sizeof(struct ucan_txbatch);
 		unsigned k = 0;
-		int bad = 0;
-		for (; k < MMSG_CHUNK && sent + k < vlen; k++) {
+		int bad = 0, paced = 0;
+		while (sent + k < vlen && used + sizeof(struct ucan_txrec) + CANFD_MTU <= sizeof(batch)) {
 			const struct msghdr *m = &vec[sent + k].msg_hdr;
-			ssize_t size = tx_build(cs, m->msg_iov, m->msg_iovlen, m->msg_name, m->msg_namelen, msgs[k]);
+			ssize_t size = tx_build(cs, m->msg_iov, m->msg_iovlen, m->msg_name, m->msg_namelen, one, &paced);
 			if (size < 0) {
 				bad = errno;
 				break;
 			}
-			iov[k] = (struct iovec){ .iov_base = msgs[k], .iov_len = sizeof(struct ucan_txhdr) + (size_t)size };
-			memset(&raw[k], 0, sizeof(raw[k]));
-			raw[k].msg_hdr.msg_iov = &iov[k];
-			raw[k].msg_hdr.msg_iovlen = 1;
+			if (paced && k > 0)
+				break; /* sent alone, next round */
+			struct ucan_txhdr hdr;
+			memcpy(&hdr, one, sizeof(hdr));
+			struct ucan_txrec rec = { .ifindex = hdr.ifindex, .size = (uint32_t)size };
+			memcpy(batch + used, &rec, sizeof(rec));
+			memcpy(batch + used + sizeof(rec), one + sizeof(hdr), (size_t)size);
+			used += sizeof(rec) + (size_t)size;
+			sizes[k++] = (uint8_t)size;
+			if (paced)
+				break;
 		}
 		if (k) {
 			if (tx_connect(cs, fd) < 0)
 				return sent ? (int)sent : -1;
-			int r = get_sendmmsg()(fd, raw, k, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+			ssize_t r;
+			if (k == 1) {
+				r = send_record_alone(fd, batch + sizeof(struct ucan_txbatch), flags);
+			} else {
+				struct ucan_txbatch head = { .type = UCAN_MSG_FRAMES, .count = k };
+				memcpy(batch, &head, sizeof(head));
+				r = get_send()(fd, batch, used, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+			}
 			if (r < 0) {
 				tx_errno();
 				return sent ? (int)sent : -1;
 			}
-			for (int i = 0; i < r; i++)
-				vec[sent + (unsigned)i].msg_len = (unsigned)(iov[i].iov_len - sizeof(struct ucan_txhdr));
-			sent += (unsigned)r;
-			if ((unsigned)r < k)
-				return (int)sent;
+			for (unsigned i = 0; i < k; i++)
+				vec[sent + i].msg_len = sizes[i];
+			sent += k;
 		}
 		if (bad) {
 			errno = bad;

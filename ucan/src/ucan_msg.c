@@ -29,25 +29,59 @@ static int validate_sockopts(const uint8_t *msg, size_t len, const struct ucan_i
 	return (int)opts.type;
 }
 
-static int validate_frame(const uint8_t *msg, size_t len, const struct ucan_ifinfo *ifs, unsigned nifs)
+/* One frame of size bytes (its sender's buffer length) for interface ifindex. */
+static int validate_one_frame(uint32_t ifindex, const uint8_t *data, size_t size, const struct ucan_ifinfo *ifs,
+			      unsigned nifs)
 {
-	struct ucan_txhdr hdr;
 	struct canfd_frame frame;
-	size_t frame_size = len - sizeof(hdr);
-
-	if (len != sizeof(hdr) + CAN_MTU && len != sizeof(hdr) + CANFD_MTU)
+	if (size != CAN_MTU && size != CANFD_MTU)
 		return UCAN_MSG_ERR_LENGTH;
-	memcpy(&hdr, msg, sizeof(hdr));
-	const struct ucan_ifinfo *ifi = ucan_find_if(ifs, nifs, hdr.ifindex);
+	const struct ucan_ifinfo *ifi = ucan_find_if(ifs, nifs, ifindex);
 	if (!ifi)
 		return UCAN_MSG_ERR_IFINDEX;
 	memset(&frame, 0, sizeof(frame));
-	memcpy(&frame, msg + sizeof(hdr), frame_size);
-	if (frame_size == CAN_MTU && frame.len > CAN_MAX_DLEN)
+	memcpy(&frame, data, size);
+	if (size == CAN_MTU && frame.len > CAN_MAX_DLEN)
 		return UCAN_MSG_ERR_FRAME;
-	if (frame_size == CANFD_MTU && (frame.len > CANFD_MAX_DLEN || ifi->mtu != CANFD_MTU))
+	if (size == CANFD_MTU && (frame.len > CANFD_MAX_DLEN || ifi->mtu != CANFD_MTU))
 		return UCAN_MSG_ERR_FRAME;
-	return UCAN_MSG_FRAME;
+	return UCAN_MSG_OK;
+}
+
+static int validate_frame(const uint8_t *msg, size_t len, const struct ucan_ifinfo *ifs, unsigned nifs)
+{
+	struct ucan_txhdr hdr;
+	if (len < sizeof(hdr))
+		return UCAN_MSG_ERR_LENGTH;
+	memcpy(&hdr, msg, sizeof(hdr));
+	int rc = validate_one_frame(hdr.ifindex, msg + sizeof(hdr), len - sizeof(hdr), ifs, nifs);
+	return rc < 0 ? rc : UCAN_MSG_FRAME;
+}
+
+/* Every record is checked, and the records must fill the message exactly. */
+static int validate_frames(const uint8_t *msg, size_t len, const struct ucan_ifinfo *ifs, unsigned nifs)
+{
+	struct ucan_txbatch batch;
+	if (len < sizeof(batch))
+		return UCAN_MSG_ERR_SHORT;
+	memcpy(&batch, msg, sizeof(batch));
+	if (batch.count == 0)
+		return UCAN_MSG_ERR_LENGTH;
+	size_t at = sizeof(batch);
+	for (uint32_t i = 0; i < batch.count; i++) {
+		struct ucan_txrec rec;
+		if (len - at < sizeof(rec))
+			return UCAN_MSG_ERR_LENGTH;
+		memcpy(&rec, msg + at, sizeof(rec));
+		at += sizeof(rec);
+		if (rec.size > len - at)
+			return UCAN_MSG_ERR_LENGTH;
+		int rc = validate_one_frame(rec.ifindex, msg + at, rec.size, ifs, nifs);
+		if (rc < 0)
+			return rc;
+		at += rec.size;
+	}
+	return at == len ? UCAN_MSG_FRAMES : UCAN_MSG_ERR_LENGTH;
 }
 
 int ucan_msg_validate(const uint8_t *msg, size_t len, const struct ucan_ifinfo *ifs, unsigned nifs)
@@ -62,6 +96,8 @@ int ucan_msg_validate(const uint8_t *msg, size_t len, const struct ucan_ifinfo *
 		return validate_sockopts(msg, len, ifs, nifs);
 	case UCAN_MSG_FRAME:
 		return validate_frame(msg, len, ifs, nifs);
+	case UCAN_MSG_FRAMES:
+		return validate_frames(msg, len, ifs, nifs);
 	case UCAN_MSG_IFLIST:
 	case UCAN_MSG_STATS:
 	case UCAN_MSG_RESET_STATS:

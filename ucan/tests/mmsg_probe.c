@@ -31,7 +31,7 @@
 #include <linux/can.h>
 #include <linux/can/raw.h>
 
-#define VLEN_MAX 256
+#define VLEN_MAX 512
 #define WAIT_SLEEPING_S 5 /* how long the sender thread waits to see the reader blocked */
 #define PROBE_TIMEOUT_S 15 /* a call that blocks where the kernel's would not: SIGALRM ends the probe */
 

@@ -150,12 +150,69 @@ static void test_validate(void)
 	CHECK(ucan_msg_validate((const uint8_t *)&barrier, sizeof(barrier), ifs, 2) == UCAN_MSG_ERR_COOKIE);
 }
 
+/* Appends one record (ucan_txrec + size bytes of f) at *at. */
+static void put_record(uint8_t *buf, size_t *at, uint32_t ifindex, uint32_t size, const struct canfd_frame *f)
+{
+	struct ucan_txrec rec = { ifindex, size };
+	memcpy(buf + *at, &rec, sizeof(rec));
+	memcpy(buf + *at + sizeof(rec), f, size);
+	*at += sizeof(rec) + size;
+}
+
+/* A batch is refused whole if any record is wrong, and must be filled exactly. */
+static void test_validate_batch(void)
+{
+	struct ucan_ifinfo ifs[2] = { { "vcan0", UCAN_IFINDEX_BASE, CANFD_MTU, 0, 0 },
+				      { "vcan1", UCAN_IFINDEX_BASE + 1, CAN_MTU, 0, 0 } };
+	uint8_t buf[512];
+	struct canfd_frame classic = frame(0x123, 8, 1), fd = frame(0x456, 64, 2), long_classic = frame(0x1, 9, 3);
+	struct ucan_txbatch head = { UCAN_MSG_FRAMES, 3 };
+	size_t at = sizeof(head);
+	memcpy(buf, &head, sizeof(head));
+	put_record(buf, &at, UCAN_IFINDEX_BASE, CAN_MTU, &classic);
+	put_record(buf, &at, UCAN_IFINDEX_BASE, CANFD_MTU, &fd);
+	put_record(buf, &at, UCAN_IFINDEX_BASE + 1, CAN_MTU, &classic);
+	CHECK(ucan_msg_validate(buf, at, ifs, 2) == UCAN_MSG_FRAMES);
+	CHECK(ucan_msg_validate(buf, at - 1, ifs, 2) == UCAN_MSG_ERR_LENGTH); /* last record cut */
+	CHECK(ucan_msg_validate(buf, at + 4, ifs, 2) == UCAN_MSG_ERR_LENGTH); /* bytes beyond count */
+	CHECK(ucan_msg_validate(buf, 6, ifs, 2) == UCAN_MSG_ERR_SHORT);
+	head.count = 4; /* a record more than the message holds */
+	memcpy(buf, &head, sizeof(head));
+	CHECK(ucan_msg_validate(buf, at, ifs, 2) == UCAN_MSG_ERR_LENGTH);
+	head.count = 0;
+	memcpy(buf, &head, sizeof(head));
+	CHECK(ucan_msg_validate(buf, sizeof(head), ifs, 2) == UCAN_MSG_ERR_LENGTH);
+	head.count = UINT32_MAX; /* a count the length cannot hold ends at the length */
+	memcpy(buf, &head, sizeof(head));
+	CHECK(ucan_msg_validate(buf, at, ifs, 2) == UCAN_MSG_ERR_LENGTH);
+
+	struct { uint32_t ifindex, size; struct canfd_frame *f; int err; } bad[] = {
+		{ UCAN_IFINDEX_BASE + 1, CANFD_MTU, &fd, UCAN_MSG_ERR_FRAME }, /* FD on a classic interface */
+		{ UCAN_IFINDEX_BASE, CAN_MTU, &long_classic, UCAN_MSG_ERR_FRAME },
+		{ 7, CAN_MTU, &classic, UCAN_MSG_ERR_IFINDEX },
+		{ UCAN_IFINDEX_BASE, 20, &classic, UCAN_MSG_ERR_LENGTH },
+		{ UCAN_IFINDEX_BASE, UINT32_MAX, &classic, UCAN_MSG_ERR_LENGTH }, /* a size past the message */
+	};
+	for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+		head.count = 2;
+		memcpy(buf, &head, sizeof(head));
+		at = sizeof(head);
+		put_record(buf, &at, UCAN_IFINDEX_BASE, CAN_MTU, &classic);
+		size_t rec_at = at;
+		uint32_t size = bad[i].size > CANFD_MTU ? CAN_MTU : bad[i].size;
+		put_record(buf, &at, bad[i].ifindex, size, bad[i].f);
+		memcpy(buf + rec_at + sizeof(uint32_t), &bad[i].size, sizeof(uint32_t));
+		CHECK(ucan_msg_validate(buf, at, ifs, 2) == bad[i].err);
+	}
+}
+
 int main(void)
 {
 	test_frame_bits();
 	test_arbitration();
 	test_filters();
 	test_validate();
+	test_validate_batch();
 	if (failures) {
 		fprintf(stderr, "%d check(s) failed\n", failures);
 		return 1;
