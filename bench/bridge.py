@@ -12,7 +12,10 @@ first one with loss. A zenoh-node instance bridges at most ZN_MAX_BUSES = 8
 buses, so more buses run several instances (each its own name and keys), as a
 vehicle computer with more buses would. Systems: zenoh-node in immediate mode
 (one put per frame) and in batching mode (--publish-period-ms BATCH_MS), the
-Python reference.
+Python reference, and the floor (bench/tools/floor_bridge.c, up to 8 buses):
+the least an immediate bridge does per frame - wake, read, one TCP write -
+without Zenoh, so the immediate target's ratio can be held against what no
+bridge of that design goes below.
 
 Zenoh -> CAN, the same loads the other way: zn-flood publishes stamped
 commands on every bus's tx key (9000 frames/s per bus, all keys interleaved,
@@ -76,11 +79,15 @@ BATCH_MS = 10
 BATCH = f"-batch{BATCH_MS}"
 LOW_LATENCY = "-low-latency"  # the bridge and its router on Zenoh's low-latency transport (docs/bridge.md)
 REFERENCE = "python-ref"
+# bench/tools/floor_bridge.c: the least an immediate CAN -> Zenoh bridge does per frame (wake, read,
+# one TCP write), no Zenoh; its CPU is the floor the immediate target is held against
+FLOOR = "floor"
+FLOOR_MAX_BUSES = 8  # one thread polls them all: the floor of the loads the bridges carry losslessly
 BRIDGES = ("zenoh-node", f"zenoh-node{BATCH}", f"zenoh-node{LOW_LATENCY}", f"zenoh-node{LOW_LATENCY}{BATCH}")
-SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}")
+SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}", FLOOR)
 # CAN -> Zenoh the reference publishes one sample per frame whatever the bridge's mode; Zenoh -> CAN
 # "-batch" is the commands' shape, given to both
-DIRECTION_SYSTEMS = {"can-to-zenoh": (*BRIDGES, REFERENCE), "zenoh-to-can": SYSTEMS}
+DIRECTION_SYSTEMS = {"can-to-zenoh": (*BRIDGES, REFERENCE, FLOOR), "zenoh-to-can": SYSTEMS[:-1]}
 DIRECTIONS = tuple(DIRECTION_SYSTEMS)
 SWITCH_TARGET = 0.05  # context switches per frame in batching mode (issue #24)
 SETTLE_S = 10.0
@@ -112,7 +119,33 @@ class Bench(Rig):
         # Zenoh's thread pools of zenoh-node alone (--zenoh-runtime), never the router's, the load's or the reference's
         self.bridge_env = {**self.env, **({"ZENOH_RUNTIME": args.zenoh_runtime} if args.zenoh_runtime else {})}
 
+    def run_floor(self, buses: int) -> dict:
+        """floor-bridge on the buses under the CAN -> Zenoh load (no router: it writes to a TCP sink of
+        its own); it reports its own CPU time and switches (getrusage), from ready to done."""
+        names = [f"vcan{i}" for i in range(buses)]
+        self.hub.start(names)
+        per_bus = int(FRAMES_PER_S * LOAD_S)
+        offered = per_bus * buses
+        floor = self.procs.spawn([str(Path(self.args.can_load).with_name("floor-bridge")), ",".join(names),
+                                  offered, 1000], env=self.env, stdout=subprocess.PIPE, text=True)
+        if floor.stdout.readline().strip() != "ready":
+            sys.exit(f"floor-bridge with {buses} buses did not come up")
+        gen = self.procs.spawn([self.args.can_load, "send", ",".join(names), "100", FRAMES_PER_S, per_bus],
+                               env=self.env, stdout=subprocess.PIPE, text=True)
+        offered_fps = round(offered / json.loads(gen.communicate(timeout=LOAD_S * 10 + SETTLE_S)[0])["seconds"])
+        done = json.loads(floor.communicate(timeout=SETTLE_S)[0])  # after every frame, or 1 s after the last
+        self.procs.close()
+        received = done["frames"]
+        return {"direction": "can-to-zenoh", "system": FLOOR, "buses": buses, "offered": offered,
+                "delivered_fps": offered_fps if received == offered else None, "offered_fps": offered_fps,
+                "instances": 1, "received": received, "lossless": received == offered,
+                "cpu_us_per_frame": round(done["cpu_ns"] / 1e3 / max(received, 1), 2), "cpu_from_ticks": False,
+                "switches_per_frame": round(done["switches"] / max(received, 1), 3), "kernel_share": None,
+                "peak_rss_mib": 0.0}
+
     def run_one(self, system: str, buses: int, direction: str = "can-to-zenoh") -> dict:
+        if system == FLOOR:
+            return self.run_floor(buses)
         names = [f"vcan{i}" for i in range(buses)]
         self.hub.start(names)
         router_args, bridge_args = transport_args(LOW_LATENCY in system)
@@ -246,18 +279,23 @@ def table(results: list[dict]) -> str:
                  + " | ".join(f"{best[s] / best[reference_of(s, direction)]:.1f}x"
                               if best.get(reference_of(s, direction)) else "-" for s in systems)
                  + " | >= 3x |"]
-        ratios = []
-        for s in systems:
-            ref = reference_of(s, direction)
-            common = [(by[(s, n)]["cpu_us_per_frame"], by[(ref, n)]["cpu_us_per_frame"]) for (sys_, n) in by
-                      if sys_ == s and (ref, n) in by and by[(s, n)]["lossless"] and by[(ref, n)]["lossless"]]
-            ratios.append(f"{statistics.median(a / b for a, b in common):.2f}" if common else "-")
         rows.append("| CPU time per frame relative to the reference (median over loads both forward losslessly) | "
-                    + " | ".join(ratios) + " | <= 0.1 batching, <= 0.33 immediate |")
+                    + " | ".join(cpu_ratio(by, s, reference_of(s, direction)) for s in systems)
+                    + " | <= 0.1 batching, <= 0.33 immediate |")
+        if FLOOR in systems:
+            rows.append(f"| ... relative to the {FLOOR} (wake, read, one TCP write per frame; no Zenoh) | "
+                        + " | ".join(cpu_ratio(by, s, FLOOR) for s in systems) + " | |")
         rows.append("| peak RSS MiB (any load) | " + " | ".join(
             str(max([r["peak_rss_mib"] for r in runs if r["system"] == s], default=0)) for s in systems)
             + " | <= 32 |")
     return "\n".join(rows)
+
+
+def cpu_ratio(by: dict, system: str, baseline: str) -> str:
+    """Median over the loads both forward losslessly of system's CPU per frame over baseline's."""
+    common = [(by[(s, n)]["cpu_us_per_frame"], by[(baseline, n)]["cpu_us_per_frame"]) for (s, n) in by
+              if s == system and (baseline, n) in by and by[(s, n)]["lossless"] and by[(baseline, n)]["lossless"]]
+    return f"{statistics.median(a / b for a, b in common):.2f}" if common else "-"
 
 
 SWITCH_RUNS = (("can-to-zenoh", "batching"), ("zenoh-to-can", "batching"), ("can-to-zenoh", "immediate"))
@@ -294,7 +332,7 @@ def plot(results: list[dict], path: Path, direction: str) -> None:
     import matplotlib.pyplot as plt
     runs = [r for r in results if r.get("direction", DIRECTIONS[0]) == direction]
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
-    for s in SYSTEMS:
+    for s in SYSTEMS[:-1]:  # not the floor: it forwards to no one
         pts = sorted((r for r in runs if r["system"] == s), key=lambda r: r["buses"])
         if pts:
             ax.plot([r["offered_fps"] or 0 for r in pts], [r["delivered_fps"] or 0 for r in pts], marker="o",
@@ -332,7 +370,7 @@ def main() -> int:
         lossy: set[str] = set()  # systems past their first load with loss: no higher load for them
         for buses in [int(b) for b in args.buses.split(",")]:
             for system in DIRECTION_SYSTEMS[direction]:
-                if system in lossy or system not in systems:
+                if system in lossy or system not in systems or (system == FLOOR and buses > FLOOR_MAX_BUSES):
                     continue
                 with tempfile.TemporaryDirectory(prefix="bench-bridge-") as tmp:
                     bench = Bench(args, Path(tmp))

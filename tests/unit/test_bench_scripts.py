@@ -176,3 +176,18 @@ def test_cpu_of_a_run_falls_back_to_ticks_when_a_thread_ended_in_it():
            "received": 100, "offered": 100, "lossless": True, "delivered_fps": 9000, "cpu_us_per_frame": 6.0,
            "cpu_from_ticks": True, "kernel_share": 0.8, "switches_per_frame": 1.0, "peak_rss_mib": 19.0}
     assert "| 6.0 (ticks) |" in bench_bridge.table([row])
+
+
+def test_bridge_table_holds_each_system_against_the_floor_too():
+    """CAN -> Zenoh the floor (no Zenoh: wake, read, one TCP write per frame) gets a column and a
+    row: what the reference and each bridge cost over the least any immediate bridge does."""
+    ref, node, floor = "python-ref", "zenoh-node", bench_bridge.FLOOR
+    results = [result(ref, 1, True, 40), result(node, 1, True, 20), result(floor, 1, True, 16),
+               result(ref, 2, True, 30), result(node, 2, True, 15), result(floor, 2, False, 10)]
+    table = bench_bridge.table(results)
+    header = next(line for line in table.splitlines() if line.startswith("| can-to-zenoh |") and "target" in line)
+    assert header == "| can-to-zenoh | zenoh-node | python-ref | floor | target |"
+    cpu_row = next(line for line in table.splitlines() if line.startswith("| CPU time per frame"))
+    assert cpu_row.split(" | ")[1] == "0.50" and cpu_row.split(" | ")[-2] == "0.40"
+    floor_row = next(line for line in table.splitlines() if line.startswith("| ... relative to the floor"))
+    assert floor_row.split(" | ")[1:4] == ["1.25", "2.50", "1.00"]  # only the 1-bus load: the floor lost at 2
