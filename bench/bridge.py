@@ -285,6 +285,9 @@ def table(results: list[dict]) -> str:
         if FLOOR in systems:
             rows.append(f"| ... relative to the {FLOOR} (wake, read, one TCP write per frame; no Zenoh) | "
                         + " | ".join(cpu_ratio(by, s, FLOOR) for s in systems) + " | |")
+        rows.append("| context switches per frame, highest over the loads both forward losslessly | "
+                    + " | ".join(most_switches(by, s, reference_of(s, direction)) for s in systems)
+                    + f" | <= {SWITCH_TARGET} batching |")
         rows.append("| peak RSS MiB (any load) | " + " | ".join(
             str(max([r["peak_rss_mib"] for r in runs if r["system"] == s], default=0)) for s in systems)
             + " | <= 32 |")
@@ -296,6 +299,14 @@ def cpu_ratio(by: dict, system: str, baseline: str) -> str:
     common = [(by[(s, n)]["cpu_us_per_frame"], by[(baseline, n)]["cpu_us_per_frame"]) for (s, n) in by
               if s == system and (baseline, n) in by and by[(s, n)]["lossless"] and by[(baseline, n)]["lossless"]]
     return f"{statistics.median(a / b for a, b in common):.2f}" if common else "-"
+
+
+def most_switches(by: dict, system: str, baseline: str) -> str:
+    """The highest context switches per frame of system over the loads it and baseline both
+    forward losslessly (where the CPU ratio is judged too)."""
+    common = [by[(s, n)]["switches_per_frame"] for (s, n) in by
+              if s == system and (baseline, n) in by and by[(s, n)]["lossless"] and by[(baseline, n)]["lossless"]]
+    return f"{max(common):.3f}" if common else "-"
 
 
 SWITCH_RUNS = (("can-to-zenoh", "batching"), ("zenoh-to-can", "batching"), ("can-to-zenoh", "immediate"))

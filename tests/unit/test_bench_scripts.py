@@ -83,12 +83,13 @@ def test_can_stamp_split_reads_the_receive_stamp_of_each_frame_from_the_attachme
     assert stamps.can_stamp_split(tmp_path / "missing.tsv", 0x100) == {}
 
 
-def result(system: str, buses: int, lossless: bool, cpu: float, delivered: int | None = None) -> dict:
+def result(system: str, buses: int, lossless: bool, cpu: float, delivered: int | None = None,
+           switches: float = 0.0) -> dict:
     offered = 9000 * buses
     return {"system": system, "buses": buses, "instances": 1, "offered": offered * 2, "offered_fps": offered,
             "delivered_fps": delivered if delivered is not None else offered,
             "received": offered * 2 if lossless else offered, "lossless": lossless, "cpu_us_per_frame": cpu,
-            "kernel_share": 0.5, "peak_rss_mib": 12.0}
+            "kernel_share": 0.5, "peak_rss_mib": 12.0, "switches_per_frame": switches}
 
 
 def test_bridge_table_counts_only_sustained_lossless_rates():
@@ -191,3 +192,13 @@ def test_bridge_table_holds_each_system_against_the_floor_too():
     assert cpu_row.split(" | ")[1] == "0.50" and cpu_row.split(" | ")[-2] == "0.40"
     floor_row = next(line for line in table.splitlines() if line.startswith("| ... relative to the floor"))
     assert floor_row.split(" | ")[1:4] == ["1.25", "2.50", "1.00"]  # only the 1-bus load: the floor lost at 2
+
+
+def test_bridge_table_judges_switches_at_the_loads_both_forward_losslessly():
+    ref, batch = "python-ref", bench_bridge.SYSTEMS[1]
+    results = [result(ref, 1, True, 40), result(batch, 1, True, 3, switches=0.04),
+               result(ref, 2, True, 40), result(batch, 2, True, 3, switches=0.03),
+               result(ref, 4, False, 40), result(batch, 4, True, 3, switches=0.09)]
+    table = bench_bridge.table(results)
+    row = next(line for line in table.splitlines() if line.startswith("| context switches per frame"))
+    assert row.split(" | ")[1:3] == ["0.040", "0.000"]  # not the 4-bus load: the reference lost frames there

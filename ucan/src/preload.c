@@ -1448,6 +1448,14 @@ static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 	uint8_t sizes[BATCH_FRAMES_MAX];
 	unsigned sent = 0;
 	while (sent < vlen) {
+		if (vlen - sent == 1) { /* one frame left: the message send() sends, built in place */
+			const struct msghdr *m = &vec[sent].msg_hdr;
+			ssize_t size = can_send(cs, fd, m->msg_iov, m->msg_iovlen, flags, m->msg_name, m->msg_namelen);
+			if (size < 0)
+				return sent ? (int)sent : -1;
+			vec[sent].msg_len = (unsigned)size;
+			return (int)sent + 1;
+		}
 		size_t used = sizeof(struct ucan_txbatch);
 		unsigned k = 0;
 		int bad = 0, paced = 0;
