@@ -12,11 +12,14 @@ put (the Rust Zenoh port and the zenoh crate, on the calling thread), the
 command path; and the whole process minus the idle run gives everything a
 frame costs in user space, Zenoh's runtime threads included. Kernel
 instructions are not counted (callgrind sees user space only; bench-bridge
-reports the kernel's share of the CPU time).
+reports the kernel's share of the CPU time). Each Zenoh transport
+(--transports): on the universal one the put queues and Zenoh's transmit
+task writes; on the low-latency one the put writes the link itself.
 
 Writes callgrind.json and callgrind.md into --out; with --record appends one
 line per run to docs/callgrind-history.csv (commit, date, instructions per
-frame), so the cost is tracked across commits. Loopback only, bounded."""
+frame on the universal transport, the default), so the cost is tracked
+across commits. Loopback only, bounded."""
 from __future__ import annotations
 
 import argparse
@@ -29,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from canbench.rig import Rig, Router, candump, start_bridge, stop, zn_capture
+from canbench.rig import Rig, Router, candump, start_bridge, stop, transport_args, zn_capture
 from canbench.runkeys import open_session
 
 from .common import REPO, add_tool_arguments, run_id_and_output
@@ -79,22 +82,27 @@ def program_total(callgrind_out: Path) -> int:
     raise ValueError(f"{callgrind_out}: no totals")
 
 
-def run(args, work: Path, rx_frames: int, tx_frames: int) -> tuple[dict[str, int], int]:
+TRANSPORTS = ("universal", "low-latency")
+
+
+def run(args, work: Path, rx_frames: int, tx_frames: int, low_latency: bool) -> tuple[dict[str, int], int]:
     """One bridge under callgrind for FRAMES / RATE seconds of load (or idle): inclusive counts and total."""
     rig = Rig(Path(args.ucan_build), work)
     env, spawn, procs = rig.env, rig.spawn, rig.procs
     try:
         rig.hub.start(["vcan0"])
+        router_args, bridge_args = transport_args(low_latency)
         router = Router(args.zenohd)
         endpoint = router.endpoint
-        procs.add(router.start())
+        procs.add(router.start(*router_args))
         session = open_session(endpoint)
         zn_out, can_out = work / "zenoh.tsv", work / "can.log"
         capture = zn_capture(procs, args.zn_capture, endpoint, "vehicle/can/rx", zn_out, session, "bench/capture")
         dump = candump(procs, env, "vcan0", can_out)
         out = work / "callgrind.out"
         bridge = start_bridge(procs, ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", args.bridge,
-                                      "--router", endpoint, "--can", "vcan0", "--publish-period-ms", "0"],
+                                      "--router", endpoint, "--can", "vcan0", "--publish-period-ms", "0",
+                                      *bridge_args],
                               env, work / "bridge.log", session, "vehicle/can/bridges/**", timeout=180)
         t0 = time.monotonic()
         if rx_frames:
@@ -124,11 +132,12 @@ def run(args, work: Path, rx_frames: int, tx_frames: int) -> tuple[dict[str, int
         rig.close()
 
 
-def measure(args) -> dict:
+def measure(args, low_latency: bool) -> dict[str, int]:
+    """Instructions per frame by stage on one Zenoh transport."""
     runs = {}
     for name, rx, tx in (("idle", 0, 0), ("rx", FRAMES, 0), ("tx", 0, FRAMES)):
         with tempfile.TemporaryDirectory(prefix="bench-callgrind-") as tmp:
-            runs[name] = run(args, Path(tmp), rx, tx)
+            runs[name] = run(args, Path(tmp), rx, tx, low_latency)
     per_frame = {}
     for stage, (names, direction) in STAGES.items():
         counts = runs[direction][0]
@@ -143,7 +152,7 @@ def measure(args) -> dict:
     idle_total = runs["idle"][1]
     per_frame["process_rx"] = round((runs["rx"][1] - idle_total) / FRAMES)
     per_frame["process_tx"] = round((runs["tx"][1] - idle_total) / FRAMES)
-    return {"frames": FRAMES, "rate": RATE, "instructions_per_frame": per_frame}
+    return per_frame
 
 
 def git_commit() -> str:
@@ -158,19 +167,28 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     add_tool_arguments(ap)
     ap.add_argument("--record", action="store_true", help=f"append this run to {HISTORY.relative_to(REPO)}")
+    ap.add_argument("--transports", default=",".join(TRANSPORTS),
+                    help="Zenoh transports to measure (the history records the universal one)")
     args = ap.parse_args()
+    transports = args.transports.split(",")
+    if set(transports) - set(TRANSPORTS) or TRANSPORTS[0] not in transports:
+        ap.error(f"--transports: {TRANSPORTS[0]} and optionally {TRANSPORTS[1]}")
     run_id, out = run_id_and_output(args)
-    result = measure(args)
+    by_transport = {t: measure(args, t == "low-latency") for t in transports}
     commit = os.environ.get("BENCH_COMMIT") or git_commit()
-    result.update(run_id=run_id, commit=commit)
+    ipf = by_transport[TRANSPORTS[0]]
+    result = {"frames": FRAMES, "rate": RATE, "instructions_per_frame": ipf, "by_transport": by_transport,
+              "run_id": run_id, "commit": commit}
     (out / "callgrind.json").write_text(json.dumps(result, indent=1))
-    ipf = result["instructions_per_frame"]
-    md = ["| stage | function (inclusive) | instructions per frame |", "|---|---|---|"]
-    md += [f"| {stage} | {fn} | {ipf[stage]} |" for stage, (fn, _) in STAGES.items()]
-    md.append(f"| component_rx | self: {COMPONENT_DIR}*.c in the CAN -> Zenoh run | {ipf['component_rx']} |")
-    md.append(f"| component_tx | self: {COMPONENT_DIR}*.c in the Zenoh -> CAN run | {ipf['component_tx']} |")
-    md.append(f"| process_rx | whole process, CAN -> Zenoh run minus idle run | {ipf['process_rx']} |")
-    md.append(f"| process_tx | whole process, Zenoh -> CAN run minus idle run | {ipf['process_tx']} |")
+    md = ["| stage | what | " + " | ".join(f"instructions per frame ({t})" for t in transports) + " |",
+          "|---|---|" + "---|" * len(transports)]
+    what = {stage: fn for stage, (fn, _) in STAGES.items()}
+    what.update(component_rx=f"self: {COMPONENT_DIR}*.c in the CAN -> Zenoh run",
+                component_tx=f"self: {COMPONENT_DIR}*.c in the Zenoh -> CAN run",
+                process_rx="whole process, CAN -> Zenoh run minus idle run",
+                process_tx="whole process, Zenoh -> CAN run minus idle run")
+    md += [f"| {stage} | {what[stage]} | " + " | ".join(str(by_transport[t][stage]) for t in transports) + " |"
+           for stage in ipf]
     text = f"callgrind {run_id} at {commit}: {FRAMES} frames each way at {RATE} frames/s\n\n" + "\n".join(md)
     (out / "callgrind.md").write_text(text + "\n")
     print(text)

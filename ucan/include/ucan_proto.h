@@ -85,9 +85,11 @@ static_assert(sizeof(struct ucan_txhdr) == 8, "tx header size");
 /* Several frames in one message, so a sendmmsg's burst costs the sender one
  * message rather than one per frame (the kernel's sendmmsg is one syscall).
  * count records follow the header back to back, each a ucan_txrec and a frame
- * of rec.size bytes (CAN_MTU or CANFD_MTU). The hub checks the whole message
- * before it transmits any of it, then transmits the frames in order, as if
- * they had come as count UCAN_MSG_FRAME messages. */
+ * of rec.size bytes (CAN_MTU or CANFD_MTU), none for a bitrate= interface
+ * (its frames go one per message: the hub pauses a sender between messages).
+ * The hub checks the whole message before it transmits any of it, then
+ * transmits the frames in order, as if they had come as count UCAN_MSG_FRAME
+ * messages. */
 struct ucan_txbatch {
 	uint32_t type; /* UCAN_MSG_FRAMES */
 	uint32_t count;

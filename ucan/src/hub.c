@@ -35,6 +35,7 @@
 #define FRAMES_PER_WAKEUP 256 /* read from one sender per wakeup (other messages count 1): fairness */
 #define TX_PENDING_SOFT_LIMIT 256 /* bitrate interfaces: pause senders above this */
 #define RECV_BATCH 64		 /* messages read per recvmmsg */
+#define FIRST_READ 8		 /* ... in a sender's first read of a wakeup (fairness: see drain_batch) */
 #define FLUSH_BATCH 64		 /* messages written per sendmmsg */
 #define TAG_LISTEN UINT64_MAX
 #define TAG_STATS_TIMER (UINT64_MAX - 1)
@@ -58,7 +59,7 @@ struct client {
 	uint32_t queue_cap, queue_head, queue_len, queue_limit;
 	uint64_t tx_frames, rx_frames, rx_bytes, rx_drops;
 	uint32_t arb_epoch;
-	uint32_t frames_per_msg; /* of its last read (batches hold many): sizes the next read to the budget */
+	uint32_t frames_per_msg; /* the most one message of its last read held: sizes the next read */
 };
 
 struct pending_frame {
@@ -935,17 +936,20 @@ static void drain_batch(uint32_t idx, unsigned budget, int even_if_paused, uint8
 	struct mmsghdr msgs[RECV_BATCH];
 	struct iovec iovs[RECV_BATCH];
 	uint64_t done = 0; /* frames, or 1 for any other message: a batch counts as what it holds */
-	unsigned resets = 0;
+	unsigned resets = 0, reads = 0;
 	while (done < budget) {
 		struct client *c = &hub.clients[idx];
 		if (c->fd < 0 || (c->paused && !even_if_paused))
 			return;
-		/* as many messages as the budget's frames need, by the last read's
-		 * frames per message: a sender of batches is read one batch at a time
-		 * once its budget is near, not 64 batches at once */
+		/* as many messages as the budget's frames need if each holds as many
+		 * as the fullest of the last read (a sender of batches is read a batch
+		 * at a time), and few in a wakeup's first read, which has no such
+		 * measure of what is queued now: a sender that switches from single
+		 * frames to batches overruns its budget by FIRST_READ batches at most */
 		uint64_t per_msg = c->frames_per_msg ? c->frames_per_msg : 1;
 		uint64_t fit = (budget - done + per_msg - 1) / per_msg;
-		unsigned want = fit < RECV_BATCH ? (unsigned)fit : RECV_BATCH;
+		unsigned cap = reads++ ? RECV_BATCH : FIRST_READ;
+		unsigned want = fit < cap ? (unsigned)fit : cap;
 		for (unsigned i = 0; i < want; i++) {
 			iovs[i] = (struct iovec){ .iov_base = bufs[i], .iov_len = UCAN_MSG_MAX };
 			msgs[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iovs[i], .msg_iovlen = 1 } };
@@ -965,7 +969,7 @@ static void drain_batch(uint32_t idx, unsigned budget, int even_if_paused, uint8
 			return;
 		}
 		/* messages already read are handled even if a frame pauses the sender */
-		uint64_t before = done;
+		unsigned fullest = 1;
 		for (int i = 0; i < n && hub.clients[idx].fd >= 0; i++) {
 			if (msgs[i].msg_len == 0) { /* peer closed after its last message */
 				client_close(idx, NULL);
@@ -976,10 +980,12 @@ static void drain_batch(uint32_t idx, unsigned budget, int even_if_paused, uint8
 				client_close(idx, "message too long");
 				return;
 			}
-			done += handle_message(idx, bufs[i], msgs[i].msg_len);
+			unsigned frames = handle_message(idx, bufs[i], msgs[i].msg_len);
+			done += frames;
+			fullest = frames > fullest ? frames : fullest;
 		}
 		if (hub.clients[idx].fd >= 0)
-			hub.clients[idx].frames_per_msg = (uint32_t)((done - before + (unsigned)n - 1) / (unsigned)n);
+			hub.clients[idx].frames_per_msg = fullest;
 		if ((unsigned)n < want)
 			return; /* drained */
 	}

@@ -74,6 +74,7 @@ struct csock {
 	int ioctl_stamps;	    /* SIOCGSTAMP(NS) used: stamps stay on without SO_TIMESTAMP */
 	struct timespec last_stamp; /* of the last frame read, for SIOCGSTAMP(NS); 0 = none yet */
 	atomic_uint mmsg_last;	    /* frames the last recvmmsg returned: sizes the next one's first read */
+	atomic_uint batch_bytes;    /* longest UCAN_MSG_FRAMES the socket's SO_SNDBUF takes (0: UCAN_MSG_MAX) */
 };
 
 /* ---- real libc functions ---- */
@@ -748,6 +749,8 @@ PUBLIC int setsockopt(int fd, int level, int name, const void *val, socklen_t le
 		return set_timestamps(cs, fd, name, val, len);
 	if (level == SOL_SOCKET) {
 		int rc = get_setsockopt()(fd, level, name, val, len);
+		if (rc == 0 && (name == SO_SNDBUF || name == SO_SNDBUFFORCE))
+			atomic_store(&cs->batch_bytes, 0); /* found again by the next sendmmsg */
 		if (rc == 0 && (name == SO_RCVBUF || name == SO_RCVBUFFORCE) && len == sizeof(int)) {
 			int bytes;
 			memcpy(&bytes, val, sizeof(bytes));
@@ -1448,6 +1451,9 @@ static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 	uint8_t sizes[BATCH_FRAMES_MAX];
 	unsigned sent = 0;
 	while (sent < vlen) {
+		/* a small SO_SNDBUF refuses a long message (EMSGSIZE): halved until it fits */
+		unsigned limit = atomic_load(&cs->batch_bytes);
+		limit = limit ? limit : UCAN_MSG_MAX;
 		if (vlen - sent == 1) { /* one frame left: the message send() sends, built in place */
 			const struct msghdr *m = &vec[sent].msg_hdr;
 			ssize_t size = can_send(cs, fd, m->msg_iov, m->msg_iovlen, flags, m->msg_name, m->msg_namelen);
@@ -1459,7 +1465,7 @@ static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 		size_t used = sizeof(struct ucan_txbatch);
 		unsigned k = 0;
 		int bad = 0, paced = 0;
-		while (sent + k < vlen && used + sizeof(struct ucan_txrec) + CANFD_MTU <= sizeof(batch)) {
+		while (sent + k < vlen && (k == 0 || used + sizeof(struct ucan_txrec) + CANFD_MTU <= limit)) {
 			const struct msghdr *m = &vec[sent + k].msg_hdr;
 			ssize_t size = tx_build(cs, m->msg_iov, m->msg_iovlen, m->msg_name, m->msg_namelen, one, &paced);
 			if (size < 0) {
@@ -1488,6 +1494,10 @@ static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 				struct ucan_txbatch head = { .type = UCAN_MSG_FRAMES, .count = k };
 				memcpy(batch, &head, sizeof(head));
 				r = get_send()(fd, batch, used, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
+				if (r < 0 && errno == EMSGSIZE) {
+					atomic_store(&cs->batch_bytes, (unsigned)used / 2);
+					continue; /* nothing of it went: the same frames again, fewer per message */
+				}
 			}
 			if (r < 0) {
 				tx_errno();

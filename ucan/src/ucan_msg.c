@@ -29,9 +29,11 @@ static int validate_sockopts(const uint8_t *msg, size_t len, const struct ucan_i
 	return (int)opts.type;
 }
 
-/* One frame of size bytes (its sender's buffer length) for interface ifindex. */
+/* One frame of size bytes (its sender's buffer length) for interface ifindex; in_batch: one
+ * record of a UCAN_MSG_FRAMES, which a bitrate= interface does not take (a batch read whole
+ * would queue past the pause that holds its senders back). */
 static int validate_one_frame(uint32_t ifindex, const uint8_t *data, size_t size, const struct ucan_ifinfo *ifs,
-			      unsigned nifs)
+			      unsigned nifs, int in_batch)
 {
 	struct canfd_frame frame;
 	if (size != CAN_MTU && size != CANFD_MTU)
@@ -39,6 +41,8 @@ static int validate_one_frame(uint32_t ifindex, const uint8_t *data, size_t size
 	const struct ucan_ifinfo *ifi = ucan_find_if(ifs, nifs, ifindex);
 	if (!ifi)
 		return UCAN_MSG_ERR_IFINDEX;
+	if (in_batch && ifi->bitrate)
+		return UCAN_MSG_ERR_PACED;
 	memset(&frame, 0, sizeof(frame));
 	memcpy(&frame, data, size);
 	if (size == CAN_MTU && frame.len > CAN_MAX_DLEN)
@@ -54,7 +58,7 @@ static int validate_frame(const uint8_t *msg, size_t len, const struct ucan_ifin
 	if (len < sizeof(hdr))
 		return UCAN_MSG_ERR_LENGTH;
 	memcpy(&hdr, msg, sizeof(hdr));
-	int rc = validate_one_frame(hdr.ifindex, msg + sizeof(hdr), len - sizeof(hdr), ifs, nifs);
+	int rc = validate_one_frame(hdr.ifindex, msg + sizeof(hdr), len - sizeof(hdr), ifs, nifs, 0);
 	return rc < 0 ? rc : UCAN_MSG_FRAME;
 }
 
@@ -76,7 +80,7 @@ static int validate_frames(const uint8_t *msg, size_t len, const struct ucan_ifi
 		at += sizeof(rec);
 		if (rec.size > len - at)
 			return UCAN_MSG_ERR_LENGTH;
-		int rc = validate_one_frame(rec.ifindex, msg + at, rec.size, ifs, nifs);
+		int rc = validate_one_frame(rec.ifindex, msg + at, rec.size, ifs, nifs, 1);
 		if (rc < 0)
 			return rc;
 		at += rec.size;
@@ -125,6 +129,7 @@ const char *ucan_msg_strerror(int code)
 	case UCAN_MSG_ERR_FRAME: return "invalid frame for interface";
 	case UCAN_MSG_ERR_COOKIE: return "barrier cookie not terminated";
 	case UCAN_MSG_ERR_FLAGS: return "option flag not 0 or 1, or reserved field set";
+	case UCAN_MSG_ERR_PACED: return "batched frame for a bitrate= interface";
 	default: return code >= 0 ? "ok" : "unknown error";
 	}
 }

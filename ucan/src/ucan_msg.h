@@ -18,6 +18,7 @@ enum ucan_msg_error {
 	UCAN_MSG_ERR_FRAME = -6,	/* frame size / length invalid for the interface */
 	UCAN_MSG_ERR_COOKIE = -7,	/* barrier cookie not NUL-terminated */
 	UCAN_MSG_ERR_FLAGS = -8,	/* boolean option not 0/1, unknown timestamp kind, or a reserved field set */
+	UCAN_MSG_ERR_PACED = -9,	/* a batch holds a frame for a bitrate= interface (those go one per message) */
 };
 
 /* Returns the message type (> 0) or an enum ucan_msg_error. */

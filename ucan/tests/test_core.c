@@ -193,6 +193,13 @@ static void test_validate_batch(void)
 		{ UCAN_IFINDEX_BASE, 20, &classic, UCAN_MSG_ERR_LENGTH },
 		{ UCAN_IFINDEX_BASE, UINT32_MAX, &classic, UCAN_MSG_ERR_LENGTH }, /* a size past the message */
 	};
+	struct ucan_ifinfo paced[2] = { ifs[0], { "vcan1", UCAN_IFINDEX_BASE + 1, CAN_MTU, 500000, 0 } };
+	head.count = 2;
+	memcpy(buf, &head, sizeof(head));
+	at = sizeof(head);
+	put_record(buf, &at, UCAN_IFINDEX_BASE, CAN_MTU, &classic);
+	put_record(buf, &at, UCAN_IFINDEX_BASE + 1, CAN_MTU, &classic);
+	CHECK(ucan_msg_validate(buf, at, paced, 2) == UCAN_MSG_ERR_PACED); /* one per message on a wire */
 	for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
 		head.count = 2;
 		memcpy(buf, &head, sizeof(head));
