@@ -18,6 +18,11 @@ candump's SO_TIMESTAMP) gives a latency per frame and loss is counted by stamp.
   Side by side: the bus alone (can-load -> hub -> candump), raw Zenoh
   (zn-flood -> zenohd -> zn-capture, the floor) and the Python reference
   bridge (client mode). Bridge CPU % and peak RSS at each level.
+- The latency a bridge adds over raw Zenoh (issue #24's target: <= 50 µs p50
+  at each load, both directions), paired: raw Zenoh and the bridge's path
+  measured back to back, PAIRS times per cell, the median of the differences
+  and the verdict. A single raw-Zenoh run per load minutes before the
+  bridge's (the table above) swung by more than the target between runs.
 - Zenoh -> CAN and round-trip throughput: offered 9k, 18k, 36k, ... frames/s
   (one bus) until frames are lost; the highest lossless rate per system.
 
@@ -55,6 +60,10 @@ BRIDGE_UP_S = 30.0  # a bridge's start to its token, at most
 CAN_TO_ZENOH_ID, COMMAND_ID, ECHO_ID = 0x100, 0x321, 0x322
 BATCH_MS = 10  # zenoh-node's batching mode: one sample per bus every 10 ms
 LOW_LATENCY = "-low-latency"  # zenoh-node and its router on Zenoh's low-latency transport (docs/bridge.md)
+PAIRS = 3  # back-to-back (raw Zenoh, bridge) measurements per added-latency cell
+ADDED_TARGET_US = 50.0  # p50 a bridge may add over raw Zenoh at each load (issue #24)
+PAIRED_SYSTEMS = ("zenoh-node", f"zenoh-node{LOW_LATENCY}")
+PAIRED_PATHS = ("can-to-zenoh", "zenoh-to-can")
 
 
 def latency_summary(stamps: list[tuple[int, int]], sent: int) -> dict:
@@ -227,6 +236,46 @@ def added_latency(latency: list[dict]) -> list[dict]:
     return added
 
 
+def paired_added(args, loads: dict[str, int], pairs: int) -> list[dict]:
+    """Per path, system and load: raw Zenoh then the bridge's path, back to back, pairs times; the
+    p50 the bridge adds over raw Zenoh in each pair, and their median (robust to one slow pair)."""
+    cells = []
+    for path in PAIRED_PATHS:
+        for system in PAIRED_SYSTEMS:
+            for rate in loads.values():
+                added = []
+                for _ in range(pairs):
+                    raw = measure(args, "zenoh", None, "client", rate, LATENCY_S)
+                    bridge = measure(args, path, system, "client", rate, LATENCY_S)
+                    if raw.get("p50_us") is not None and bridge.get("p50_us") is not None:
+                        added.append(round(bridge["p50_us"] - raw["p50_us"], 1))
+                cell = {"path": path, "system": system, "rate": rate, "added_us": added,
+                        "median_added_us": round(statistics.median(added), 1) if added else None}
+                print(json.dumps(cell), flush=True)
+                cells.append(cell)
+    return cells
+
+
+def paired_table(cells: list[dict]) -> str:
+    """The added-latency target per path and system: median of the pairs at each load, and the verdict."""
+    load_name = {v: k for k, v in LOADS.items()}
+    rows = [f"### Added p50 over raw Zenoh, paired (median of back-to-back pairs; target <= {ADDED_TARGET_US:.0f} µs "
+            "at every load)", "", "| path | system | " + " | ".join(
+                f"{load_name.get(r, r)} ({r}/s)" for r in sorted({c['rate'] for c in cells})) + " | target |",
+            "|---|---|" + "---|" * (len({c["rate"] for c in cells}) + 1)]
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for c in cells:
+        groups.setdefault((c["path"], c["system"]), []).append(c)
+    for (path, system), group in groups.items():
+        group.sort(key=lambda c: c["rate"])
+        medians = [c["median_added_us"] for c in group]
+        met = all(m is not None and m <= ADDED_TARGET_US for m in medians)
+        rows.append(f"| {path} | {system} | " + " | ".join(
+            f"{c['median_added_us']:+.1f} ({', '.join(f'{a:+.1f}' for a in c['added_us'])})"
+            if c["median_added_us"] is not None else "-" for c in group) + f" | {'met' if met else 'not met'} |")
+    return "\n".join(rows)
+
+
 def tables(latency: list[dict], rates: list[dict]) -> str:
     rows = ["### Latency (µs; per path, mode and load of one 1 Mbit/s bus)", "",
             "| path | system | mode | load | frames/s | p50 | p90 | p99 | max | lost | bridge CPU % | RSS MiB |",
@@ -319,15 +368,16 @@ def main() -> int:
             r = measure(args, path, system, mode, rate, LATENCY_S)
             print(json.dumps({k: v for k, v in r.items() if k != "cdf_us"}), flush=True)
             latency.append(r)
+    paired = paired_added(args, loads, 1 if args.quick else PAIRS)
     rates = []
     for system in ("zenoh-node", "python-ref"):
         for path in ("zenoh-to-can", "round-trip"):
             rates += throughput(args, path, system)
     machine = machine_line()
     (out / "paths.json").write_text(json.dumps({"run_id": run_id, "machine": machine, "latency": latency,
-                                                "added_latency": added_latency(latency), "throughput": rates},
-                                               indent=1))
-    md = tables(latency, rates)
+                                                "added_latency": added_latency(latency), "paired_added": paired,
+                                                "throughput": rates}, indent=1))
+    md = tables(latency, rates) + "\n\n" + paired_table(paired)
     (out / "paths.md").write_text(f"Path benchmark {run_id} on {machine}\n\n{md}\n")
     plots(latency, rates, out)
     print(md)

@@ -3,6 +3,8 @@ zn-capture TSV (batched samples too) and candump -L logs, latency percentiles,
 loss and duplicates, sustained rates, and the summary table's verdicts."""
 from __future__ import annotations
 
+import statistics
+
 import pytest
 
 from bench import bridge as bench_bridge
@@ -202,3 +204,19 @@ def test_bridge_table_judges_switches_at_the_loads_both_forward_losslessly():
     table = bench_bridge.table(results)
     row = next(line for line in table.splitlines() if line.startswith("| context switches per frame"))
     assert row.split(" | ")[1:3] == ["0.040", "0.000"]  # not the 4-bus load: the reference lost frames there
+
+
+def test_paired_added_latency_is_judged_on_the_median_of_the_pairs():
+    """One slow pair does not fail a cell; a cell whose median is over the target fails the row."""
+    def cell(path, system, rate, added):
+        return {"path": path, "system": system, "rate": rate, "added_us": added,
+                "median_added_us": statistics.median(added)}
+    cells = [cell("can-to-zenoh", "zenoh-node", 900, [10.0, 200.0, 20.0]),
+             cell("can-to-zenoh", "zenoh-node", 8100, [40.0, 45.0, 90.0]),
+             cell("zenoh-to-can", "zenoh-node", 900, [10.0, 60.0, 70.0]),
+             cell("zenoh-to-can", "zenoh-node", 8100, [-5.0, 0.0, 5.0])]
+    table = bench_paths.paired_table(cells)
+    rows = {tuple(line.split(" | ")[:2]): line for line in table.splitlines() if line.startswith("| ")}
+    c2z = rows[("| can-to-zenoh", "zenoh-node")]
+    assert "+20.0 (+10.0, +200.0, +20.0)" in c2z and "+45.0" in c2z and c2z.endswith("| met |")
+    assert rows[("| zenoh-to-can", "zenoh-node")].endswith("| not met |")  # 60 at 10 %
