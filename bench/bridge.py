@@ -294,19 +294,24 @@ def table(results: list[dict]) -> str:
     return "\n".join(rows)
 
 
+def both_lossless(by: dict, system: str, baseline: str) -> list[int]:
+    """The bus counts at which system and baseline both forwarded losslessly: where ratios are judged."""
+    return [n for (s, n) in by if s == system and (baseline, n) in by
+            and by[(s, n)]["lossless"] and by[(baseline, n)]["lossless"]]
+
+
 def cpu_ratio(by: dict, system: str, baseline: str) -> str:
     """Median over the loads both forward losslessly of system's CPU per frame over baseline's."""
-    common = [(by[(s, n)]["cpu_us_per_frame"], by[(baseline, n)]["cpu_us_per_frame"]) for (s, n) in by
-              if s == system and (baseline, n) in by and by[(s, n)]["lossless"] and by[(baseline, n)]["lossless"]]
-    return f"{statistics.median(a / b for a, b in common):.2f}" if common else "-"
+    ratios = [by[(system, n)]["cpu_us_per_frame"] / by[(baseline, n)]["cpu_us_per_frame"]
+              for n in both_lossless(by, system, baseline)]
+    return f"{statistics.median(ratios):.2f}" if ratios else "-"
 
 
 def most_switches(by: dict, system: str, baseline: str) -> str:
     """The highest context switches per frame of system over the loads it and baseline both
     forward losslessly (where the CPU ratio is judged too)."""
-    common = [by[(s, n)]["switches_per_frame"] for (s, n) in by
-              if s == system and (baseline, n) in by and by[(s, n)]["lossless"] and by[(baseline, n)]["lossless"]]
-    return f"{max(common):.3f}" if common else "-"
+    loads = both_lossless(by, system, baseline)
+    return f"{max(by[(system, n)]['switches_per_frame'] for n in loads):.3f}" if loads else "-"
 
 
 SWITCH_RUNS = (("can-to-zenoh", "batching"), ("zenoh-to-can", "batching"), ("can-to-zenoh", "immediate"))
