@@ -1429,18 +1429,6 @@ static ssize_t can_send(struct csock *cs, int fd, const struct iovec *iov, size_
  * EINVAL/ENXIO before anything of it is sent; the hub's socket full with
  * MSG_DONTWAIT: ENOBUFS) ends the call, which returns how many went, or -1 if
  * none did. */
-/* One frame, from its record in a batch, as the message send() sends. */
-static ssize_t send_record_alone(int fd, const uint8_t *record, int flags)
-{
-	struct ucan_txrec rec;
-	memcpy(&rec, record, sizeof(rec));
-	uint8_t msg[sizeof(struct ucan_txhdr) + CANFD_MTU];
-	struct ucan_txhdr hdr = { .type = UCAN_MSG_FRAME, .ifindex = rec.ifindex };
-	memcpy(msg, &hdr, sizeof(hdr));
-	memcpy(msg + sizeof(hdr), record + sizeof(rec), rec.size);
-	return get_send()(fd, msg, sizeof(hdr) + rec.size, MSG_NOSIGNAL | (flags & MSG_DONTWAIT));
-}
-
 #define BATCH_FRAMES_MAX ((UCAN_MSG_MAX - sizeof(struct ucan_txbatch)) / (sizeof(struct ucan_txrec) + CAN_MTU))
 static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned vlen, int flags)
 {
@@ -1488,8 +1476,9 @@ static int can_sendmmsg(struct csock *cs, int fd, struct mmsghdr *vec, unsigned 
 			if (tx_connect(cs, fd) < 0)
 				return sent ? (int)sent : -1;
 			ssize_t r;
-			if (k == 1) {
-				r = send_record_alone(fd, batch + sizeof(struct ucan_txbatch), flags);
+			if (k == 1) { /* alone (paced, or the next is invalid or would not fit): as send() */
+				const struct msghdr *m = &vec[sent].msg_hdr;
+				r = can_send(cs, fd, m->msg_iov, m->msg_iovlen, flags, m->msg_name, m->msg_namelen);
 			} else {
 				struct ucan_txbatch head = { .type = UCAN_MSG_FRAMES, .count = k };
 				memcpy(batch, &head, sizeof(head));
