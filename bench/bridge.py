@@ -56,7 +56,7 @@ import time
 from pathlib import Path
 
 from canbench.errors import RunError
-from canbench.rig import Rig, Router, start_bridge, transport_args, zn_capture
+from canbench.rig import Rig, Router, bridge_stats, start_bridge, transport_args, zn_capture
 from canbench.runkeys import open_session
 
 from . import wakeups
@@ -97,6 +97,9 @@ SWITCH_TARGET = 0.05  # context switches per frame in batching mode (issue #24)
 # the median of its runs, so one run that a neighbour's burst on the 2 cores slowed does not decide
 JUDGED_RUNS = 3
 SETTLE_S = 10.0
+# zenoh-node's per-bus counters that say where a frame went (docs/bridge.md, Keys, token, stats)
+CAN_TO_ZENOH_COUNTERS = ("can_rx_frames", "rx_queue_drops", "published_frames", "publish_errors")
+ZENOH_TO_CAN_COUNTERS = ("tx_samples", "tx_frames", "tx_queue_full", "can_tx_errors", "tx_abandoned")
 
 
 def reference_of(system: str, direction: str) -> str:
@@ -219,6 +222,7 @@ class Bench(Rig):
         user_ticks, system_ticks = (sum(cpu_split_s(b.pid)[i] for b in bridges) - ticks0[i] for i in (0, 1))
         cpu, cpu_from_ticks = cpu_of_run(run_s, user_ticks + system_ticks)
         switches = sum(sum(ctx_switches(b.pid).values()) for b in bridges) - switches0
+        accounts = self.accounts(session, system, len(bridges), direction)  # after the CPU: its query costs some
         self.procs.close()
         session.close()
         if direction == "can-to-zenoh":
@@ -237,7 +241,29 @@ class Bench(Rig):
                 "cpu_us_per_frame": round(cpu / max(received, 1) * 1e6, 2), "cpu_from_ticks": cpu_from_ticks,
                 "switches_per_frame": round(switches / max(received, 1), 3),
                 "kernel_share": round(system_ticks / (user_ticks + system_ticks), 2) if user_ticks + system_ticks
-                else None, "peak_rss_mib": round(peak_rss, 1)}
+                else None, "peak_rss_mib": round(peak_rss, 1), "accounts": accounts}
+
+    def accounts(self, session, system: str, instances: int, direction: str) -> dict:
+        """Where the frames went, once the load is over: the hub's drops for slow readers (the
+        bridge's socket CAN -> Zenoh, the counting reader's Zenoh -> CAN) and zenoh-node's own
+        counters summed over its instances and buses, so a run with loss says where it lost."""
+        try:
+            hub = self.hub.stats()
+        except (subprocess.CalledProcessError, json.JSONDecodeError):
+            hub = {}
+        out = {"hub_rx_drops": sum(c.get("rx_drops", 0) for c in hub.get("clients", []))}
+        if not system.startswith("zenoh-node"):
+            return out
+        names = CAN_TO_ZENOH_COUNTERS if direction == "can-to-zenoh" else ZENOH_TO_CAN_COUNTERS
+        for k in range(instances):
+            stats = bridge_stats(session, "vehicle/can", f"zenoh-node-{k}") or {}
+            for bus in stats.get("buses", []):
+                for name in names:
+                    out[name] = out.get(name, 0) + bus.get(name, 0)
+                rejected = sum((bus.get("tx_rejected") or {}).values())
+                if direction == "zenoh-to-can":
+                    out["tx_rejected"] = out.get("tx_rejected", 0) + rejected
+        return out
 
     def cleanup(self) -> None:
         for p in self.procs.procs:
@@ -260,13 +286,29 @@ def first_loss(results: list[dict], system: str) -> str:
     return f"{lossy[0]} buses" if lossy else f"none up to {highest} buses"
 
 
+LOSS_COUNTERS = ("hub_rx_drops", "rx_queue_drops", "publish_errors", "tx_rejected", "tx_queue_full", "can_tx_errors",
+                 "tx_abandoned")
+
+
+def lossless_cell(r: dict) -> str:
+    """yes, or no with the counters that saw frames go (and what zenoh-node wrote to the bus): where
+    the frames went missing."""
+    if r["lossless"]:
+        return "yes"
+    acc = r.get("accounts") or {}
+    seen = [f"{name} {acc[name]}" for name in LOSS_COUNTERS if acc.get(name)]
+    if "tx_frames" in acc:
+        seen.append(f"tx_frames {acc['tx_frames']}")
+    return f"no ({', '.join(seen)})" if seen else "no"
+
+
 def table(results: list[dict]) -> str:
     rows = ["| direction | system | buses | instances | offered frames/s | received | lossless | delivered frames/s | "
             "CPU µs/frame | of it in the kernel | switches/frame | RSS MiB |", "|" + "---|" * 12]
     for r in sorted(results, key=lambda r: (DIRECTIONS.index(r.get("direction", DIRECTIONS[0])),
                                             SYSTEMS.index(r["system"]), r["buses"])):
         rows.append(f"| {r.get('direction', DIRECTIONS[0])} | {r['system']} | {r['buses']} | {r['instances']} | "
-                    f"{r['offered_fps']} | {r['received']}/{r['offered']} | {'yes' if r['lossless'] else 'no'} | "
+                    f"{r['offered_fps']} | {r['received']}/{r['offered']} | {lossless_cell(r)} | "
                     f"{r['delivered_fps']} | {r['cpu_us_per_frame']}{' (ticks)' if r.get('cpu_from_ticks') else ''} | "
                     f"{r['kernel_share']} | {r.get('switches_per_frame', '-')} | {r['peak_rss_mib']} |")
     for direction in DIRECTIONS:

@@ -252,3 +252,13 @@ def test_paired_added_latency_is_judged_on_the_median_of_the_pairs():
     c2z = rows[("| can-to-zenoh", "zenoh-node")]
     assert "+20.0 (+10.0, +200.0, +20.0)" in c2z and "+45.0" in c2z and c2z.endswith("| met |")
     assert rows[("| zenoh-to-can", "zenoh-node")].endswith("| not met |")  # 60 at 10 %
+
+
+def test_bridge_table_says_where_a_lossy_run_lost_its_frames():
+    node = "zenoh-node"
+    lossy = dict(result(node, 8, False, 4), direction="zenoh-to-can",
+                 accounts={"hub_rx_drops": 1651, "tx_samples": 144000, "tx_frames": 144000, "tx_queue_full": 0})
+    row = next(line for line in bench_bridge.table([lossy]).splitlines() if line.startswith("| zenoh-to-can | zenoh"))
+    assert "| no (hub_rx_drops 1651, tx_frames 144000) |" in row
+    assert bench_bridge.lossless_cell(dict(lossy, lossless=True)) == "yes"
+    assert bench_bridge.lossless_cell(dict(lossy, accounts={})) == "no"
