@@ -410,6 +410,101 @@ static void test_rest_of_a_direct_write_goes_first(void)
 	zn_node_stop();
 }
 
+/* Commands queued behind a busy bus leave together: after the one the bus held, the 20 single-frame
+ * commands that waited go in one port call (Linux: one sendmmsg), in arbitration order. */
+static void test_queued_commands_written_together(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_tx_room("vcan0", 0); /* the first command waits in the transmitter for room */
+	size_t len = command(big, 1, 0x700);
+	CHECK(deliver_ms(big, len) < FAST_MS);
+	uint8_t w[16];
+	for (uint8_t i = 0; i < 20; i++) /* ids falling: the heap, not arrival, decides the order */
+		CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x300 - i, 0, i), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 21"));
+	mock_can_tx_room("vcan0", -1);
+	CHECK(mock_can_wait_tx("vcan0", 21, WAIT_MS) == 21);
+	CHECK(mock_can_tx("vcan0", 0).identifier == 0x700);
+	for (size_t i = 1; i < 21; i++)
+		CHECK(mock_can_tx("vcan0", i).data[0] == 20 - i);
+	if (mock_can_tx_calls("vcan0") != 2)
+		fprintf(stderr, "test_queued_commands_written_together: %zu transmit calls for 1 + 20 commands\n",
+			mock_can_tx_calls("vcan0"));
+	CHECK(mock_can_tx_calls("vcan0") == 2);
+	CHECK(stats_soon_has("\"tx_frames\": 21"));
+	zn_node_stop();
+}
+
+/* A group the bus takes in part: the command cut in its frames finishes next, whole and alone,
+ * before a command of higher priority that came meanwhile, and before the command behind it that
+ * had not begun (back in the heap, then grouped with the newcomer); nothing is lost. */
+static void test_group_taken_in_part(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_tx_room("vcan0", 0);
+	static uint8_t wire[4][16 * 5];
+	static const struct {
+		uint32_t id;
+		size_t frames;
+	} cmd[] = { { 0x100, 3 }, { 0x200, 1 }, { 0x300, 5 }, { 0x400, 2 } };
+	for (size_t i = 0; i < 4; i++)
+		CHECK(mock_zenoh_deliver("vehicle/can/tx", wire[i], command(wire[i], cmd[i].frames, cmd[i].id), NULL, 0) ==
+		      0);
+	CHECK(stats_soon_has("\"tx_samples\": 4"));
+	mock_can_tx_room("vcan0", 6); /* 0x100's 3 frames, then of the group 0x200 and two of 0x300 */
+	CHECK(mock_can_wait_tx("vcan0", 6, WAIT_MS) == 6);
+	uint8_t w[16];
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x050, 0, 0xA1), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 5"));
+	mock_can_tx_room("vcan0", -1);
+	CHECK(mock_can_wait_tx("vcan0", 12, WAIT_MS) == 12);
+	static const uint32_t order[] = { 0x100, 0x101, 0x102, 0x200, 0x300, 0x301,
+					  0x302, 0x303, 0x304, 0x050, 0x400, 0x401 };
+	for (size_t i = 0; i < 12; i++) {
+		if (mock_can_tx("vcan0", i).identifier != order[i])
+			fprintf(stderr, "test_group_taken_in_part: frame %zu is 0x%X, expected 0x%X\n", i,
+				(unsigned)mock_can_tx("vcan0", i).identifier, (unsigned)order[i]);
+		CHECK(mock_can_tx("vcan0", i).identifier == order[i]);
+	}
+	/* 0x100; the group; the rest of 0x300; 0x050 and 0x400 together */
+	CHECK(mock_can_tx_calls("vcan0") == 4);
+	/* one write took nothing (the callback's, at first): the rest of 0x300 waited for room as the
+	 * transmitter's next, never tried again in a group */
+	CHECK(mock_can_wait_tx_empty("vcan0", 0, 0) == 1);
+	CHECK(stats_soon_has("\"tx_frames\": 12"));
+	CHECK(stats_soon_has("\"can_tx_errors\": 0, \"tx_queue_full\": 0, \"tx_abandoned\": 0"));
+	zn_node_stop();
+}
+
+/* A group the bus takes none of at once: its first command is written alone, with the bus's
+ * timeouts, the others wait in their places and then go alone too (a full bus is not asked
+ * again per command); nothing is lost or abandoned. */
+static void test_group_taken_in_none(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_tx_room("vcan0", 0); /* the first command: the callback's write takes none, the transmitter waits */
+	uint8_t w[16];
+	for (uint8_t i = 0; i < 4; i++)
+		CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x100u * (i + 1u), 0, i), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 4"));
+	mock_can_tx_room("vcan0", 1); /* the first goes; the group of the other three finds no room */
+	CHECK(mock_can_wait_tx_empty("vcan0", 2, WAIT_MS) == 2);
+	mock_can_tx_room("vcan0", -1);
+	CHECK(mock_can_wait_tx("vcan0", 4, WAIT_MS) == 4);
+	for (size_t i = 0; i < 4; i++)
+		CHECK(mock_can_tx("vcan0", i).identifier == 0x100u * (i + 1) && mock_can_tx("vcan0", i).data[0] == i);
+	CHECK(mock_can_tx_calls("vcan0") == 4); /* after a group the bus took none of, each alone (tx_solo) */
+	CHECK(stats_soon_has("\"tx_frames\": 4"));
+	CHECK(stats_soon_has("\"can_tx_errors\": 0, \"tx_queue_full\": 0, \"tx_abandoned\": 0"));
+	zn_node_stop();
+}
+
 /* Runs every test, or the one named by argv[1] (to run one against other code). */
 int main(int argc, char **argv)
 {
@@ -429,6 +524,9 @@ int main(int argc, char **argv)
 		{ "stale_waiting", test_stale_waiting_for_the_bus },
 		{ "direct", test_free_bus_written_by_the_callback },
 		{ "direct_rest", test_rest_of_a_direct_write_goes_first },
+		{ "together", test_queued_commands_written_together },
+		{ "group_part", test_group_taken_in_part },
+		{ "group_none", test_group_taken_in_none },
 	};
 	for (size_t i = 0; i < sizeof(tests) / sizeof(tests[0]); i++)
 		if (argc < 2 || strcmp(argv[1], tests[i].name) == 0)

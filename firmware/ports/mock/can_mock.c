@@ -26,6 +26,7 @@ struct mock_bus {
 	unsigned generation; /* handles of an older generation are of a bus that went away */
 	size_t capacity;     /* frames held before injected ones are dropped (0: MOCK_FRAMES) */
 	size_t rx_drops, reads, tx_calls; /* frames dropped; receive and transmit calls that moved frames */
+	size_t tx_empty;		  /* transmit calls with a timeout of 0 that moved none */
 };
 
 struct zn_can {
@@ -151,6 +152,18 @@ size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms)
 	while (b->tx_len < n && pthread_cond_timedwait(&sent, &lock, &ts) == 0)
 		;
 	size_t got = b->tx_len;
+	pthread_mutex_unlock(&lock);
+	return got;
+}
+
+size_t mock_can_wait_tx_empty(const char *bus, size_t n, int timeout_ms)
+{
+	struct timespec ts = mock_deadline(timeout_ms);
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 1);
+	while (b->tx_empty < n && pthread_cond_timedwait(&sent, &lock, &ts) == 0)
+		;
+	size_t got = b->tx_empty;
 	pthread_mutex_unlock(&lock);
 	return got;
 }
@@ -329,6 +342,10 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 		if ((can->bus->stalled == MOCK_HOLD || !can->bus->stalled) && timeout_ms != 0) /* held, or no room */
 			pthread_cond_wait(&sent, &lock);
 		else if (timeout_ms == 0 || pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
+			if (timeout_ms == 0 && *done == 0) {
+				can->bus->tx_empty++;
+				pthread_cond_broadcast(&sent);
+			}
 			pthread_mutex_unlock(&lock);
 			return ESP_ERR_TIMEOUT;
 		}

@@ -75,6 +75,8 @@ size_t mock_can_rx_drops(const char *bus);
 /* Receive calls that returned frames (zn_can_receive or _burst); transmit calls that sent. */
 size_t mock_can_reads(const char *bus);
 size_t mock_can_tx_calls(const char *bus);
+/* Waits until n transmit calls with a timeout of 0 took no frame (a full bus); returns how many did. */
+size_t mock_can_wait_tx_empty(const char *bus, size_t n, int timeout_ms);
 
 /* Zenoh */
 size_t mock_zenoh_put_count(void);

@@ -111,6 +111,8 @@ struct bus {
 	 * the rest of its command the bus did not take at once, the transmitter's next (count 0: none) */
 	int tx_direct;
 	can_message_t *tx_burst;
+	struct tx_cmd *tx_group; /* the transmitter's commands of one burst (zn_tx.c, Queued commands together) */
+	uint32_t tx_solo;	 /* commands to write alone after a group the bus took none of */
 	struct tx_cmd tx_rest;
 	int tx_failed; /* the transmitter's last command failed and no frame went since: at stop, give up */
 	zn_thread_t *transmitter;

@@ -104,6 +104,7 @@ static void release(int final_stats)
 		free(b->txq);
 		free(b->tx_heap);
 		free(b->tx_burst);
+		free(b->tx_group);
 		free(b->payload);
 		free(b->attachment);
 		zn_cond_free(b->nonempty);

@@ -16,6 +16,17 @@
  * the bus does not take at once is the transmitter's next command (tx_rest),
  * ahead of the queue: a command stays whole, never interleaved with another.
  *
+ * Queued commands together: when the transmitter takes a command of fewer frames than a
+ * burst, the commands next in the heap whose frames still fit go with it, in heap order,
+ * in one burst (Linux: one sendmmsg), written with a timeout of 0 like a direct write. What
+ * the bus does not take at once stays whole and in order: a command cut in its frames is the
+ * next one, alone, with the bus's timeouts (tx_rest); those not begun go back to the heap in
+ * their places. When the bus took none of a group, its first command is written alone with
+ * the bus's timeouts and the next ZN_CAN_BURST_MAX commands too (tx_solo, or until the queue
+ * empties), so a bus that stays full costs one gathering per 64 commands, not one each. A
+ * stale command ends a group (it is refused when its turn comes), so freshness and order are
+ * as when each command went alone.
+ *
  * A command's source time: its attachment's first frame time when it carries
  * an attachment (and that time is not 0), else the sample's Zenoh timestamp,
  * else none (accepted, counted tx_unstamped). Ages are CLOCK_REALTIME now minus
@@ -64,7 +75,8 @@ esp_err_t zn_tx_queue_init(struct bus *b, uint32_t frames)
 	b->txq = calloc(frames, sizeof(*b->txq));
 	b->tx_heap = calloc(frames, sizeof(*b->tx_heap)); /* a command has at least one frame */
 	b->tx_burst = malloc(ZN_CAN_BURST_MAX * sizeof(*b->tx_burst));
-	if (!b->txq || !b->tx_heap || !b->tx_burst)
+	b->tx_group = malloc(ZN_CAN_BURST_MAX * sizeof(*b->tx_group)); /* a command has at least one frame */
+	if (!b->txq || !b->tx_heap || !b->tx_burst || !b->tx_group)
 		return ESP_ERR_NO_MEM;
 	for (uint32_t i = 0; i < frames; i++)
 		b->txq[i].next = i + 1 < frames ? i + 1 : ZN_TX_NONE;
@@ -72,6 +84,7 @@ esp_err_t zn_tx_queue_init(struct bus *b, uint32_t frames)
 	b->tx_len = b->tx_waiting = b->tx_order = 0;
 	b->tx_rest.count = 0;
 	b->tx_direct = 0;
+	b->tx_solo = 0;
 	return ESP_OK;
 }
 
@@ -331,6 +344,60 @@ static int transmit_command(struct bus *b, struct tx_cmd *c, can_message_t *burs
 	return 1;
 }
 
+/* Takes from the heap, after the command group[0], the commands whose frames fit one burst with
+ * it, stopping at a stale one; returns how many the group holds (tx_lock held). */
+static uint32_t gather(struct bus *b, struct tx_cmd *group)
+{
+	uint32_t n = 1, frames = group[0].count;
+	int64_t age_ms = 0;
+	while (b->tx_waiting > 0 && frames + b->tx_heap[0].count <= ZN_CAN_BURST_MAX &&
+	       !stale(b->tx_heap[0].source_ns, &age_ms)) {
+		group[n] = heap_pop(b);
+		frames += group[n++].count;
+	}
+	return n;
+}
+
+/* Writes a group of whole commands in one burst with a timeout of 0 and returns the frames the
+ * bus took. Each command's frames written are released and counted; a command begun but not
+ * finished becomes tx_rest; those not begun go back to the heap, but for group[0] when nothing
+ * went: the caller writes it alone, with the bus's timeouts. */
+static size_t write_group(struct bus *b, struct tx_cmd *group, uint32_t n)
+{
+	uint32_t k = 0;
+	for (uint32_t i = 0; i < n; i++)
+		for (uint32_t at = group[i].first, j = 0; j < group[i].count; j++, at = b->txq[at].next)
+			b->tx_burst[k++] = b->txq[at].msg;
+	size_t sent = 0;
+	zn_mutex_lock(b->can_lock);
+	zn_can_send_burst(b->can, b->tx_burst, k, &sent, 0);
+	zn_mutex_unlock(b->can_lock);
+	zn_mutex_lock(b->tx_lock);
+	if (sent > 0)
+		b->tx_failed = 0;
+	size_t left = sent;
+	for (uint32_t i = 0; i < n; i++) {
+		struct tx_cmd *c = &group[i];
+		uint32_t done = left < c->count ? (uint32_t)left : c->count;
+		left -= done;
+		for (uint32_t j = 0; j < done; j++) {
+			uint32_t next = b->txq[c->first].next;
+			release(b, c->first, 1);
+			c->first = next;
+		}
+		c->count -= done;
+		if (c->count == 0 || (i == 0 && sent == 0))
+			continue;
+		if (done > 0)
+			b->tx_rest = *c;
+		else
+			heap_push(b, *c);
+	}
+	zn_mutex_unlock(b->tx_lock);
+	COUNT_N(b->n.tx_frames, sent);
+	return sent;
+}
+
 void zn_tx_transmitter_thread(void *arg)
 {
 	struct bus *b = arg;
@@ -338,8 +405,11 @@ void zn_tx_transmitter_thread(void *arg)
 		zn_mutex_lock(b->tx_lock);
 		/* a callback writing directly (tx_direct) has the bus until it hands over; at stop none
 		 * is (zn_tx_close waited for them) */
-		while ((b->tx_direct || (b->tx_waiting == 0 && b->tx_rest.count == 0)) && !b->tx_stop)
+		while ((b->tx_direct || (b->tx_waiting == 0 && b->tx_rest.count == 0)) && !b->tx_stop) {
+			if (!b->tx_direct)
+				b->tx_solo = 0; /* the queue emptied: the bus keeps up again */
 			zn_cond_wait(b->tx_ready, b->tx_lock, -1);
+		}
 		if ((b->tx_waiting == 0 && b->tx_rest.count == 0) || (b->tx_stop && b->tx_failed)) {
 			uint32_t left = b->tx_len; /* stopping: the bus does not take them */
 			b->tx_waiting = 0;
@@ -358,10 +428,22 @@ void zn_tx_transmitter_thread(void *arg)
 		int too_old = !rest && stale(c.source_ns, &age_ms);
 		if (too_old)
 			release(b, c.first, c.count);
+		uint32_t grouped = 1;
+		if (!rest && !too_old && b->tx_solo > 0)
+			b->tx_solo--;
+		else if (!rest && !too_old) {
+			b->tx_group[0] = c;
+			grouped = gather(b, b->tx_group);
+		}
 		zn_mutex_unlock(b->tx_lock);
 		if (too_old) {
 			refuse_stale(b, age_ms, c.count, "in the transmit queue");
 			continue;
+		}
+		if (grouped > 1) {
+			if (write_group(b, b->tx_group, grouped) > 0)
+				continue; /* what is left of it is tx_rest or back in the heap */
+			b->tx_solo = ZN_CAN_BURST_MAX; /* only the transmitter reads or writes it */
 		}
 		if (!transmit_command(b, &c, b->tx_burst)) { /* the bus's one burst buffer: one writer at a time */
 			zn_mutex_lock(b->tx_lock);
