@@ -297,8 +297,9 @@ def lossless_cell(r: dict) -> str:
         return "yes"
     acc = r.get("accounts") or {}
     seen = [f"{name} {acc[name]}" for name in LOSS_COUNTERS if acc.get(name)]
-    if "tx_frames" in acc:
-        seen.append(f"tx_frames {acc['tx_frames']}")
+    # Zenoh -> CAN: the commands that reached zenoh-node and the frames it wrote; fewer commands
+    # than offered, none refused, is loss before the bridge (the router's congestion drops)
+    seen += [f"{name} {acc[name]}" for name in ("tx_samples", "tx_frames") if name in acc]
     return f"no ({', '.join(seen)})" if seen else "no"
 
 
