@@ -144,28 +144,27 @@ size_t mock_can_tx_count(const char *bus)
 	return n;
 }
 
-size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms)
+/* Waits until a bus's counter (a size_t at offset) reaches n or timeout_ms passes; returns it. */
+static size_t wait_counter(const char *bus, size_t offset, size_t n, int timeout_ms)
 {
 	struct timespec ts = mock_deadline(timeout_ms);
 	pthread_mutex_lock(&lock);
-	struct mock_bus *b = find_bus(bus, 1);
-	while (b->tx_len < n && pthread_cond_timedwait(&sent, &lock, &ts) == 0)
+	size_t *counter = (size_t *)((char *)find_bus(bus, 1) + offset);
+	while (*counter < n && pthread_cond_timedwait(&sent, &lock, &ts) == 0)
 		;
-	size_t got = b->tx_len;
+	size_t got = *counter;
 	pthread_mutex_unlock(&lock);
 	return got;
 }
 
+size_t mock_can_wait_tx(const char *bus, size_t n, int timeout_ms)
+{
+	return wait_counter(bus, offsetof(struct mock_bus, tx_len), n, timeout_ms);
+}
+
 size_t mock_can_wait_tx_empty(const char *bus, size_t n, int timeout_ms)
 {
-	struct timespec ts = mock_deadline(timeout_ms);
-	pthread_mutex_lock(&lock);
-	struct mock_bus *b = find_bus(bus, 1);
-	while (b->tx_empty < n && pthread_cond_timedwait(&sent, &lock, &ts) == 0)
-		;
-	size_t got = b->tx_empty;
-	pthread_mutex_unlock(&lock);
-	return got;
+	return wait_counter(bus, offsetof(struct mock_bus, tx_empty), n, timeout_ms);
 }
 
 void mock_can_stall(const char *bus, int stalled)

@@ -171,6 +171,18 @@ static void refuse_stale(struct bus *b, int64_t age_ms, uint32_t frames, const c
 		       b->name, b->tx_key, where, age_ms, zn_node.cfg.tx_max_age_ms, frames);
 }
 
+/* The first n frames of command c are on the bus: their slots are released, in chain order, and
+ * they leave the command (tx_lock held). */
+static void written(struct bus *b, struct tx_cmd *c, uint32_t n)
+{
+	for (uint32_t i = 0; i < n; i++) {
+		uint32_t next = b->txq[c->first].next;
+		release(b, c->first, 1);
+		c->first = next;
+	}
+	c->count -= n;
+}
+
 /* Writes the next burst of command c (up to ZN_CAN_BURST_MAX of its frames, copied to burst)
  * with zn_can_send_burst's timeout (0: what the bus takes at once). The frames written leave
  * the command (c->first, c->count) and their slots are released; counted in tx_frames. */
@@ -186,15 +198,10 @@ static esp_err_t write_burst(struct bus *b, struct tx_cmd *c, can_message_t *bur
 	esp_err_t rc = zn_can_send_burst(b->can, burst, k, &sent, timeout_ms);
 	zn_mutex_unlock(b->can_lock);
 	zn_mutex_lock(b->tx_lock);
-	for (size_t i = 0; i < sent; i++) { /* the slots written, in chain order */
-		uint32_t next = b->txq[c->first].next;
-		release(b, c->first, 1);
-		c->first = next;
-	}
+	written(b, c, (uint32_t)sent);
 	if (sent > 0)
 		b->tx_failed = 0; /* the bus takes frames again */
 	zn_mutex_unlock(b->tx_lock);
-	c->count -= (uint32_t)sent;
 	COUNT_N(b->n.tx_frames, sent);
 	return rc;
 }
@@ -380,12 +387,7 @@ static size_t write_group(struct bus *b, struct tx_cmd *group, uint32_t n)
 		struct tx_cmd *c = &group[i];
 		uint32_t done = left < c->count ? (uint32_t)left : c->count;
 		left -= done;
-		for (uint32_t j = 0; j < done; j++) {
-			uint32_t next = b->txq[c->first].next;
-			release(b, c->first, 1);
-			c->first = next;
-		}
-		c->count -= done;
+		written(b, c, done);
 		if (c->count == 0 || (i == 0 && sent == 0))
 			continue;
 		if (done > 0)
@@ -429,11 +431,13 @@ void zn_tx_transmitter_thread(void *arg)
 		if (too_old)
 			release(b, c.first, c.count);
 		uint32_t grouped = 1;
-		if (!rest && !too_old && b->tx_solo > 0)
-			b->tx_solo--;
-		else if (!rest && !too_old) {
-			b->tx_group[0] = c;
-			grouped = gather(b, b->tx_group);
+		if (!rest && !too_old) {
+			if (b->tx_solo > 0) {
+				b->tx_solo--;
+			} else {
+				b->tx_group[0] = c;
+				grouped = gather(b, b->tx_group);
+			}
 		}
 		zn_mutex_unlock(b->tx_lock);
 		if (too_old) {
