@@ -16,7 +16,7 @@ from pathlib import Path
 import yaml
 
 from . import scenario
-from .errors import InputError, TraceError
+from .errors import TraceError
 from .trace import STREAM_CACHE, format_line, iter_trace, where_in
 from .wire import id_hex
 
@@ -200,23 +200,12 @@ class SignalSummary:
         return "\n".join(lines)
 
 
-def _database(path: Path):
-    """The DBC's cantools database, or an InputError naming the file (as scenario.load says it)."""
-    from .dbc import load_dbc
-    if not path.is_file():
-        raise InputError(str(path), None, "no such DBC file")
-    try:
-        return load_dbc(path)
-    except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
-        raise InputError(str(path), None, f"cannot load it as a DBC (cantools): {str(e).splitlines()[0]}") from None
-
-
 def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
     """Per message of the DBC seen in the trace: frames, and per signal count, min, max, mean
     (physical values, as cantools decodes them) and the value-table names seen. One pass, state
     per signal only."""
-    from .dbc import cycle_time_ms, message_of
-    db = _database(dbc_path)
+    from .dbc import cycle_time_ms, message_of, read_dbc
+    db = read_dbc(dbc_path)
     stats: dict[str, MessageStats] = {}
     unknown: dict[str, int] = defaultdict(int)
     interfaces: set[str] = set()
@@ -258,7 +247,8 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list],
     signals whose every value had a name as one_of those names, others a range of the observed
     min/max widened by SIGNAL_MARGIN_PCT of the span (of the value when constant), within the
     signal's DBC limits."""
-    db = _database(summary.dbc)
+    from .dbc import read_dbc
+    db = read_dbc(summary.dbc)
     out: list[tuple[str, dict[str, list], str]] = []
     for m in summary.messages:
         message = db.get_message_by_name(m.name)

@@ -13,21 +13,70 @@ import cantools
 
 @lru_cache(maxsize=16)
 def _load(path: str, mtime_ns: int):
-    return cantools.database.load_file(path)
+    db = cantools.database.load_file(path)
+    _refuse_duplicates(db)
+    return db
+
+
+class DbcError(ValueError):
+    """A DBC cantools reads but the bench cannot use as it is (the message says what to change)."""
+
+
+def _refuse_duplicates(db) -> None:
+    """Two messages of one id (and format) or one name: cantools keeps the last for lookups, so
+    every frame of that id would decode as the last one. Refused, naming both."""
+    ids: dict[tuple[int, bool], str] = {}
+    names: dict[str, int] = {}
+    for m in db.messages:
+        key = (m.frame_id, m.is_extended_frame)
+        if key in ids:
+            raise DbcError(f"messages {ids[key]} and {m.name} have the same id "
+                           f"{m.frame_id:0{8 if m.is_extended_frame else 3}X}: give each message its own id")
+        if m.name in names:
+            raise DbcError(f"two messages are named {m.name} (ids {names[m.name]:X} and {m.frame_id:X}): "
+                           "give each message its own name")
+        ids[key], names[m.name] = m.name, m.frame_id
 
 
 def load_dbc(path: Path | None):
-    """The cantools database of a DBC file (None for None); cantools' own error on a bad file."""
+    """The cantools database of a DBC file (None for None); cantools' own error on a bad file,
+    DbcError on one it reads but the bench cannot use."""
     return _load(str(path), Path(path).stat().st_mtime_ns) if path else None
 
 
-def message_of(dbc, frame):
-    """The DBC's message of a frame (id and 11/29-bit as the DBC has them), else None."""
+def read_dbc(path: Path):
+    """load_dbc for a file a user named on the command line: an InputError naming it when it is
+    missing or cannot be used."""
+    from .errors import InputError
+    if not Path(path).is_file():
+        raise InputError(str(path), None, "no such DBC file")
     try:
-        message = dbc.get_message_by_frame_id(frame.can_id)
+        return load_dbc(path)
+    except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
+        raise InputError(str(path), None, f"cannot load it as a DBC (cantools): {load_error_text(e)}") from None
+
+
+def load_error_text(error: Exception) -> str:
+    """A DBC load error on one line: cantools' message whole (it names what it could not read on
+    the lines after its first)."""
+    return " ".join(line.strip() for line in str(error).splitlines() if line.strip())[:1000]
+
+
+def message_of(dbc, frame):
+    """The DBC's message of a frame (id and 11/29-bit as the DBC has them), else None: a 29-bit
+    frame is looked up among the 29-bit messages whatever its id, as cantools only does for ids
+    above 7FF unless told."""
+    try:
+        message = dbc.get_message_by_frame_id(frame.can_id, force_extended_id=frame.extended)
     except KeyError:
         return None
     return message if message.is_extended_frame == frame.extended else None
+
+
+def too_long_for_can_20(message) -> bool:
+    """A message the bench cannot carry: more than CAN 2.0's 8 data bytes (a CAN FD bus's
+    message of up to 8 bytes goes as a CAN 2.0 frame, its bytes as they are)."""
+    return message.length > 8
 
 
 def decode_signals(dbc, frame) -> tuple[str, dict] | None:
@@ -61,15 +110,12 @@ def value_range(signal) -> tuple[float, float, str]:
     """(lowest, highest, where from) of the physical values a signal can carry: what its raw bits
     encode at its scale and offset, narrowed to the DBC's minimum and maximum where it gives them
     (cantools reads [0|0] as none); where from is empty when the DBC's limits are the range."""
-    lo, hi, encoded = -math.inf, math.inf, ""
-    if not signal.is_float:  # a float signal's bits carry any value a scenario would give
-        raw = (-(2 ** (signal.length - 1)), 2 ** (signal.length - 1) - 1) if signal.is_signed \
-            else (0, 2 ** signal.length - 1)
-        ends = sorted(r * signal.scale + signal.offset for r in raw)
-        lo, hi = ends
-        encoded = (f"what its {signal.length}{' signed' if signal.is_signed else ''} bits at scale "
-                   f"{signal.scale:g}, offset {signal.offset:g} carry: [{lo:g}, {hi:g}]")
+    lo, hi, encoded = bits_range(signal)
     dbc_lo, dbc_hi = signal.minimum, signal.maximum
+    if (dbc_lo is not None and dbc_lo > hi) or (dbc_hi is not None and dbc_hi < lo) or \
+            (dbc_lo is not None and dbc_hi is not None and dbc_lo > dbc_hi):  # a DBC's slip: the bits decide
+        return lo, hi, (f"{encoded}; the DBC's [{dbc_lo}|{dbc_hi}] is outside it, so not used" if encoded
+                        else f"the DBC's [{dbc_lo}|{dbc_hi}] is empty, so not used")
     inside = dbc_lo is not None and dbc_hi is not None and lo <= dbc_lo and dbc_hi <= hi
     if dbc_lo is not None:
         lo = max(lo, dbc_lo)
@@ -82,6 +128,24 @@ def value_range(signal) -> tuple[float, float, str]:
     return lo, hi, given + encoded
 
 
+def bits_range(signal) -> tuple[float, float, str]:
+    """(lowest, highest, said) of the physical values a signal's bits encode at its scale and
+    offset, whatever the DBC's minimum and maximum say (said: empty for a 64-bit float)."""
+    if signal.is_float:  # IEEE 754: a 32-bit float's largest finite value; a 64-bit float's is past any scenario's
+        if signal.length != 32:
+            return -math.inf, math.inf, ""
+        top = FLOAT32_MAX * abs(signal.scale)
+        return signal.offset - top, signal.offset + top, f"what a 32-bit float carries: [{-top:g}, {top:g}]"
+    raw = (-(2 ** (signal.length - 1)), 2 ** (signal.length - 1) - 1) if signal.is_signed \
+        else (0, 2 ** signal.length - 1)
+    lo, hi = sorted(r * signal.scale + signal.offset for r in raw)
+    return lo, hi, (f"what its {signal.length}{' signed' if signal.is_signed else ''} bits at scale "
+                    f"{signal.scale:g}, offset {signal.offset:g} carry: [{lo:g}, {hi:g}]")
+
+
+FLOAT32_MAX = 3.4028234663852886e38
+
+
 def range_problem(signal, value: float) -> str | None:
     """Why a number is not one of the signal's physical values (None if it is one)."""
     lo, hi, where = value_range(signal)
@@ -92,12 +156,45 @@ def range_problem(signal, value: float) -> str | None:
             + (f" ({where})" if where else ""))
 
 
+# GenMsgSendType values with no cycle of their own (Vector's and OEM templates' spellings); a
+# type named cyclic or periodic is cyclic, and one the bench does not know leaves it to the cycle
+SEND_TYPES_UNSAID = ("", "nomsgsendtype", "notused", "none")
+
+
 def cycle_time_ms(message) -> float | None:
-    """The message's GenMsgCycleTime (ms) when the DBC gives one above 0 and its send type
-    (GenMsgSendType, where the DBC has it) is a cyclic one; else None (event-driven, unknown)."""
-    if not message.cycle_time or message.cycle_time <= 0:
+    """The message's GenMsgCycleTime (ms) when the DBC gives one above 0 and its send type does
+    not make it an event message; else None (event-driven, unknown)."""
+    cycle = _cycle_number(message)
+    if cycle is None or not math.isfinite(cycle) or cycle <= 0:
         return None
-    send_type = message.send_type
-    if send_type is not None and "cyclic" not in str(send_type).lower():
+    return cycle if send_type_cyclic(message.send_type) else None
+
+
+def _cycle_number(message) -> float | None:
+    """GenMsgCycleTime as a number, whatever the attribute's type: an ENUM's value is the index
+    of its label (cantools gives the index), a STRING's is its text; None if it is not a number."""
+    cycle = message.cycle_time
+    attribute = message.dbc.attributes.get("GenMsgCycleTime") if message.dbc else None
+    if attribute is not None and attribute.definition.type_name == "ENUM" and isinstance(cycle, int):
+        labels = attribute.definition.choices or []
+        cycle = labels[cycle] if 0 <= cycle < len(labels) else None
+    if isinstance(cycle, bool) or cycle is None:
         return None
-    return float(message.cycle_time)
+    try:
+        return float(cycle)
+    except (TypeError, ValueError):
+        return None
+
+
+def send_type_cyclic(send_type) -> bool:
+    """Whether a GenMsgSendType leaves a message cyclic: Cyclic, CyclicIfActive, FixedPeriodic,
+    EventPeriodic, ... are; NonCyclic, Event, OnChange, IfActive, Spontaneous, ... are not; none
+    or one that says nothing (NoMsgSendType, NotUsed) leaves it to the cycle time."""
+    if send_type is None or isinstance(send_type, int):
+        return True
+    said = "".join(ch for ch in str(send_type).lower() if ch.isalnum())
+    if said in SEND_TYPES_UNSAID:
+        return True
+    if said.startswith(("non", "no")):
+        return False
+    return "cyclic" in said or "periodic" in said

@@ -20,6 +20,7 @@ import itertools
 import json
 import select
 import statistics
+import sys
 import threading
 import time
 from array import array
@@ -28,7 +29,7 @@ from pathlib import Path
 
 import can
 
-from . import runkeys
+from . import restbus, runkeys
 from .plans import SENT_LOG_HEADER, frame_of, schedule, sent_line
 from .scenario import Ecu, Scenario
 from .stats import percentile
@@ -196,12 +197,16 @@ def responder(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: s
     rules = {(r.on.frame_id, r.on.is_extended_frame): r for r in ecu.rules}
     filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if ext else 0x7FF, "extended": ext} for i, ext in sorted(rules)]
     answers: dict[tuple[int, bool], int] = {}
+    unanswerable: list[str] = []  # the first reason, then a count
 
     def answer_of(msg: can.Message) -> can.Message | None:
         key = (msg.arbitration_id, msg.is_extended_id)
         try:
             message, data = rules[key].answer(bytes(msg.data), answers.get(key, 0))
-        except Exception:  # noqa: BLE001 - a request the DBC cannot decode is counted, not answered
+        except restbus.UndecodableRequest:  # counted (received - answered - unanswerable), not answered
+            return None
+        except restbus.Unanswerable as e:
+            unanswerable.append(str(e) if not unanswerable else "")
             return None
         answers[key] = answers.get(key, 0) + 1
         return can.Message(arbitration_id=message.frame_id, is_extended_id=message.is_extended_frame,
@@ -210,9 +215,13 @@ def responder(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: s
     received, answered, turnaround_ms = _answer_requests(
         ecu, filters, run_dir, stop, session, run_id, timeout_s,
         lambda msg: (msg.arbitration_id, msg.is_extended_id) in rules, answer_of)
-    # every request is answered or undecodable (a failed send ends the role)
-    return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
-            "undecodable": received - answered, "turnaround_ms": fidelity(turnaround_ms)}
+    # every request is answered, undecodable or unanswerable (a failed send ends the role)
+    summary = {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
+               "undecodable": received - answered - len(unanswerable), "unanswerable": len(unanswerable),
+               "turnaround_ms": fidelity(turnaround_ms)}
+    if unanswerable:
+        summary["unanswerable_first"] = unanswerable[0]
+    return summary
 
 
 def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, timeout_s: float) -> dict:
@@ -228,8 +237,12 @@ def run(scenario: Scenario, name: str, run_id: str, run_dir: Path, router: str, 
         elif ecu.role == "responder":
             summary = responder(ecu, run_dir, stop, session, run_id, timeout_s)
         else:
+            if ecu.left_out:  # a restbus node's CAN FD messages: said, never truncated
+                print(f"ecu {ecu.name}: {ecu.dbc_node}'s messages left out: {', '.join(ecu.left_out)}", file=sys.stderr)
             runkeys.wait_token(session, runkeys.capture_ready(run_id), timeout_s)
             summary = replay(ecu, scenario, run_dir)
+            if ecu.left_out:
+                summary["left_out"] = list(ecu.left_out)
         stop_sub.undeclare()
         tmp = run_dir / f".ecu-{ecu.name}.json.tmp"
         tmp.write_text(json.dumps(summary, indent=2))

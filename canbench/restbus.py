@@ -8,13 +8,18 @@ next line) or else from the DBC: GenSigStartValue, and the value of raw 0 where 
 A multiplexer the scenario does not set selects its message's pages in turn, one per frame
 (ascending ids, nested multiplexers within the pages that carry them), as an ECU sending every
 page does; its GenSigStartValue or raw 0 need not be one of its ids. Signals the scenario names
-as counters count 0, 1, ... per frame of their message and wrap after their largest value; a
-checksum signal (one whole byte, raw = physical) carries, over the other bytes of the payload in
-order:
+as counters count 0, 1, ... per frame that carries them (each frame of their message; of their
+pages for a signal of some pages only) and wrap after their largest value; a checksum signal (one
+whole byte, raw = physical) carries, in the frames that carry it, over the other bytes of the
+payload in order:
 
   xor             every byte XORed together
   crc8_sae_j1850  CRC-8 SAE J1850: polynomial 0x1D, initial 0xFF, final XOR 0xFF, not reflected
                   (crccheck's Crc8SaeJ1850; "123456789" -> 0x4B)
+
+The bench carries CAN 2.0 frames: a restbus node's CAN FD messages of more than 8 data bytes are
+left out and said (Ecu.left_out: `canbench validate` and the ECU's log name them), those of up to
+8 go as CAN 2.0 frames; a command, a request or an answer of more than 8 bytes is a problem.
 
 Plans are made lazily, like the replay ECU's (canbench.plans): an hour of a restbus node is
 hundreds of thousands of frames, each encoded as it is sent."""
@@ -34,7 +39,7 @@ from typing import Any
 import can
 from crccheck.crc import Crc8SaeJ1850
 
-from .dbc import cycle_time_ms, name_problem, range_problem
+from .dbc import bits_range, cycle_time_ms, name_problem, range_problem, send_type_cyclic, too_long_for_can_20
 from .scenario import YAML_BOOLS, text_number
 
 
@@ -97,31 +102,51 @@ class MessagePlan:
 
     def values(self, t: float) -> dict:
         """Every signal's value at t; a multiplexer the scenario does not set is left out (encode
-        gives it the frame's page)."""
+        gives it the frame's page) unless it selects no pages (then it is a plain signal)."""
+        paged = self.message.is_multiplexed()
         return {s.name: self.sources[s.name].at(t) if s.name in self.sources else default_value(s)
-                for s in self.message.signals if s.name in self.sources or not s.is_multiplexer}
+                for s in self.message.signals if s.name in self.sources or not (s.is_multiplexer and paged)}
 
     def encode(self, values: dict, n: int) -> bytes:
-        """The payload of the n-th frame with these signal values (counter and checksum applied;
-        multiplexers not in values at the n-th of the pages the given ones allow)."""
+        """The payload of the n-th frame with these signal values (counter and checksum applied
+        where the frame's page carries them; multiplexers not in values at the n-th of the pages
+        the given ones allow)."""
         m = self.message
+        allowed: list[dict[str, int]] = [{}]
         if m.is_multiplexed():
             allowed = _pages(m, tuple((k, v) for k, v in values.items() if k in multiplexers(m)))
             values.update(allowed[n % len(allowed)])
+        page = allowed[n % len(allowed)]
         if self.counter:
-            values[self.counter] = n % counter_modulo(m.get_signal_by_name(self.counter))
-        if self.checksum:
-            values[self.checksum[0]] = 0
+            values[self.counter] = carried_count(m, self.counter, allowed, n) \
+                % counter_modulo(m.get_signal_by_name(self.counter))
+        checksum = self.checksum if self.checksum and on_page(m, self.checksum[0], page) else None
+        if checksum:
+            values[checksum[0]] = 0
         data = bytearray(m.encode(values, scaling=True, strict=False))
-        if self.checksum:
-            at = checksum_byte(m, self.checksum[0])
-            data[at] = CHECKSUMS[self.checksum[1]](bytes(data[:at] + data[at + 1:]))
+        if checksum:
+            at = checksum_byte(m, checksum[0])
+            data[at] = CHECKSUMS[checksum[1]](bytes(data[:at] + data[at + 1:]))
         return bytes(data)
 
     def frame(self, n: int, t: float, start: float, bus: str) -> can.Message:
         m = self.message
         return can.Message(timestamp=start + t, arbitration_id=m.frame_id, is_extended_id=m.is_extended_frame,
                            dlc=m.length, data=self.encode(self.values(t), n), channel=bus)
+
+
+def every_page(plan: MessagePlan, t: float = 0.0) -> None:
+    """Encodes one frame of each page the plan sends at t (a check before a run: the run encodes
+    them as it goes); an error names the message."""
+    allowed = _pages(plan.message, ()) if plan.message.is_multiplexed() else [{}]
+    for n in range(min(len(allowed), MAX_PAGES_CHECKED)):
+        try:
+            plan.encode(plan.values(t), n)
+        except Exception as e:  # noqa: BLE001 - cantools' encode errors say what it could not encode
+            raise ValueError(f"{plan.message.name}: {e}") from None
+
+
+MAX_PAGES_CHECKED = 256
 
 
 def default_value(signal) -> float | str:
@@ -158,13 +183,33 @@ def pages(message, given: dict) -> list[dict[str, int]]:
     def level(names: list[str]) -> list[dict[str, int]]:
         out: list[dict[str, int]] = [{}]
         for name in names:
-            ids = [number(name, given[name])] if name in given else multiplexer_ids(message, name)
+            ids = [number(name, given[name])] if name in given else \
+                multiplexer_ids(message, name) or [int(default_value(message.get_signal_by_name(name)))]  # no pages
             options = [{name: i, **inner} for i in ids
                        for inner in level([s.name for s in message.signals if s.is_multiplexer
                                            and s.multiplexer_signal == name and i in (s.multiplexer_ids or ())])]
             out = [{**a, **b} for a in out for b in options]
         return out
     return level([s.name for s in message.signals if s.is_multiplexer and s.multiplexer_signal is None])
+
+
+def on_page(message, name: str, page: dict[str, int]) -> bool:
+    """Whether a page (multiplexer -> id; {} for a message without) carries the signal: every
+    multiplexer above it selects it."""
+    signal = message.get_signal_by_name(name)
+    while signal.multiplexer_signal is not None:
+        if page.get(signal.multiplexer_signal) not in (signal.multiplexer_ids or ()):
+            return False
+        signal = message.get_signal_by_name(signal.multiplexer_signal)
+    return True
+
+
+def carried_count(message, name: str, allowed: list[dict[str, int]], n: int) -> int:
+    """How many frames before the n-th carried the signal, the pages going in turn (n for a
+    signal of every page)."""
+    carrying = [i for i, page in enumerate(allowed) if on_page(message, name, page)]
+    turn = n % len(allowed)
+    return (n // len(allowed)) * len(carrying) + sum(1 for i in carrying if i < turn)
 
 
 def mux_ids(message, name: str) -> list[int] | None:
@@ -183,7 +228,9 @@ def checksum_byte(message, name: str) -> int:
     """The payload byte a one-byte signal occupies (ValueError if it is not exactly one byte)."""
     if message.get_signal_by_name(name).length != 8:
         raise ValueError("a checksum signal fills exactly one byte of the payload (8 bits, byte-aligned)")
-    values = {s.name: 0 for s in message.signals} | (pages(message, {})[0] if message.is_multiplexed() else {})
+    every = pages(message, {}) if message.is_multiplexed() else [{}]
+    page = next((p for p in every if on_page(message, name, p)), {})  # one that carries it
+    values = {s.name: 0 for s in message.signals} | page
     zero = message.encode({**values, name: 0}, scaling=False, strict=False)
     full = message.encode({**values, name: 0xFF}, scaling=False, strict=False)  # the byte(s) it takes
     ones = [i for i, (a, b) in enumerate(zip(zero, full, strict=True)) if a != b]
@@ -259,11 +306,31 @@ class Rule:
     line: int = 0
 
     def answer(self, request: bytes, n: int) -> tuple[Any, bytes]:
-        decoded = self.on.decode(request, decode_choices=False)
+        """The n-th answer; UndecodableRequest if the request is not its message, Unanswerable
+        if a copied value is one the answer's signal cannot carry."""
+        try:
+            decoded = self.on.decode(request, decode_choices=False)
+        except Exception as e:  # noqa: BLE001 - cantools' decode errors say what it could not read
+            raise UndecodableRequest(str(e)) from None
         values = self.send.values(0.0)
         for target, (source, scale, offset) in self.copies.items():
             values[target] = decoded[source] * scale + offset
-        return self.send.message, self.send.encode(values, n)
+            lo, hi, said = bits_range(self.send.message.get_signal_by_name(target))
+            if not lo <= values[target] <= hi:
+                raise Unanswerable(f"{self.send.message.name}.{target} from {self.on.name}.{source}: "
+                                   f"{values[target]:g} is outside {said}")
+        try:
+            return self.send.message, self.send.encode(values, n)
+        except Exception as e:  # noqa: BLE001 - cantools' encode errors say what it could not encode
+            raise Unanswerable(f"{self.send.message.name}: {e}") from None
+
+
+class UndecodableRequest(ValueError):
+    """A request frame its rule's message does not decode."""
+
+
+class Unanswerable(ValueError):
+    """A request whose answer cannot be encoded (a copied value out of the answer signal's range)."""
 
 
 # --- reading the scenario's values (problems reported, never raised) ---------------------------
@@ -432,21 +499,51 @@ def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_
     return MessagePlan(message, sources, counter, checksum, cycle_time_ms(message))  # None: an event message
 
 
+def start_value_problems(plan: MessagePlan, where: list, fail: Fail, copied: frozenset[str] = frozenset()) -> None:
+    """A signal the scenario leaves at its DBC start value (GenSigStartValue) that its bits cannot
+    carry is a problem here, naming it, not an encoding error mid-run (on whichever page); copied:
+    a responder's signals set from the request."""
+    m = plan.message
+    for s in m.signals:
+        if s.name in plan.sources or s.name in copied or s.is_multiplexer or s.name == plan.counter or \
+                (plan.checksum and s.name == plan.checksum[0]):
+            continue
+        value = default_value(s)
+        lo, hi, said = bits_range(s)
+        if isinstance(value, int | float) and not lo <= value <= hi:
+            fail(where, f"{m.name}.{s.name}: its start value {value:g} (GenSigStartValue) is outside {said}: "
+                 "give it a value in signals")
+
+
 def _split(key: str) -> tuple[str, str] | None:
     message, dot, signal = key.partition(".")
     return (message, signal) if dot and message and signal else None
 
 
+def why_not_cyclic(message) -> str:
+    """Why the DBC gives a message no cycle of its own (for a node whose messages are all so)."""
+    if send_type_cyclic(message.send_type):
+        return f"GenMsgCycleTime {message.cycle_time!r}" if message.cycle_time is not None else "no GenMsgCycleTime"
+    return f"GenMsgSendType {message.send_type}"
+
+
 def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
-                  fail_file: FailFile) -> tuple[MessagePlan, ...]:
+                  fail_file: FailFile) -> tuple[tuple[MessagePlan, ...], tuple[str, ...]]:
     """A restbus ECU's plans: every cyclic message its dbc_node transmits; `signals`,
-    `counters`, `checksums` keyed Message.Signal, `cycle_ms` per message (overriding the DBC)."""
+    `counters`, `checksums` keyed Message.Signal, `cycle_ms` per message (overriding the DBC);
+    and the messages left out that it transmits (CAN FD ones), each with why."""
     node = spec["dbc_node"]
-    nodes = sorted(n.name for n in db.nodes)
+    nodes = sorted({n.name for n in db.nodes} | {s for m in db.messages for s in m.senders})  # BU_ may omit senders
     if node not in nodes:
         fail([*where, "dbc_node"], f"the DBC has no node {node!r} (it has {nodes})")
-        return ()
+        return (), ()
     sent = [m for m in db.messages if node in m.senders]
+    if not sent:
+        fail([*where, "dbc_node"], f"{node} transmits no message in the DBC (no BO_ names it as sender)")
+        return (), ()
+    left_out = tuple(f"{m.name} ({m.length} data bytes: CAN FD)" for m in sent  # those it would send
+                     if too_long_for_can_20(m) and cycle_time_ms(m))
+    sent = [m for m in sent if not too_long_for_can_20(m)]
     by_name = {m.name: m for m in sent}
     for kind in ("signals", "counters", "checksums", "cycle_ms"):
         items = spec.get(kind) or {}
@@ -457,7 +554,8 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
                 fail(at, f"{key!r}: name a signal as Message.Signal")
             elif name not in by_name:
                 known = "the DBC has no message" if name not in {m.name for m in db.messages} \
-                    else f"{node} does not transmit"
+                    else f"{node} does not transmit" if not too_long_for_can_20(db.get_message_by_name(name)) \
+                    else "the bench carries CAN 2.0 frames, not the CAN FD message"
                 fail(at, f"{known} {name!r} ({node} transmits {sorted(by_name)})")
     out = []
     for m in sent:
@@ -467,18 +565,26 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
         plan = message_plan(m, spec, where, base, fail, fail_file, key_of)
         cycle = (spec.get("cycle_ms") or {}).get(m.name, plan.cycle_ms)
         if cycle:
+            start_value_problems(plan, where, fail)
             out.append(MessagePlan(m, plan.sources, plan.counter, plan.checksum, float(cycle)))
     if not out:
-        fail([*where, "dbc_node"], f"{node} transmits no cyclic message (GenMsgCycleTime): give cycle_ms")
-    return tuple(out)
+        why = "; ".join(f"{m.name}: {why_not_cyclic(m)}" for m in sent[:8]) + ("; ..." if len(sent) > 8 else "")
+        fail([*where, "dbc_node"], f"{node} transmits no cyclic CAN 2.0 message ({why or 'only CAN FD ones'}): "
+             "give cycle_ms per message")
+    return tuple(out), left_out
 
 
 def _message(db, name: str, at: list, fail: Fail):
+    """A message the bench can send or read: the DBC's, and CAN 2.0."""
     try:
-        return db.get_message_by_name(name)
+        message = db.get_message_by_name(name)
     except KeyError:
         fail(at, f"the DBC has no message {name!r}")
         return None
+    if too_long_for_can_20(message):
+        fail(at, f"{name} has {message.length} data bytes (CAN FD): the bench carries CAN 2.0 frames, up to 8")
+        return None
+    return message
 
 
 def responder_rules(db, specs: list, where: list, base: Path, fail: Fail, fail_file: FailFile) -> tuple[Rule, ...]:
@@ -506,6 +612,7 @@ def responder_rules(db, specs: list, where: list, base: Path, fail: Fail, fail_f
             else:
                 constants[target] = value
         plan = message_plan(send, {**spec, "set": constants}, at, base, fail, fail_file, signals_key="set")
+        start_value_problems(plan, at, fail, frozenset(copies))
         rules.append(Rule(on, plan, copies))
     return tuple(rules)
 
@@ -518,6 +625,7 @@ def command_plan(db, spec: dict, where: list, base: Path, fail: Fail, fail_file:
     if m is None:
         return None, ()
     plan = message_plan(m, spec, where, base, fail, fail_file)
+    start_value_problems(plan, where, fail)
     cycle = spec.get("cycle_ms", plan.cycle_ms)
     schedule = []
     names = {s.name for s in m.signals}

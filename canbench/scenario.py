@@ -133,6 +133,7 @@ class Ecu:
     run_s: float = 0.0
     dbc_node: str = ""     # restbus: the DBC node it stands in for
     restbus: tuple = ()    # restbus: its messages (canbench.restbus.MessagePlan), from the bus's DBC
+    left_out: tuple = ()   # restbus: messages of its node it cannot send (CAN FD), each "Name (why)"
     rules: tuple = ()      # responder: canbench.restbus.Rule
 
     def answer(self, can_id: int, data: bytes) -> tuple[int, bytes]:
@@ -437,7 +438,7 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
     loaded with cantools here so a DBC it cannot read is a problem at its line; then
     expect.signals and cycle_time.from_dbc against them (canbench.signals)."""
     from . import signals
-    from .dbc import load_dbc
+    from .dbc import load_dbc, load_error_text
     bus_dbcs: dict[str, Path] = {}
     where_of: dict[Path, list] = {}
     if dbc is not None and dbc.is_file():
@@ -458,7 +459,7 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
         try:
             load_dbc(file)
         except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
-            fail(where, f"cannot load {file.name} as a DBC (cantools): {str(e).splitlines()[0]}")
+            fail(where, f"cannot load {file.name} as a DBC (cantools): {load_error_text(e)}")
     cycle = (doc.get("expect") or {}).get("cycle_time") if isinstance(doc.get("expect"), dict) else None
     if isinstance(cycle, dict) and cycle.get("from_dbc") and not bus_dbcs:
         fail(["expect", "cycle_time", "from_dbc"], "needs a DBC: give the scenario a dbc, or a bus (buses[].dbc)")
@@ -495,8 +496,8 @@ def _restbus_parts(path: Path, doc: Any, bus_dbcs: dict[str, Path], ecus: list[E
         if e.role == "restbus" and "dbc_node" in spec:
             db = db_of(e.bus, [*where, "role"])
             if db is not None:
-                e = dataclasses.replace(e, dbc_node=spec["dbc_node"],
-                                        restbus=restbus.restbus_plans(db, spec, where, path.parent, fail, fail_file))
+                plans, left_out = restbus.restbus_plans(db, spec, where, path.parent, fail, fail_file)
+                e = dataclasses.replace(e, dbc_node=spec["dbc_node"], restbus=plans, left_out=left_out)
         elif e.role == "responder" and "rules" in spec:
             db = db_of(e.bus, [*where, "role"])
             if db is not None:

@@ -106,8 +106,11 @@ def encoding_problems(path: Path, sc: scenario.Scenario) -> list[InputError]:
             found.append(ScenarioError(str(path), scenario.line_of(doc, where),
                                        f"{'.'.join(map(str, where))}: a frame cannot be encoded with the DBC: {e}"))
 
+    from . import restbus
     for i, ecu in enumerate(sc.ecus):
         if ecu.role == "restbus":
+            for plan in ecu.restbus:  # every page once, at the start
+                check(["ecus", i], partial(restbus.every_page, plan))
             check(["ecus", i], partial(plans.schedule, ecu, sc))  # makes each message's last frame
     for i, command in enumerate(sc.commands):
         if command.signal_plan is not None:
@@ -147,6 +150,9 @@ def run(paths: list[Path]) -> int:
         else:
             sc = scenario.load(path)
             print(f"{path}: ok ({len(sc.ecus)} ECUs on {', '.join(sc.bus_names)})")
+            for ecu in sc.ecus:
+                if ecu.left_out:
+                    print(f"{path}: note: ECU {ecu.name} ({ecu.dbc_node}) leaves out {', '.join(ecu.left_out)}")
     if count:
         print(f"canbench validate: {count} problem{'s' if count > 1 else ''} in {bad} of {len(paths)} "
               f"scenario file{'s' if len(paths) > 1 else ''}", file=sys.stderr)

@@ -30,7 +30,7 @@ import rerun as rr
 import zenoh
 
 from . import ros2, ros2_msgs, runkeys, wire
-from .dbc import load_dbc
+from .dbc import read_dbc
 from .errors import InputError
 from .viewer_args import DEFAULT_ENDPOINT
 from .viewer_types import LOGGERS, Context
@@ -277,7 +277,7 @@ def run(args) -> int:
     for option, path in (("--urdf", args.urdf), ("--dbc", args.dbc), ("source", args.source)):
         if path is not None and not Path(path).is_file():
             raise InputError(str(path), None, f"{option}: no such file")
-    bus_dbcs = {bus: load_dbc(path) for bus, path in bus_dbc_paths(args.bus_dbc).items()}
+    bus_dbcs = {bus: read_dbc(path) for bus, path in bus_dbc_paths(args.bus_dbc).items()}
     rr.init("canbench-view", spawn=False)
     if args.save:
         rr.save(str(args.save))
@@ -288,7 +288,7 @@ def run(args) -> int:
         # Rerun's URDF importer: links become coordinate frames named as in the URDF, joints
         # transforms between them, so TF frames of the same names attach live data to the model
         rr.log_file_from_path(args.urdf, static=True)
-    dbc = load_dbc(args.dbc) if args.dbc else None
+    dbc = read_dbc(args.dbc) if args.dbc else None
     if args.source:
         from .recording import view_mcap
         count, malformed = view_mcap(args.source, Context(dbc, bus_dbcs))

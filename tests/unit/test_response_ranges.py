@@ -113,7 +113,8 @@ def test_a_value_the_bits_cannot_carry_is_refused_before_the_run(tmp_path):
 def test_value_range_of_float_and_limited_signals():
     resp = cantools.database.load_string(DBC).get_message_by_name("Resp")
     assert dbc.value_range(resp.get_signal_by_name("RespVal")) == (-1000, 1000, "")
-    assert dbc.value_range(resp.get_signal_by_name("Flt"))[:2] == (float("-inf"), float("inf"))
+    # a 32-bit float carries up to its largest finite value (above it cantools would send inf)
+    assert dbc.value_range(resp.get_signal_by_name("Flt"))[:2] == (-dbc.FLOAT32_MAX, dbc.FLOAT32_MAX)
     assert dbc.range_problem(resp.get_signal_by_name("Raw8"), 117.5) is None  # 255 * 0.5 - 10
 
 

@@ -45,7 +45,7 @@ def test_a_frame_cantools_cannot_encode_is_a_problem_at_the_entry(tmp_path, caps
     path = abs_restbus(tmp_path)
     assert validate.run([path]) == 2
     assert capsys.readouterr().err.splitlines()[0] == (
-        f"{path}:6: ecus.0: a frame cannot be encoded with the DBC: Expected multiplexer id in {{1 or 2}}, "
+        f"{path}:6: ecus.0: a frame cannot be encoded with the DBC: BREMSE_33: Expected multiplexer id in {{1 or 2}}, "
         "for multiplexer \"X\" but got 0")
 
 
