@@ -4,10 +4,12 @@ replays the trace with gates derived from it; with a DBC, per-message signal
 statistics and proposed signal ranges and DBC cycle times, marked for review."""
 from __future__ import annotations
 
+import filecmp
 import os
 import re
 import shutil
 import statistics
+import tempfile
 from array import array
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -16,7 +18,7 @@ from pathlib import Path
 import yaml
 
 from . import scenario
-from .errors import TraceError
+from .errors import InputError, TraceError
 from .trace import STREAM_CACHE, format_line, iter_trace, where_in
 from .wire import id_hex
 
@@ -242,14 +244,15 @@ def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
                          sorted(interfaces))
 
 
-def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list], str]]:
-    """(Message.Signal, expectation, why) proposed from what the trace showed: value-table
+def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list], str, bool]]:
+    """(Message.Signal, expectation, why, usable) proposed from what the trace showed: value-table
     signals whose every value had a name as one_of those names, others a range of the observed
     min/max widened by SIGNAL_MARGIN_PCT of the span (of the value when constant), within the
-    signal's DBC limits."""
-    from .dbc import read_dbc
+    signal's DBC limits. Not usable: a range wholly outside what the DBC lets the signal carry
+    (the scenario would refuse it; the DBC, or its decoding of this trace, is wrong)."""
+    from .dbc import read_dbc, value_range
     db = read_dbc(summary.dbc)
-    out: list[tuple[str, dict[str, list], str]] = []
+    out: list[tuple[str, dict[str, list], str, bool]] = []
     for m in summary.messages:
         message = db.get_message_by_name(m.name)
         for sig in (m.signals or {}).values():
@@ -258,7 +261,7 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list],
             key = f"{m.name}.{sig.name}"
             seen = f"seen {sig.min:.6g}..{sig.max:.6g}{' ' + sig.unit if sig.unit else ''} in {sig.count} values"
             if sig.names and not sig.unnamed and len(sig.names) < CHOICES_SEEN_MAX:
-                out.append((key, {"one_of": sorted(sig.names)}, f"value-table names seen in {sig.count} values"))
+                out.append((key, {"one_of": sorted(sig.names)}, f"value-table names seen in {sig.count} values", True))
                 continue
             span = sig.max - sig.min
             margin = span * SIGNAL_MARGIN_PCT / 100 if span else (abs(sig.max) * SIGNAL_MARGIN_PCT / 100 or 1.0)
@@ -272,8 +275,12 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list],
                 ("below", dbc_signal.minimum, dbc_signal.minimum is not None and sig.min < dbc_signal.minimum),
                 ("above", dbc_signal.maximum, dbc_signal.maximum is not None and sig.max > dbc_signal.maximum))
                 if out_of]
+            lo, hi, _ = value_range(dbc_signal)
+            usable = not (_round(high) < lo or _round(low) > hi)
             out.append((key, {"range": [_round(low), _round(high)]},
-                        seen + (f" ({' and '.join(beyond)}: is the DBC right?)" if beyond else "")))
+                        seen + (f" ({' and '.join(beyond)}: is the DBC right?)" if beyond else "")
+                        + ("" if usable else f"; not gated: wholly outside the [{lo:g}, {hi:g}] the DBC allows"),
+                        usable))
     return out
 
 
@@ -292,10 +299,10 @@ def _signals_yaml(summary: SignalSummary) -> str:
              f"  # observed min/max widened by {SIGNAL_MARGIN_PCT}% of the span (within the DBC's limits), value-table",
              "  # signals as one_of the names seen. A trace is not a specification: set what the ECU must do,",
              "  # drop what is not a requirement (counters, checksums).",
-             "  signals:"]
-    for key, spec, why in proposals:
+             "  signals:" if any(usable for *_, usable in proposals) else "  # signals:"]
+    for key, spec, why, usable in proposals:
         body = yaml.safe_dump(spec, default_flow_style=True, width=1000).strip()
-        lines.append(f"    {key}: {body}  # review: {why}")
+        lines.append(f"    {'' if usable else '# '}{key}: {body}  # review: {why}")
     return "\n".join(lines) + "\n"
 
 
@@ -315,22 +322,37 @@ def bus_names(interfaces: list[str]) -> dict[str, str]:
     return {i: i if i in taken else next(free) for i in interfaces}
 
 
+def copy_in(source: Path, copy: Path) -> Path:
+    """source copied to copy, which may already hold the same bytes (a scaffold run again); one
+    with other bytes is another scenario's file there, never overwritten (an InputError)."""
+    if copy.exists():
+        if not filecmp.cmp(source, copy, shallow=False):
+            raise InputError(str(copy), None, f"exists with other contents than {source} (another scenario's "
+                             "file?): scaffold into another folder, or rename the file")
+        return copy
+    copy.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(source, copy)
+    return copy
+
+
 def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[str, Path], dict[str, float]]:
     """A trace of several interfaces as one candump -L file per interface (its frames only, in
     order, the frame on the interface's bus): what each bus's replay ECU sends; and each one's
     first frame after the trace's first (s): its start_offset_s, so the buses keep their
     recorded timing to one another (a replay starts at its own first frame). One pass."""
     folder.mkdir(parents=True, exist_ok=True)
-    paths = {iface: folder / f"{trace.stem}.{iface}.log" for iface in buses}
-    outs = {iface: open(path, "w") for iface, path in paths.items()}
     first: dict[str, int] = {}
-    try:
-        for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE):
-            first.setdefault(str(iface), t_ns)
-            outs[str(iface)].write(format_line(t_ns, buses[str(iface)], frame) + "\n")
-    finally:
-        for out in outs.values():
-            out.close()
+    with tempfile.TemporaryDirectory(dir=folder) as work:  # copy_in each part when whole
+        parts = {iface: Path(work) / f"{trace.stem}.{iface}.log" for iface in buses}
+        outs = {iface: open(path, "w") for iface, path in parts.items()}
+        try:
+            for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE):
+                first.setdefault(str(iface), t_ns)
+                outs[str(iface)].write(format_line(t_ns, buses[str(iface)], frame) + "\n")
+        finally:
+            for out in outs.values():
+                out.close()
+        paths = {iface: copy_in(part, folder / part.name) for iface, part in parts.items()}
     start = min(first.values())
     return paths, {iface: round((t_ns - start) / 1e9, 6) for iface, t_ns in first.items()}
 
@@ -375,10 +397,7 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
     signal_summary = summarise_signals(trace, dbc) if dbc is not None else None
     home = scenario_path.resolve().parent
     if dbc is not None and not dbc.resolve().is_relative_to(home):
-        dbc_copy = home / "dbc" / dbc.name
-        dbc_copy.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(dbc, dbc_copy)
-        dbc = dbc_copy
+        dbc = copy_in(dbc, home / "dbc" / dbc.name)
     notes = ""
     if len(buses) > 1:  # one bus per recorded interface, each replayed from its own part of the trace
         traces, offsets = split_trace(trace, buses, home / "traces")
@@ -388,10 +407,7 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
                   f"replay ECU each (traces/{trace.stem}.<interface>.log, candump -L).\n")
     else:
         if not trace.resolve().is_relative_to(home):
-            copy = home / "traces" / trace.name
-            copy.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(trace, copy)
-            trace = copy
+            trace = copy_in(trace, home / "traces" / trace.name)
         ecus = [{"name": "recorded", "bus": next(iter(buses.values()), "vcan0"),
                  "trace": os.path.relpath(trace.resolve(), home)}]
     cycles, disagree = gated_cycles(s)

@@ -34,7 +34,7 @@ MAX_TRACE_FRAMES = 10_000_000
 CANDUMP_SUFFIXES = (".log", ".candump", "")
 TEXT_READERS = {".asc": can.ASCReader, ".trc": can.TRCReader, ".csv": can.CSVReader}  # line = the file's line
 BINARY_SUFFIXES = (".blf", ".mf4")  # python-can's LogReader; "line" = the frame's number
-FORMATS_SAID = "candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc .mf4 (python-can)"
+FORMATS_SAID = "candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc (python-can; .mf4 with asammdf)"
 FRAME_CACHE = 1 << 20  # distinct frame texts kept for sharing (then it starts again: only memory is at stake)
 STREAM_CACHE = 1 << 14  # the same for a pass that keeps no frames (summarise, validate): ~4 MiB
 
@@ -168,6 +168,83 @@ class _LineCounter:
         self.f.close()
 
 
+class _AscLines(_LineCounter):
+    """An ASC file as python-can's ASCReader takes it. Its header reader stops at the first line
+    that is not a date, base, comment or 'internal events logged' line and drops that line: in a
+    file without the events line, the first frame. That line is given here when missing (not
+    counted: lines stay the file's). 'timestamps relative' is refused at its line: the reader
+    takes every stamp as absolute."""
+
+    def __init__(self, f, path: Path):
+        super().__init__(f)
+        self.path, self.header = path, True
+        self.pending: str | None = None
+
+    def __next__(self) -> str:
+        if self.pending is not None:
+            self.line, self.text, self.pending = self.line + 1, self.pending, None
+            return self.text
+        text = super().__next__()
+        if not self.header:
+            return text
+        line = text.strip()
+        if ASC_RELATIVE.match(line):
+            raise TraceError(str(self.path), self.line, "timestamps relative: the bench reads absolute ASC stamps "
+                             "(python-can takes each as absolute); export the log with absolute timestamps")
+        if ASC_EVENTS.match(line):
+            self.header = False
+        elif not ASC_HEADER.match(line):
+            self.header, self.pending, self.line = False, text, self.line - 1
+            return "no internal events logged\n"
+        return text
+
+
+ASC_HEADER = re.compile(r"^(date\s|base\s|//)", re.IGNORECASE)  # what ASCReader's header reader reads on past
+ASC_EVENTS = re.compile(r"^(no)?\s*internal\s+events\s+logged", re.IGNORECASE)
+ASC_RELATIVE = re.compile(r"^base\s+(hex|dec)\s+timestamps\s+relative", re.IGNORECASE)
+# a transmit request, not a frame on the bus (python-can's message pattern reads its 'Tx' as one)
+ASC_TX_REQUEST = re.compile(r"^\s*\d+\.\d+\s+\d+\s+\S+\s+(\S+\s+)?TxRq\b")
+CSV_HEADER = "timestamp,arbitration_id,extended,remote,error,dlc,data"  # python-can's CSVWriter's first line
+ENDS = {".asc": ("end triggerblock",), ".trc": (";",), ".csv": ()}  # a last line that is no frame
+FRAME_START = {".asc": re.compile(r"^\d+\.\d+\s+\d+\s+\S"), ".trc": re.compile(r"^\d+\)?\s+\d"),
+               ".csv": re.compile(r".")}  # a line python-can would read a frame from
+
+
+def _cut(text: str, msg: can.Message | None, suffix: str) -> bool:
+    """Whether an unended last line is a cut one: a frame line python-can read nothing from, or
+    a data frame ending in half a byte (python-can reads 'F' as 0F)."""
+    if msg is None:
+        return bool(FRAME_START[suffix].match(text))
+    last = text.split()[-1] if text.split() else ""
+    return not msg.is_remote_frame and len(last) == 1 and last in "0123456789abcdefABCDEF"
+
+
+def _unended_line(path: Path) -> tuple[int, str] | None:
+    """(line, text) of a text trace's last line when the file has no end of line after it and it
+    is not the format's closing line: whole, or a recording cut there (_cut says which)."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        f.seek(max(0, size - 4096))
+        tail = f.read()
+        if tail.endswith(b"\n"):
+            return None
+        text = tail.rsplit(b"\n", 1)[-1].decode("utf-8", "replace").strip()
+        ends = ENDS.get(path.suffix.lower(), ())
+        if not text or (ends and text.lower().startswith(ends)):
+            return None
+        f.seek(0)
+        lines = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")) + 1
+    return lines, text
+
+
+def _csv_problem(text: str) -> str | None:
+    """Why a python-can CSV row's flags are not its 0/1 (it reads 'true' as 0: a 29-bit frame as 11-bit)."""
+    fields = text.strip().split(",")
+    if len(fields) >= 5 and any(flag not in ("0", "1") for flag in fields[2:5]):
+        return f"extended, remote and error are 0 or 1 in python-can's CSV, not {','.join(fields[2:5])!r}"
+    return None
+
+
 class _ReaderLog(logging.Handler):
     """What python-can's TRC reader only logs, with the line it was reading: a line it could not
     parse (WARNING) and the record types it does not read (INFO 'Unsupported type')."""
@@ -196,7 +273,19 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
     if suffix == ".trc" and _trc_version(path) is None:
         hint = " (the file has no ;$FILEVERSION line: read as TRC 1.0)"
     if suffix in TEXT_READERS:
-        counter = _LineCounter(open(path, encoding="utf-8-sig", errors="replace"))
+        unended = _unended_line(path)
+
+        def cut_there() -> None:
+            assert unended
+            fail(unended[0], f"the file ends inside this line: a recording cut there ({unended[1][:60]!r})")
+        if suffix == ".csv":
+            with open(path, encoding="utf-8-sig", errors="replace") as f:
+                first = f.readline().strip()
+            if first != CSV_HEADER:
+                raise TraceError(str(path), 1, f"python-can's CSV begins with the line {CSV_HEADER} "
+                                 f"(its reader skips the first line whatever it is): {first[:60]!r}")
+        f = open(path, encoding="utf-8-sig", errors="replace")
+        counter = _AscLines(f, path) if suffix == ".asc" else _LineCounter(f)
         log = _ReaderLog(counter)
         trc_log = logging.getLogger("can.io.trc")
         trc_log.addHandler(log)
@@ -206,8 +295,23 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
             for msg in TEXT_READERS[suffix](counter):
                 line = counter.line
                 _reader_problems(log, fail)
+                if unended and line == unended[0]:
+                    cut = _cut(unended[1], msg, suffix)
+                    if cut:
+                        cut_there()
+                    unended = None  # said once
+                    if cut:
+                        continue
+                if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
+                    continue  # a transmit request is no frame on the bus
+                problem = _csv_problem(counter.text) if suffix == ".csv" else None
+                if problem:
+                    fail(line, problem)
+                    continue
                 yield line, msg
             _reader_problems(log, fail)
+            if unended and _cut(unended[1], None, suffix):  # python-can read nothing from it
+                cut_there()
         except TraceError:
             raise
         except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad lines
@@ -217,7 +321,10 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
             trc_log.setLevel(level)
             counter.close()
         return
-    if suffix not in BINARY_SUFFIXES and not (suffix == ".gz" and len(path.suffixes) > 1):
+    if suffix == ".gz":
+        raise TraceError(str(path), None, f"a compressed trace: decompress it (gunzip {path.name}) so that "
+                         "every check of its format reads it")
+    if suffix not in BINARY_SUFFIXES:
         hint = ""
         try:
             with open(path, encoding="utf-8-sig", errors="replace") as f:
@@ -296,7 +403,7 @@ def _frame_of_message(msg: can.Message) -> Frame:
 
 def numbered(path: Path) -> bool:
     """Whether a trace's frames are numbered (binary formats) rather than at lines of the file."""
-    return path.suffix.lower() in BINARY_SUFFIXES or path.suffix.lower() == ".gz"
+    return path.suffix.lower() in BINARY_SUFFIXES
 
 
 def where_in(path: Path, line: int) -> str:

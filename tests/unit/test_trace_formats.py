@@ -135,7 +135,8 @@ def test_an_unknown_suffix_names_the_formats_and_spots_candump(tmp_path, capsys)
     assert cli.main(["summarise", str(path)]) == 2
     assert capsys.readouterr().err == (
         f"canbench: {path}: unknown trace format '.txt': its lines read as candump -L, rename it drive.log (the "
-        "bench reads candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc .mf4 (python-can))\n")
+        "bench reads candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc (python-can; .mf4 with "
+        "asammdf))\n")
 
 
 def test_validate_names_every_bad_frame_of_a_python_can_trace(tmp_path):

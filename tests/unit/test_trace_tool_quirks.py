@@ -1,0 +1,148 @@
+"""Recordings as other tools leave them, where python-can's readers alone would read them wrong
+without a word: ASC files with relative stamps, transmit requests or no 'internal events
+logged' line, a text trace cut inside its last line, python-can CSV without its header or with
+'true' flags, a compressed trace; and `canbench scaffold` beside another scenario's files or
+with a DBC whose limits the trace is outside. Each case read a frame wrong, twice or not at all
+before the code it guards."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from canbench import authoring, cli
+from canbench.errors import InputError, TraceError
+from canbench.trace import iter_trace
+
+pytestmark = pytest.mark.unit
+
+ASC_HEAD = "date Mon Nov 13 10:00:00.000 am 2023\nbase hex  timestamps absolute\n"
+
+
+def frames(path: Path) -> list[tuple[int, int, str]]:
+    """(line, t_ns relative to the first, data hex) of every frame read."""
+    out = [(line, t_ns, frame.data.hex()) for line, t_ns, _, frame in iter_trace(path)]
+    return [(line, t_ns - out[0][1], data) for line, t_ns, data in out]
+
+
+def problems(path: Path) -> list[str]:
+    found: list[TraceError] = []
+    list(iter_trace(path, on_problem=found.append))
+    return [str(e) for e in found]
+
+
+def asc(tmp_path: Path, body: str, head: str = ASC_HEAD + "internal events logged\n", end: str = "End TriggerBlock\n"):
+    path = tmp_path / "t.asc"
+    path.write_text(head + "Begin Triggerblock Mon Nov 13 10:00:00.000 am 2023\n" + body + end)
+    return path
+
+
+def test_relative_asc_stamps_are_refused_at_their_header_line(tmp_path):
+    path = asc(tmp_path, "   0.010000 1  123  Rx   d 1 01\n   0.010000 1  123  Rx   d 1 02\n",
+               head=ASC_HEAD.replace("absolute", "relative") + "internal events logged\n")
+    with pytest.raises(TraceError, match=r"t.asc:2: timestamps relative: the bench reads absolute ASC stamps"):
+        frames(path)
+
+
+def test_an_asc_transmit_request_is_not_a_frame(tmp_path):
+    path = asc(tmp_path, "   0.010000 1  123             TxRq d 1 01\n   0.010100 1  123             Tx   d 1 01\n"
+                         "   0.020000 1  123             TxRq d 1 02\n   0.020100 1  123             Tx   d 1 02\n")
+    assert frames(path) == [(6, 0, "01"), (8, 10_000_000, "02")]
+
+
+@pytest.mark.parametrize("head", [ASC_HEAD, ""])
+def test_an_asc_without_the_events_line_keeps_its_first_frame(tmp_path, head):
+    path = tmp_path / "t.asc"
+    path.write_text(head + "   0.010000 1  123  Rx   d 1 01\n   0.020000 1  123  Rx   d 1 02\n"
+                           "   0.030000 1  123  Rx   d 1 03\n")
+    first = len(head.splitlines()) + 1
+    assert frames(path) == [(first, 0, "01"), (first + 1, 10_000_000, "02"), (first + 2, 20_000_000, "03")]
+
+
+@pytest.mark.parametrize("last,said", [
+    ("   0.020000 1  123  Rx   d 8 01 02 03 04 05 06 07 0", "read as 07 00, not the 08 recorded"),
+    ("   0.020000 1  12", "dropped by python-can"),
+])
+def test_an_asc_cut_inside_its_last_line_is_said_there(tmp_path, last, said):
+    path = asc(tmp_path, "   0.010000 1  123  Rx   d 8 01 02 03 04 05 06 07 08\n" + last, end="")
+    assert problems(path) == [f"{path}:6: the file ends inside this line: a recording cut there ({last.strip()!r})"]
+
+
+TRC = (";$FILEVERSION=1.1\n;$STARTTIME=45000.5\n;\n"
+       "     1)         1.0  Rx         0123  2  01 02\n")
+
+
+def test_a_trc_cut_inside_a_byte_is_said_and_a_whole_unended_line_is_read(tmp_path):
+    cut = tmp_path / "cut.trc"
+    cut.write_text(TRC + "     2)        11.0  Rx         0123  2  01 0")
+    assert problems(cut) == [f"{cut}:5: the file ends inside this line: a recording cut there "
+                             "('2)        11.0  Rx         0123  2  01 0')"]
+    whole = tmp_path / "whole.trc"
+    whole.write_text(TRC + "     2)        11.0  Rx         0123  2  01 03")  # no end of line, nothing missing
+    assert [(line, data) for line, _, data in frames(whole)] == [(4, "0102"), (5, "0103")]
+
+
+def test_python_can_csv_needs_its_header_and_flags_of_0_or_1(tmp_path):
+    rows = "1700000000.0,0x123,0,0,0,2,AQI=\n1700000000.01,0x123,0,0,0,2,AQM=\n"
+    bare = tmp_path / "bare.csv"
+    bare.write_text(rows)  # its reader skips line 1 whatever it is: the first frame was lost
+    with pytest.raises(TraceError, match=r"bare.csv:1: python-can's CSV begins with the line timestamp,arbitration_id"):
+        frames(bare)
+    flags = tmp_path / "flags.csv"
+    header = "timestamp,arbitration_id,extended,remote,error,dlc,data\n"
+    flags.write_text(header + rows.replace(",0,0,0,", ",true,0,0,", 1))
+    assert problems(flags) == [f"{flags}:2: extended, remote and error are 0 or 1 in python-can's CSV, not 'true,0,0'"]
+
+
+def test_a_compressed_trace_is_refused_with_what_to_do(tmp_path):
+    path = tmp_path / "drive.log.gz"
+    path.write_bytes(b"\x1f\x8b\x08\x00")
+    with pytest.raises(TraceError, match=r"a compressed trace: decompress it \(gunzip drive.log.gz\)"):
+        frames(path)
+
+
+def test_scaffold_never_writes_over_another_scenarios_trace(tmp_path, capsys):
+    for car, data in (("a", "11"), ("b", "22")):
+        (tmp_path / car).mkdir()
+        (tmp_path / car / "drive.log").write_text("".join(f"({1_700_000_000 + i * 0.01:.6f}) can0 123#{data}\n"
+                                                          for i in range(20)))
+    out = tmp_path / "scenarios"
+    assert cli.main(["scaffold", str(tmp_path / "a" / "drive.log"), "--name", "a", "--out", str(out / "a.yaml")]) == 0
+    capsys.readouterr()
+    assert cli.main(["scaffold", str(tmp_path / "b" / "drive.log"), "--name", "b", "--out", str(out / "b.yaml")]) == 2
+    assert "traces/drive.log: exists with other contents than" in capsys.readouterr().err
+    assert (out / "traces" / "drive.log").read_text() == (tmp_path / "a" / "drive.log").read_text()
+    assert authoring.copy_in(tmp_path / "a" / "drive.log", out / "traces" / "drive.log")  # the same bytes: reused
+    with pytest.raises(InputError):
+        authoring.copy_in(tmp_path / "b" / "drive.log", out / "traces" / "drive.log")
+
+
+DBC = """\
+VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: ECU TESTER
+
+BO_ 291 Cmd: 8 ECU
+ SG_ Offset : 0|8@1- (1,0) [0|127] "" TESTER
+ SG_ Level : 8|8@1+ (1,0) [0|255] "" TESTER
+
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;
+BA_DEF_DEF_ "GenMsgCycleTime" 10;
+"""
+
+
+def test_a_proposal_wholly_outside_the_dbc_limits_is_left_commented_and_the_scaffold_validates(tmp_path):
+    # the trace carries Offset -64..-44, the DBC says [0|127]: the proposal could only be refused
+    (tmp_path / "cmd.dbc").write_text(DBC)
+    trace = tmp_path / "drive.log"
+    trace.write_text("".join(f"({1_700_000_000 + i * 0.01:.6f}) can0 123#{(-64 + i) & 0xFF:02X}{i:02X}000000000000\n"
+                             for i in range(21)))
+    out = tmp_path / "sc" / "drive.yaml"
+    assert cli.main(["scaffold", str(trace), "--name", "d", "--dbc", str(tmp_path / "cmd.dbc"), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "    # Cmd.Offset: {range: [" in text and "not gated: wholly outside the [0, 127] the DBC allows" in text
+    assert "    Cmd.Level: {range: [" in text
