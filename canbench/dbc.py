@@ -4,6 +4,7 @@ the viewer, the signal expectations), a message's database cycle time and send t
 scenario's value cannot be a signal's."""
 from __future__ import annotations
 
+import logging
 import math
 from functools import lru_cache
 from pathlib import Path
@@ -13,7 +14,13 @@ import cantools
 
 @lru_cache(maxsize=16)
 def _load(path: str, mtime_ns: int):
-    db = cantools.database.load_file(path)
+    cantools_log = logging.getLogger("cantools")
+    level = cantools_log.level
+    cantools_log.setLevel(logging.ERROR)  # its warning of an overwritten duplicate: refused below, named
+    try:
+        db = cantools.database.load_file(path)
+    finally:
+        cantools_log.setLevel(level)
     _refuse_duplicates(db)
     return db
 
@@ -53,13 +60,15 @@ def read_dbc(path: Path):
     try:
         return load_dbc(path)
     except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
-        raise InputError(str(path), None, f"cannot load it as a DBC (cantools): {load_error_text(e)}") from None
+        raise InputError(str(path), None, load_error_text(e)) from None
 
 
-def load_error_text(error: Exception) -> str:
-    """A DBC load error on one line: cantools' message whole (it names what it could not read on
-    the lines after its first)."""
-    return " ".join(line.strip() for line in str(error).splitlines() if line.strip())[:1000]
+def load_error_text(error: Exception, name: str = "it") -> str:
+    """Why a DBC (name) cannot be used, on one line: cantools' message whole (it names what it
+    could not read on the lines after its first), or the bench's (DbcError)."""
+    said = " ".join(line.strip() for line in str(error).splitlines() if line.strip())[:1000]
+    return (f"cannot use {name} as a DBC: {said}" if isinstance(error, DbcError)
+            else f"cannot load {name} as a DBC (cantools): {said}")
 
 
 def message_of(dbc, frame):
@@ -112,10 +121,10 @@ def value_range(signal) -> tuple[float, float, str]:
     (cantools reads [0|0] as none); where from is empty when the DBC's limits are the range."""
     lo, hi, encoded = bits_range(signal)
     dbc_lo, dbc_hi = signal.minimum, signal.maximum
-    if (dbc_lo is not None and dbc_lo > hi) or (dbc_hi is not None and dbc_hi < lo) or \
-            (dbc_lo is not None and dbc_hi is not None and dbc_lo > dbc_hi):  # a DBC's slip: the bits decide
-        return lo, hi, (f"{encoded}; the DBC's [{dbc_lo}|{dbc_hi}] is outside it, so not used" if encoded
-                        else f"the DBC's [{dbc_lo}|{dbc_hi}] is empty, so not used")
+    if dbc_lo is not None and dbc_hi is not None and dbc_lo > dbc_hi:  # a DBC's slip: the bits decide
+        return lo, hi, f"{encoded + '; ' if encoded else ''}the DBC's [{dbc_lo:g}|{dbc_hi:g}] is empty, so not used"
+    if (dbc_lo is not None and dbc_lo > hi) or (dbc_hi is not None and dbc_hi < lo):
+        return lo, hi, f"{encoded}; the DBC's [{dbc_lo}|{dbc_hi}] is outside it, so not used"
     inside = dbc_lo is not None and dbc_hi is not None and lo <= dbc_lo and dbc_hi <= hi
     if dbc_lo is not None:
         lo = max(lo, dbc_lo)
@@ -156,8 +165,8 @@ def range_problem(signal, value: float) -> str | None:
             + (f" ({where})" if where else ""))
 
 
-# GenMsgSendType values with no cycle of their own (Vector's and OEM templates' spellings); a
-# type named cyclic or periodic is cyclic, and one the bench does not know leaves it to the cycle
+# GenMsgSendType values that say nothing of a cycle: the cycle time decides. Otherwise a type named
+# cyclic or periodic (not non-) is cyclic, and any other (Event, OnChange, Triggered, ...) is not
 SEND_TYPES_UNSAID = ("", "nomsgsendtype", "notused", "none")
 
 
@@ -173,8 +182,8 @@ def cycle_time_ms(message) -> float | None:
 def _cycle_number(message) -> float | None:
     """GenMsgCycleTime as a number, whatever the attribute's type: an ENUM's value is the index
     of its label (cantools gives the index), a STRING's is its text; None if it is not a number."""
-    cycle = message.cycle_time
     attribute = message.dbc.attributes.get("GenMsgCycleTime") if message.dbc else None
+    cycle = attribute.value if attribute is not None else message.cycle_time  # cantools makes index 0 None
     if attribute is not None and attribute.definition.type_name == "ENUM" and isinstance(cycle, int):
         labels = attribute.definition.choices or []
         cycle = labels[cycle] if 0 <= cycle < len(labels) else None

@@ -314,6 +314,8 @@ class Rule:
             raise UndecodableRequest(str(e)) from None
         values = self.send.values(0.0)
         for target, (source, scale, offset) in self.copies.items():
+            if source not in decoded:  # a signal of another page of a multiplexed request
+                raise Unanswerable(f"{self.on.name}.{source} is not in this request's page")
             values[target] = decoded[source] * scale + offset
             lo, hi, said = bits_range(self.send.message.get_signal_by_name(target))
             if not lo <= values[target] <= hi:
@@ -499,6 +501,21 @@ def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_
     return MessagePlan(message, sources, counter, checksum, cycle_time_ms(message))  # None: an event message
 
 
+def carried_nowhere(plan: MessagePlan, where: list, fail: Fail) -> None:
+    """A counter or checksum on no page the scenario lets the message send (its multiplexer pinned
+    to another page) is a problem: the frames would never carry it."""
+    m = plan.message
+    if not m.is_multiplexed():
+        return
+    given = tuple((k, src.value) for k, src in plan.sources.items()
+                  if k in multiplexers(m) and isinstance(src, Constant))
+    allowed = _pages(m, given)
+    for kind, name in (("counters", plan.counter), ("checksums", plan.checksum[0] if plan.checksum else None)):
+        if name and not any(on_page(m, name, page) for page in allowed):
+            fail([*where, kind], f"{m.name}.{name} is on no page the scenario sends ({', '.join(map(str, given))}): "
+                 "no frame would carry it")
+
+
 def start_value_problems(plan: MessagePlan, where: list, fail: Fail, copied: frozenset[str] = frozenset()) -> None:
     """A signal the scenario leaves at its DBC start value (GenSigStartValue) that its bits cannot
     carry is a problem here, naming it, not an encoding error mid-run (on whichever page); copied:
@@ -566,6 +583,7 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
         cycle = (spec.get("cycle_ms") or {}).get(m.name, plan.cycle_ms)
         if cycle:
             start_value_problems(plan, where, fail)
+            carried_nowhere(plan, where, fail)
             out.append(MessagePlan(m, plan.sources, plan.counter, plan.checksum, float(cycle)))
     if not out:
         why = "; ".join(f"{m.name}: {why_not_cyclic(m)}" for m in sent[:8]) + ("; ..." if len(sent) > 8 else "")
@@ -613,6 +631,7 @@ def responder_rules(db, specs: list, where: list, base: Path, fail: Fail, fail_f
                 constants[target] = value
         plan = message_plan(send, {**spec, "set": constants}, at, base, fail, fail_file, signals_key="set")
         start_value_problems(plan, at, fail, frozenset(copies))
+        carried_nowhere(plan, at, fail)
         rules.append(Rule(on, plan, copies))
     return tuple(rules)
 
@@ -625,7 +644,7 @@ def command_plan(db, spec: dict, where: list, base: Path, fail: Fail, fail_file:
     if m is None:
         return None, ()
     plan = message_plan(m, spec, where, base, fail, fail_file)
-    start_value_problems(plan, where, fail)
+    carried_nowhere(plan, where, fail)
     cycle = spec.get("cycle_ms", plan.cycle_ms)
     schedule = []
     names = {s.name for s in m.signals}
@@ -641,6 +660,9 @@ def command_plan(db, spec: dict, where: list, base: Path, fail: Fail, fail_file:
                 fail(at, problem)
             values[key] = value
         schedule.append((float(entry["at_s"]), values, 0))
+    # a signal the first entry sets is never at its start value (entries' signals hold after them)
+    first_set = frozenset(min(schedule, key=lambda e: e[0])[1]) if schedule else frozenset()
+    start_value_problems(plan, where, fail, first_set)
     if not schedule and not cycle:
         fail([*where, "message"], f"{m.name} has no GenMsgCycleTime: give cycle_ms or a schedule")
     return MessagePlan(m, plan.sources, plan.counter, plan.checksum, float(cycle) if cycle else None), \

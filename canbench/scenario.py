@@ -459,7 +459,7 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
         try:
             load_dbc(file)
         except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
-            fail(where, f"cannot load {file.name} as a DBC (cantools): {load_error_text(e)}")
+            fail(where, load_error_text(e, file.name))
     cycle = (doc.get("expect") or {}).get("cycle_time") if isinstance(doc.get("expect"), dict) else None
     if isinstance(cycle, dict) and cycle.get("from_dbc") and not bus_dbcs:
         fail(["expect", "cycle_time", "from_dbc"], "needs a DBC: give the scenario a dbc, or a bus (buses[].dbc)")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import re
+import string
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -210,13 +211,22 @@ FRAME_START = {".asc": re.compile(r"^\d+\.\d+\s+\d+\s+\S"), ".trc": re.compile(r
                ".csv": re.compile(r".")}  # a line python-can would read a frame from
 
 
-def _cut(text: str, msg: can.Message | None, suffix: str) -> bool:
-    """Whether an unended last line is a cut one: a frame line python-can read nothing from, or
-    a data frame ending in half a byte (python-can reads 'F' as 0F)."""
+def _cut(text: str, msg: can.Message | None, suffix: str, hex_bytes: bool = True) -> bool:
+    """Whether an unended last line is a cut one: a frame line python-can read nothing from, a
+    data frame with fewer bytes than its dlc, or one whose last byte is half of one (python-can
+    reads 'F' as 0F; hex_bytes: the format writes every byte as two digits, not ASC's base dec;
+    a line ending in fields of another kind, such as ASC's 'ID = 5', is not judged by its end)."""
     if msg is None:
         return bool(FRAME_START[suffix].match(text))
-    last = text.split()[-1] if text.split() else ""
-    return not msg.is_remote_frame and len(last) == 1 and last in "0123456789abcdefABCDEF"
+    if msg.is_remote_frame or not msg.data:
+        return False
+    if len(msg.data) < msg.dlc:
+        return True
+    tokens = text.split()
+    last = tokens[-1] if tokens else ""
+    if not hex_bytes or suffix == ".csv" or "=" in tokens or len(last) != 1 or last not in string.hexdigits:
+        return False
+    return int(last, 16) == msg.data[-1]  # the line's last field is its last byte, one digit of two
 
 
 def _unended_line(path: Path) -> tuple[int, str] | None:
@@ -235,6 +245,29 @@ def _unended_line(path: Path) -> tuple[int, str] | None:
         f.seek(0)
         lines = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")) + 1
     return lines, text
+
+
+ASC_FD_FRAME = 0x1000  # the flags' EDL bit: the frame was CAN FD (Vector's ASC; python-can's ASCWriter sets it)
+
+
+def _classic_in_fd_line(text: str, msg: can.Message) -> can.Message:
+    """A frame of an ASC `CANFD` line whose flags say it was a classic CAN frame (EDL clear, no BRS
+    or ESI, at most 8 bytes), as CANoe logs on a CAN FD channel and can-utils' log2asc -f writes:
+    the classic frame (python-can reads every CANFD line as CAN FD). Else the message unchanged.
+    Grammar: <time> CANFD <ch> <dir> <id> [<name>] <brs> <esi> <dlc> <length> <data bytes>
+    <duration> <bits> <flags> <crc> ..., e.g. '0.010000 CANFD 1 Rx 123 0 0 8 8 01 .. 08 130000 130 0 0'."""
+    tokens = text.split()
+    at = 5 if len(tokens) > 5 and tokens[5].isdigit() else 6  # an optional symbolic name
+    try:
+        brs, esi, length = tokens[at], tokens[at + 1], int(tokens[at + 3])
+        flags = int(tokens[at + 4 + length + 2], 16)
+    except (IndexError, ValueError):
+        return msg  # not the grammar above: left as python-can read it (refused as CAN FD)
+    if flags & ASC_FD_FRAME or brs != "0" or esi != "0" or length > 8:
+        return msg
+    return can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id, is_extended_id=msg.is_extended_id,
+                       is_remote_frame=msg.is_remote_frame, dlc=msg.dlc if msg.is_remote_frame else len(msg.data),
+                       data=None if msg.is_remote_frame else msg.data, channel=msg.channel, is_rx=msg.is_rx)
 
 
 def _csv_problem(text: str) -> str | None:
@@ -285,18 +318,20 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
                 raise TraceError(str(path), 1, f"python-can's CSV begins with the line {CSV_HEADER} "
                                  f"(its reader skips the first line whatever it is): {first[:60]!r}")
         f = open(path, encoding="utf-8-sig", errors="replace")
-        counter = _AscLines(f, path) if suffix == ".asc" else _LineCounter(f)
+        counter: _LineCounter = _AscLines(f, path) if suffix == ".asc" else _LineCounter(f)
         log = _ReaderLog(counter)
         trc_log = logging.getLogger("can.io.trc")
         trc_log.addHandler(log)
         level = trc_log.level
         trc_log.setLevel(logging.INFO)
         try:
-            for msg in TEXT_READERS[suffix](counter):
+            reader = TEXT_READERS[suffix](counter)
+            for msg in reader:
                 line = counter.line
                 _reader_problems(log, fail)
                 if unended and line == unended[0]:
-                    cut = _cut(unended[1], msg, suffix)
+                    hex_bytes = str(getattr(reader, "base", "hex")).lower() != "dec"  # ASC: as its header said
+                    cut = _cut(unended[1], msg, suffix, hex_bytes)
                     if cut:
                         cut_there()
                     unended = None  # said once
@@ -304,6 +339,8 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
                         continue
                 if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
                     continue  # a transmit request is no frame on the bus
+                if suffix == ".asc" and msg.is_fd:
+                    msg = _classic_in_fd_line(counter.text, msg)
                 problem = _csv_problem(counter.text) if suffix == ".csv" else None
                 if problem:
                     fail(line, problem)
@@ -315,6 +352,9 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         except TraceError:
             raise
         except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad lines
+            if unended and counter.line == unended[0]:  # what it could not read is a cut last line
+                raise TraceError(str(path), counter.line, f"the file ends inside this line: a recording cut there "
+                                 f"({unended[1][:60]!r})") from None
             raise TraceError(str(path), counter.line or None, f"python-can cannot read it: {e}{hint}") from None
         finally:
             trc_log.removeHandler(log)

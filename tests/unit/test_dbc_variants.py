@@ -196,7 +196,7 @@ def test_two_messages_of_one_id_or_name_are_refused_naming_both(tmp_path, second
                          "ecus:\n  - {name: gw, bus: vcan0, role: restbus, dbc_node: GW, run_s: 1, "
                          "cycle_ms: {M1: 10}}\n")
     assert [str(p) for p in validate.problems(path)] == [
-        f"{path}:3: dbc: cannot load v.dbc as a DBC (cantools): {said}"]
+        f"{path}:3: dbc: cannot use v.dbc as a DBC: {said}"]
 
 
 def test_a_sender_missing_from_bu_is_a_node_and_a_silent_node_is_said(tmp_path):
@@ -241,7 +241,7 @@ def test_limits_outside_what_the_bits_carry_leave_the_bits_range():
     # [0|-989.765] on a signal of 0..4095: every value was refused with a backwards range
     db = load('BO_ 256 M: 8 GW\n SG_ Dist : 0|12@1+ (1,0) [0|-989.765] "m" TESTER\n')
     lo, hi, said = dbc.value_range(db.get_message_by_name("M").get_signal_by_name("Dist"))
-    assert (lo, hi) == (0, 4095) and "is outside it, so not used" in said
+    assert (lo, hi) == (0, 4095) and "the DBC's [0|-989.765] is empty, so not used" in said
     assert dbc.range_problem(db.get_message_by_name("M").get_signal_by_name("Dist"), 100) is None
 
 
@@ -259,3 +259,52 @@ def test_a_responder_answer_that_cannot_carry_the_copied_value_is_unanswerable_n
         rule.answer((500).to_bytes(2, "little") + bytes(6), 0)
     with pytest.raises(restbus.UndecodableRequest):
         rule.answer(b"\x01", 0)  # shorter than the message
+
+
+def test_a_cycle_time_enum_of_its_first_label_is_that_label():
+    # cantools gives index 0 as None: the message was taken for an event message
+    db = load('BO_ 256 M: 8 GW\n SG_ A : 0|8@1+ (1,0) [0|0] "" TESTER\n\n'
+              'BA_DEF_ BO_ "GenMsgCycleTime" ENUM "10","20","100";\nBA_DEF_DEF_ "GenMsgCycleTime" "100";\n'
+              'BA_ "GenMsgCycleTime" BO_ 256 0;\n')
+    assert dbc.cycle_time_ms(db.get_message_by_name("M")) == 10.0
+
+
+def test_a_counter_or_checksum_on_no_page_the_scenario_sends_is_a_problem(tmp_path):
+    path = scenario_file(tmp_path, PAGED, """\
+        ecus:
+          - {name: gw, bus: vcan0, role: restbus, dbc_node: GW, run_s: 1, signals: {Muxed.Page: 0},
+             counters: [Muxed.P1Cnt], checksums: {Muxed.P1Crc: xor}}
+        """)
+    assert [str(p).split(": ", 1)[1] for p in validate.problems(path)] == [
+        f"ecus.0.{kind}: Muxed.{name} is on no page the scenario sends (('Page', 0)): no frame would carry it"
+        for kind, name in (("counters", "P1Cnt"), ("checksums", "P1Crc"))]
+
+
+def test_a_start_value_a_command_schedule_always_sets_is_not_a_problem(tmp_path):
+    text = 'BO_ 300 Cmd: 8 TESTER\n SG_ Level : 0|8@1+ (1,0) [0|0] "" GW\n\n' \
+           'BA_DEF_ SG_ "GenSigStartValue" INT 0 65535;\nBA_DEF_DEF_ "GenSigStartValue" 0;\n' \
+           'BA_ "GenSigStartValue" SG_ 300 Level 300;\n'
+    ecus = "ecus:\n  - {name: gw, bus: vcan0, role: echo, echo_ids: [\"12C\"]}\n"
+    path = scenario_file(tmp_path, text, ecus, "commands:\n  - {bus: vcan0, message: Cmd, schedule: "
+                         "[{at_s: 0.5, signals: {Level: 5}}, {at_s: 1.0, signals: {Level: 6}}]}\n")
+    assert validate.problems(path) == []
+    path = scenario_file(tmp_path, text, ecus, "commands:\n  - {bus: vcan0, message: Cmd, cycle_ms: 10, run_s: 1}\n")
+    assert [str(p).split(": ", 1)[1] for p in validate.problems(path)] == [
+        "commands.0: Cmd.Level: its start value 300 (GenSigStartValue) is outside what its 8 bits at scale 1, "
+        "offset 0 carry: [0, 255]: give it a value in signals"]
+
+
+def test_a_responder_request_of_another_page_is_unanswerable_not_a_crash():
+    db = load("""\
+        BO_ 768 Req: 8 TESTER
+         SG_ Page M : 0|8@1+ (1,0) [0|0] "" GW
+         SG_ A m0 : 8|8@1+ (1,0) [0|0] "" GW
+         SG_ B m1 : 8|8@1+ (1,0) [0|0] "" GW
+        BO_ 769 Ans: 8 GW
+         SG_ X : 0|8@1+ (1,0) [0|0] "" TESTER
+        """)
+    rule = restbus.Rule(db.get_message_by_name("Req"), restbus.MessagePlan(db.get_message_by_name("Ans")),
+                        {"X": ("A", 1.0, 0.0)})
+    assert rule.answer(bytes([0, 5]) + bytes(6), 0)[1] == bytes([5]) + bytes(7)
+    with pytest.raises(restbus.Unanswerable, match="Req.A is not in this request's page"):
+        rule.answer(bytes([1, 5]) + bytes(6), 0)

@@ -146,3 +146,20 @@ def test_a_proposal_wholly_outside_the_dbc_limits_is_left_commented_and_the_scaf
     text = out.read_text()
     assert "    # Cmd.Offset: {range: [" in text and "not gated: wholly outside the [0, 127] the DBC allows" in text
     assert "    Cmd.Level: {range: [" in text
+
+
+@pytest.mark.parametrize("name,text,read", [
+    ("dlc0.trc", TRC + "     2)        11.0  Rx         0123  0", [(4, "0102"), (5, "")]),
+    ("dec.asc", "date Mon Nov 13 10:00:00.000 am 2023\nbase dec  timestamps absolute\ninternal events logged\n"
+     "   0.010000 1  291  Rx   d 2 12 5\n   0.020000 1  291  Rx   d 2 12 6", [(4, "0c05"), (5, "0c06")]),
+])
+def test_a_whole_unended_last_line_is_read_whatever_its_last_field(tmp_path, name, text, read):
+    path = tmp_path / name
+    path.write_text(text)
+    assert [(line, data) for line, _, data in frames(path)] == read
+
+
+def test_a_last_line_cut_where_python_can_cannot_read_it_is_said_as_cut(tmp_path):
+    path = asc(tmp_path, "   0.010000 1  123  Rx   d 1 01\n   0.020000 1  123  Rx", end="")
+    with pytest.raises(TraceError, match=r"t.asc:6: the file ends inside this line: a recording cut there"):
+        frames(path)
