@@ -163,3 +163,15 @@ def test_a_last_line_cut_where_python_can_cannot_read_it_is_said_as_cut(tmp_path
     path = asc(tmp_path, "   0.010000 1  123  Rx   d 1 01\n   0.020000 1  123  Rx", end="")
     with pytest.raises(TraceError, match=r"t.asc:6: the file ends inside this line: a recording cut there"):
         frames(path)
+
+
+def test_an_asc_canfd_line_of_a_classic_frame_is_a_can_20_frame(tmp_path):
+    # can-utils' log2asc -f and CANoe on a CAN FD channel: flags 0 (EDL clear), no BRS or ESI
+    path = asc(tmp_path, "   0.010000 CANFD   1 Rx          123                                  0 0 8  8 "
+                         "01 02 03 04 05 06 07 08   130000  130        0 0 0 0 0 0\n"
+                         "   0.020000 CANFD   1 Rx          123                                  1 0 8  8 "
+                         "01 02 03 04 05 06 07 09   130000  130     3000 0 0 0 0 0\n")
+    read = [(line, frame.data.hex()) for line, _, _, frame in iter_trace(path, on_problem=lambda e: None)]
+    assert read == [(5, "0102030405060708")]
+    assert problems(path) == [f"{path}:6: a CAN FD frame (8 data bytes, BRS): the bridge carries CAN 2.0 frames "
+                              "only (remove FD frames from the trace)"]
