@@ -483,15 +483,28 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
             raise error
         on_problem(error)
 
-    last_ns = None
+    # time never goes back per interface: candump of several interfaces writes each socket's frames
+    # as it reads them (one per wakeup), so its lines are in order per interface only
+    last: dict[str | None, tuple[int, int]] = {}  # interface -> (t_ns, line) of its last frame
+    said = "frame" if by_number else "line"
+
+    def went_back(line: int, t_ns: int, iface: str | None) -> str | None:
+        before = last.get(iface)
+        last[iface] = (t_ns, line) if before is None or t_ns >= before[0] else before
+        if before is None or t_ns >= before[0]:
+            return None
+        if len(last) == 1:
+            return f"timestamp earlier than the {said} before"
+        return f"timestamp earlier than {said} {before[1]}'s, the frame before on {iface}"
+
     if path.suffix.lower() in CANDUMP_SUFFIXES:
         for lineno, t_ns, iface, frame in iter_candump(path, strict=True, on_error=on_problem, cache_size=cache_size):
             if interfaces is not None and iface not in interfaces:
                 fail(lineno, f"interface '{iface}' is not one of {sorted(interfaces)} (remap it in the scenario)")
                 continue
-            if last_ns is not None and t_ns < last_ns:
-                fail(lineno, "timestamp earlier than the line before")
-            last_ns = t_ns
+            problem = went_back(lineno, t_ns, iface)
+            if problem:
+                fail(lineno, problem)
             yield lineno, t_ns, iface, frame
         return
     for line, msg in _python_can_messages(path, fail):
@@ -506,9 +519,9 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
             fail(line, f"interface '{channel}' is not one of {sorted(interfaces)} (remap it in the scenario)")
             continue
         t_ns = _stamp_ns(msg.timestamp)
-        if last_ns is not None and t_ns < last_ns:
-            fail(line, f"timestamp earlier than the {'frame' if by_number else 'line'} before")
-        last_ns = t_ns
+        problem = went_back(line, t_ns, channel)
+        if problem:
+            fail(line, problem)
         yield line, t_ns, channel, frame
 
 

@@ -175,3 +175,14 @@ def test_an_asc_canfd_line_of_a_classic_frame_is_a_can_20_frame(tmp_path):
     assert read == [(5, "0102030405060708")]
     assert problems(path) == [f"{path}:6: a CAN FD frame (8 data bytes, BRS): the bridge carries CAN 2.0 frames "
                               "only (remove FD frames from the trace)"]
+
+
+def test_candump_of_several_interfaces_is_in_order_per_interface_only(tmp_path):
+    # candump can0 can1 reads one socket per wakeup: can1's .0002 may be written after can0's .0003
+    path = tmp_path / "two.log"
+    path.write_text("(1700000000.000100) can0 123#01\n(1700000000.000300) can0 123#02\n"
+                    "(1700000000.000200) can1 456#01\n(1700000000.000400) can1 456#02\n"
+                    "(1700000000.000250) can0 123#03\n")
+    assert [(line, iface) for line, _, iface, _ in iter_trace(path, on_problem=lambda e: None)] == [
+        (1, "can0"), (2, "can0"), (3, "can1"), (4, "can1"), (5, "can0")]
+    assert problems(path) == [f"{path}:5: timestamp earlier than line 2's, the frame before on can0"]
