@@ -78,6 +78,17 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
     return Frame(can_id, len(data), data, extended)
 
 
+# candump's own formats without -L: '  can0  123   [4]  DE AD BE EF', with -ta/-td/-tz/-tA a stamp first
+CANDUMP_DEFAULT = re.compile(r"^\s*(\([^)]*\)\s+)?[A-Za-z0-9_.-]+\s+[0-9A-Fa-f]{3,8}\s+\[\d+\]")
+
+
+def not_candump_l(line: str) -> str:
+    """Why a line is no candump -L frame, saying so when it is candump's other output."""
+    hint = (" (candump's default output: record with candump -L, the log format canplayer reads)"
+            if CANDUMP_DEFAULT.match(line) else "")
+    return f"not a candump -L frame: {line.strip()[:80]!r}{hint}"
+
+
 def parse_line(line: str, path: str = "<candump>", lineno: int | None = None,
                cache: dict[tuple[str, str], Frame] | None = None) -> tuple[int, str, Frame] | None:
     """(timestamp ns since the epoch, interface, frame) of one candump -L line; None for lines
@@ -88,7 +99,7 @@ def parse_line(line: str, path: str = "<candump>", lineno: int | None = None,
         return None
     m = CANDUMP_LINE.match(line)
     if not m:
-        raise TraceError(path, lineno, f"not a candump -L frame: {line.strip()[:80]!r}")
+        raise TraceError(path, lineno, not_candump_l(line))
     t_ns = int(m["sec"]) * 1_000_000_000 + int(m["frac"].ljust(9, "0"))
     if cache is None:
         return t_ns, m["iface"], _frame(m, path, lineno)
@@ -137,7 +148,7 @@ def iter_candump(path: str | Path, interface: str | None = None, drops: dict[str
                 parsed = parse_line(raw.lstrip(), str(path), lineno, cache)
                 if parsed is None and strict and not DROPCOUNT.match(raw) and raw.strip() \
                         and not raw.lstrip().startswith("#"):
-                    raise TraceError(str(path), lineno, f"not a candump -L frame: {raw.strip()[:80]!r}")
+                    raise TraceError(str(path), lineno, not_candump_l(raw))
             except TraceError as e:
                 if on_error is None:
                     raise

@@ -186,3 +186,14 @@ def test_candump_of_several_interfaces_is_in_order_per_interface_only(tmp_path):
     assert [(line, iface) for line, _, iface, _ in iter_trace(path, on_problem=lambda e: None)] == [
         (1, "can0"), (2, "can0"), (3, "can1"), (4, "can1"), (5, "can0")]
     assert problems(path) == [f"{path}:5: timestamp earlier than line 2's, the frame before on can0"]
+
+
+@pytest.mark.parametrize("line", ["  vcan0  123   [4]  DE AD BE EF",
+                                  " (1700000000.000100)  vcan0  123   [4]  DE AD BE EF",
+                                  " (2023-11-14 22:13:20.000100)  vcan0  123   [4]  DE AD BE EF"])
+def test_candumps_other_output_is_said_to_be_it(tmp_path, line):
+    path = tmp_path / "drive.log"
+    path.write_text(line + "\n")
+    with pytest.raises(TraceError, match=r"drive.log:1: not a candump -L frame: .*\(candump's default output: "
+                                         r"record with candump -L"):
+        frames(path)
