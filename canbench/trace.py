@@ -483,6 +483,10 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         raise TraceError(str(path), None, "no such trace file")
     if path.stat().st_size == 0:  # in every format (a binary reader would say its header is short)
         return
+    if not numbered(path):
+        with open(path, "rb") as f:
+            if f.read(2) in (b"\xff\xfe", b"\xfe\xff"):  # Windows tools' "Unicode": read as UTF-8, no frame at all
+                raise TraceError(str(path), 1, "UTF-16 text: save the trace as UTF-8 (or ASCII)")
     by_number = numbered(path)
     # python-can numbers ASC and BLF channels from 0; the file, CANalyzer and CANoe from 1: said as the file has them
     zero_based = path.suffix.lower() in (".asc", ".blf")

@@ -197,3 +197,11 @@ def test_candumps_other_output_is_said_to_be_it(tmp_path, line):
     with pytest.raises(TraceError, match=r"drive.log:1: not a candump -L frame: .*\(candump's default output: "
                                          r"record with candump -L"):
         frames(path)
+
+
+@pytest.mark.parametrize("name", ["drive.log", "drive.asc"])
+def test_a_utf16_trace_is_said_to_be_one(tmp_path, name):
+    path = tmp_path / name
+    path.write_text("(1700000000.000100) can0 123#01\n", encoding="utf-16")  # with its byte order mark
+    with pytest.raises(TraceError, match=rf"{name}:1: UTF-16 text: save the trace as UTF-8"):
+        frames(path)
