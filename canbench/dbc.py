@@ -121,10 +121,11 @@ def value_range(signal) -> tuple[float, float, str]:
     (cantools reads [0|0] as none); where from is empty when the DBC's limits are the range."""
     lo, hi, encoded = bits_range(signal)
     dbc_lo, dbc_hi = signal.minimum, signal.maximum
+    limits = f"the DBC's [{'' if dbc_lo is None else f'{dbc_lo:g}'}|{'' if dbc_hi is None else f'{dbc_hi:g}'}]"
     if dbc_lo is not None and dbc_hi is not None and dbc_lo > dbc_hi:  # a DBC's slip: the bits decide
-        return lo, hi, f"{encoded + '; ' if encoded else ''}the DBC's [{dbc_lo:g}|{dbc_hi:g}] is empty, so not used"
+        return lo, hi, f"{encoded + '; ' if encoded else ''}{limits} is empty, so not used"
     if (dbc_lo is not None and dbc_lo > hi) or (dbc_hi is not None and dbc_hi < lo):
-        return lo, hi, f"{encoded}; the DBC's [{dbc_lo}|{dbc_hi}] is outside it, so not used"
+        return lo, hi, f"{encoded}; {limits} is outside it, so not used"
     inside = dbc_lo is not None and dbc_hi is not None and lo <= dbc_lo and dbc_hi <= hi
     if dbc_lo is not None:
         lo = max(lo, dbc_lo)
@@ -132,8 +133,7 @@ def value_range(signal) -> tuple[float, float, str]:
         hi = min(hi, dbc_hi)
     if inside or not encoded:
         return lo, hi, ""
-    given = "" if dbc_lo is None and dbc_hi is None else \
-        f"the DBC's [{'' if dbc_lo is None else f'{dbc_lo:g}'}|{'' if dbc_hi is None else f'{dbc_hi:g}'}] and "
+    given = "" if dbc_lo is None and dbc_hi is None else f"{limits} and "
     return lo, hi, given + encoded
 
 

@@ -318,10 +318,7 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         hint = " (the file has no ;$FILEVERSION line: read as TRC 1.0)"
     if suffix in TEXT_READERS:
         unended = _unended_line(path)
-
-        def cut_there() -> None:
-            assert unended
-            fail(unended[0], f"the file ends inside this line: a recording cut there ({unended[1][:60]!r})")
+        cut_said = f"the file ends inside this line: a recording cut there ({unended[1][:60]!r})" if unended else ""
         if suffix == ".csv":
             with open(path, encoding="utf-8-sig", errors="replace") as f:
                 first = f.readline().strip()
@@ -343,10 +340,9 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
                 if unended and line == unended[0]:
                     hex_bytes = str(getattr(reader, "base", "hex")).lower() != "dec"  # ASC: as its header said
                     cut = _cut(unended[1], msg, suffix, hex_bytes)
+                    unended = None  # judged once
                     if cut:
-                        cut_there()
-                    unended = None  # said once
-                    if cut:
+                        fail(line, cut_said)
                         continue
                 if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
                     continue  # a transmit request is no frame on the bus
@@ -359,13 +355,12 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
                 yield line, msg
             _reader_problems(log, fail)
             if unended and _cut(unended[1], None, suffix):  # python-can read nothing from it
-                cut_there()
+                fail(unended[0], cut_said)
         except TraceError:
             raise
         except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad lines
             if unended and counter.line == unended[0]:  # what it could not read is a cut last line
-                raise TraceError(str(path), counter.line, f"the file ends inside this line: a recording cut there "
-                                 f"({unended[1][:60]!r})") from None
+                raise TraceError(str(path), counter.line, cut_said) from None
             raise TraceError(str(path), counter.line or None, f"python-can cannot read it: {e}{hint}") from None
         finally:
             trc_log.removeHandler(log)
