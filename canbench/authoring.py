@@ -61,6 +61,7 @@ class TraceSummary:
     loads: dict[str, float] = field(default_factory=dict)  # per interface, of a trace of several
     longest_gap_s: float = 0.0  # between two frames of the trace (any ids)
     longest_gap_line: int = 0  # the frame after it
+    drops: dict[str, int] = field(default_factory=dict)  # per interface: frames candump -d says the kernel dropped
 
     def table(self) -> str:
         several = len(self.interfaces) > 1
@@ -71,6 +72,8 @@ class TraceSummary:
                  f"bus load {load} of {self.bitrate // 1000} kbit/s (worst-case stuffing)"
                  + (f"; longest gap {self.longest_gap_s:.3f} s (before {where_in(self.path, self.longest_gap_line)})"
                     if self.longest_gap_line else ""),
+                 *([f"  {dropped_note(self.drops)}: the gaps and cycles below count its holes"]
+                   if self.drops else []),
                  f"  {'interface  ' if several else ''}{'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  "
                  f"{'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:
@@ -80,6 +83,12 @@ class TraceSummary:
             iface = f"{s.interface or '-':<9}  " if several else ""
             lines.append(f"  {iface}{s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
         return "\n".join(lines)
+
+
+def dropped_note(drops: dict[str, int]) -> str:
+    """What a recording's DROPCOUNT lines mean for what is read from it."""
+    said = ", ".join(f"{n} frame{'s' if n != 1 else ''} on {iface}" for iface, n in sorted(drops.items()))
+    return f"INCOMPLETE: candump says the kernel dropped {said} while recording (DROPCOUNT lines)"
 
 
 @dataclass
@@ -100,7 +109,8 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
     frames = 0
     first_ns = last_ns = None
     gap_ns, gap_line = 0, 0
-    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE):
+    drops: dict[str, int] = {}
+    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, drops=drops):
         frames += 1
         state = by_id[(iface, frame.can_id, frame.extended)]
         if state.last_ns is not None:
@@ -130,7 +140,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
              if i is not None}
     total_load = 100 * sum(bits.values()) / bitrate / span if span > 0 else 0.0
     return TraceSummary(path, frames, span, sorted(loads), ids, max(loads.values(), default=total_load), bitrate,
-                        loads, gap_ns / 1e9, gap_line)
+                        loads, gap_ns / 1e9, gap_line, drops)
 
 
 # ---- signals of a trace, with a DBC (canbench summarise --dbc, canbench scaffold --dbc) ----
@@ -410,6 +420,8 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
             trace = copy_in(trace, home / "traces" / trace.name)
         ecus = [{"name": "recorded", "bus": next(iter(buses.values()), "vcan0"),
                  "trace": os.path.relpath(trace.resolve(), home)}]
+    if s.drops:
+        notes += f"# {dropped_note(s.drops)}: the proposed cycles are read across its holes.\n"
     cycles, disagree = gated_cycles(s)
     if disagree:
         notes += (f"# Not gated in cycle_time.ids: {', '.join(disagree[:10])}{', ...' if len(disagree) > 10 else ''} "

@@ -107,7 +107,7 @@ def _messages(c: Commands):
     if c.signal_plan is not None:  # commands in signals, encoded with cantools
         return restbus.command_frames(c)
     if c.trace is not None:
-        return timed_plan(read_trace(c.trace, None), c.speed, 1, c.start_offset_s, c.bus, {}).frames()
+        return timed_plan(read_trace(c.trace, None, c.interface), c.speed, 1, c.start_offset_s, c.bus, {}).frames()
     return ((0, m) for m in periodic.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
 
 

@@ -37,7 +37,7 @@ def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
                     last_id_count=sum(periodic.periodic_count(m, run_s) for m in msgs
                                       if last and (m.can_id, m.extended) == (last.arbitration_id,
                                                                              last.is_extended_id)))
-    frames = read_trace(ecu.trace, None) if ecu.trace else []
+    frames = read_trace(ecu.trace, None, ecu.interface) if ecu.trace else []
     return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap)
 
 

@@ -135,6 +135,7 @@ class Ecu:
     restbus: tuple = ()    # restbus: its messages (canbench.restbus.MessagePlan), from the bus's DBC
     left_out: tuple = ()   # restbus: messages of its node it cannot send (CAN FD), each "Name (why)"
     rules: tuple = ()      # responder: canbench.restbus.Rule
+    interface: str | None = None  # the trace's interface it replays (a trace of several); None: the trace's only one
 
     def answer(self, can_id: int, data: bytes) -> tuple[int, bytes]:
         """The echo role's answer to a request (canfdtest style)."""
@@ -150,6 +151,7 @@ class Commands:
     messages: tuple[Message, ...] = ()
     run_s: float = 0.0
     start_offset_s: float = 0.0
+    interface: str | None = None  # the trace's interface it puts (a trace of several)
     message: str = ""  # commands in signals: the DBC message
     signal_plan: Any = None  # canbench.restbus.MessagePlan of message
     schedule: tuple = ()  # (at_s, signal values, line) per entry; empty: every cycle for run_s
@@ -328,6 +330,11 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
             fail([*where, "trace"], f"no such file {shown}")
         return shown.resolve()
 
+    def interface_of(spec: dict, where: list) -> str | None:
+        if "interface" in spec and "trace" not in spec:
+            fail([*where, "interface"], "names an interface of a trace: give the trace")
+        return spec.get("interface")
+
     def messages_of(spec: dict) -> tuple[Message, ...]:
         return tuple(Message(int(m["id"], 16), m["cycle_ms"], m.get("dlc", 8), m.get("extended", False),
                              m.get("remote", False)) for m in spec.get("messages", []))
@@ -355,7 +362,8 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
             ecus.append(Ecu(spec["name"], spec["bus"], role, trace, spec.get("speed", 1.0), spec.get("loops", 1),
                             spec.get("start_offset_s", 0.0), remap,
                             frozenset(int(x, 16) for x in spec.get("echo_ids", [])),
-                            spec.get("answer_id_offset", 1), messages_of(spec), spec.get("run_s", 0.0)))
+                            spec.get("answer_id_offset", 1), messages_of(spec), spec.get("run_s", 0.0),
+                            interface=interface_of(spec, ["ecus", i])))
         except (KeyError, TypeError, ValueError, AttributeError):
             continue  # refused by the schema already
     names = [e.name for e in ecus]
@@ -373,7 +381,8 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
             elif "messages" in spec and "run_s" not in spec:
                 fail(["commands", i], "messages need run_s")
             commands.append(Commands(spec["bus"], trace_of(spec, ["commands", i]), spec.get("speed", 1.0),
-                                     messages_of(spec), spec.get("run_s", 0.0), spec.get("start_offset_s", 0.0)))
+                                     messages_of(spec), spec.get("run_s", 0.0), spec.get("start_offset_s", 0.0),
+                                     interface_of(spec, ["commands", i])))
         except (KeyError, TypeError, ValueError, AttributeError):
             continue
     bridge = dict(doc.get("bridge", {}))

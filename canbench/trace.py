@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import re
 import string
+import struct
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -247,14 +248,18 @@ def _unended_line(path: Path) -> tuple[int, str] | None:
     with open(path, "rb") as f:
         f.seek(max(0, size - 4096))
         tail = f.read()
-        if tail.endswith(b"\n"):
+        if tail.endswith((b"\n", b"\r")):  # lines end as Python's readers split them: LF, CRLF or CR alone
             return None
-        text = tail.rsplit(b"\n", 1)[-1].decode("utf-8", "replace").strip()
+        text = re.split(rb"\r\n|\r|\n", tail)[-1].decode("utf-8", "replace").strip()
         ends = ENDS.get(path.suffix.lower(), ())
         if not text or (ends and text.lower().startswith(ends)):
             return None
         f.seek(0)
-        lines = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")) + 1
+        lines, after_cr = 1, False
+        for block in iter(lambda: f.read(1 << 20), b""):
+            lines += (block.count(b"\n") + block.count(b"\r") - block.count(b"\r\n")
+                      - (after_cr and block.startswith(b"\n")))  # a CRLF across two blocks
+            after_cr = block.endswith(b"\r")
     return lines, text
 
 
@@ -387,11 +392,33 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         if recorded > path.stat().st_size:  # python-can reads a cut BLF to its cut, silently
             fail(None, f"truncated: its header says {recorded} bytes, the file has {path.stat().st_size} "
                        "(a recording cut short, or an incomplete copy)")
+        elif suffix == ".blf" and recorded != path.stat().st_size and (cut := _blf_cut_at(path)) is not None:
+            fail(None, f"truncated: its last object (at byte {cut}) ends past the file's end, and its header was "
+                       "never finished (a logger stopped without closing the file, or an incomplete copy)")
         yield from enumerate(reader, 1)
     except TraceError:
         raise
     except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
         raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
+
+
+def _blf_cut_at(path: Path) -> int | None:
+    """Where the BLF object that runs past the file's end begins (None: every object whole). A
+    logger that stopped without closing the file leaves its header's sizes unwritten, and
+    python-can reads its last object container to the cut without a word."""
+    with open(path, "rb") as f:
+        head = f.read(8)  # "LOGG", the header's size: the first object follows it
+        pos = struct.unpack_from("<L", head, 4)[0] if len(head) == 8 else 0
+        size = path.stat().st_size
+        while pos + 16 <= size:
+            f.seek(pos)
+            signature, _, _, obj_size, _ = struct.unpack("<4sHHLL", f.read(16))
+            if signature != b"LOBJ" or obj_size < 16:
+                return None  # not what python-can reads either: its own error says it
+            if pos + obj_size > size:
+                return pos
+            pos += obj_size + obj_size % 4  # objects are padded as python-can reads them
+    return pos if 0 < size - pos < 16 else None
 
 
 TRC_VERSIONS = ("1.0", "1.1", "1.3", "2.0", "2.1")  # what python-can's TRC reader reads (no FILEVERSION: 1.0)
@@ -466,13 +493,15 @@ def _stamp_ns(timestamp: float) -> int:
 
 def iter_trace(path: str | Path, interfaces: set[str] | None = None,
                on_problem: Callable[[TraceError], None] | None = None,
-               cache_size: int = FRAME_CACHE) -> Iterator[tuple[int, int, str | None, Frame]]:
+               cache_size: int = FRAME_CACHE,
+               drops: dict[str, int] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
     """(line, t_ns, interface or None, frame) of every frame of a trace in any format the bench
     reads, checked alike: CAN 2.0 data and remote frames only, ids in range, dlc 0..8, time never
     going back, interfaces among `interfaces` (None: any). line: the file's line (text formats),
     the frame's number (.blf, .mf4: said as 'frame N'). A problem raises TraceError, or with
     on_problem is handed to it and the frame left out (validate: every problem at once).
-    cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames)."""
+    cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames).
+    drops: filled with the frames a candump -d recording says the kernel dropped, per interface."""
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
@@ -508,7 +537,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         return f"timestamp earlier than {said} {before[1]}'s, the frame before on {iface}"
 
     if path.suffix.lower() in CANDUMP_SUFFIXES:
-        for lineno, t_ns, iface, frame in iter_candump(path, strict=True, on_error=on_problem, cache_size=cache_size):
+        for lineno, t_ns, iface, frame in iter_candump(path, drops=drops, strict=True, on_error=on_problem,
+                                                     cache_size=cache_size):
             if interfaces is not None and iface not in interfaces:
                 fail(lineno, f"interface '{iface}' is not one of {sorted(interfaces)} (remap it in the scenario)")
                 continue
@@ -535,16 +565,38 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         yield line, t_ns, channel, frame
 
 
-def read_trace(path: str | Path, interfaces: set[str] | None = None) -> list[TraceFrame]:
+def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str | None = None) -> list[TraceFrame]:
     """All frames of a trace, in order, each with the line it came from (iter_trace's checks).
-    interfaces: names the trace may use (None: any)."""
+    interfaces: names the trace may use (None: any). only: the one interface to keep (a bus
+    carries one); None: the trace must have one, since merging several would put two buses'
+    frames on one, out of time order (candump's lines are in order per interface only)."""
     frames: list[TraceFrame] = []
+    seen: dict[str | None, int] = {}  # interface -> its first line
     for line, t_ns, iface, frame in iter_trace(path, interfaces):
+        seen.setdefault(iface, line)
+        if only is not None and iface != only:
+            continue
+        if only is None and len(seen) > 1:
+            raise TraceError(str(path), line, several_interfaces(seen))
         if len(frames) >= MAX_TRACE_FRAMES:
             raise TraceError(str(path), line, f"more than {MAX_TRACE_FRAMES} frames: split the trace")
         frames.append(TraceFrame(line, can.Message(
             timestamp=t_ns / 1e9, arbitration_id=frame.can_id, is_extended_id=frame.extended,
             is_remote_frame=frame.remote, dlc=frame.dlc, data=frame.data, channel=iface)))
+    if only is not None and only not in seen:
+        raise TraceError(str(path), None, f"no frames on interface '{only}' ({interfaces_said(seen)})")
     if not frames:
         raise TraceError(str(path), None, "no frames in trace")
     return frames
+
+
+def interfaces_said(seen) -> str:
+    """A trace's interfaces as a problem names them: 'it has can0, can1', or that it names none."""
+    named = sorted(i for i in seen if i is not None)
+    return f"it has {', '.join(named)}" if named else "the trace names no interfaces"
+
+
+def several_interfaces(seen) -> str:
+    """The problem of a trace of several interfaces replayed without saying which."""
+    return (f"frames of {len(seen)} interfaces ({', '.join(sorted(str(i) for i in seen))}) and one bus: say which "
+            f"the scenario replays (interface:), or split the trace one bus each (canbench scaffold)")

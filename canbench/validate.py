@@ -10,17 +10,19 @@ from pathlib import Path
 
 from . import scenario
 from .errors import InputError, ScenarioError, TraceError
-from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, iter_trace
+from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, interfaces_said, iter_trace, several_interfaces
 from .wire import EXT_ID_MAX, STD_ID_MAX
 
 MAX_PER_TRACE = 20  # a trace of FD frames would give one line per frame: the rest are counted
 
 
-def trace_problems(path: Path) -> list[InputError]:
+def trace_problems(path: Path, interfaces: dict[str | None, int] | None = None) -> list[InputError]:
     """Every problem of a trace (iter_trace's checks, in every format): the scan goes on after each
-    bad frame (read_trace stops at the first); one that stops its reader ends the list."""
+    bad frame (read_trace stops at the first); one that stops its reader ends the list.
+    interfaces: filled with the trace's interfaces, each with its first line."""
     found: list[InputError] = []
     more = frames = 0
+    seen = {} if interfaces is None else interfaces
 
     def problem(error: TraceError) -> None:
         nonlocal more
@@ -30,8 +32,9 @@ def trace_problems(path: Path) -> list[InputError]:
             more += 1
 
     try:
-        for _ in iter_trace(path, None, problem, STREAM_CACHE):
+        for line, _, iface, _ in iter_trace(path, None, problem, STREAM_CACHE):
             frames += 1
+            seen.setdefault(iface, line)
     except TraceError as error:
         found.append(error)
     else:
@@ -61,6 +64,32 @@ def named_traces(path: Path) -> list[Path]:
     return traces
 
 
+def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, int]]) -> list[InputError]:
+    """A trace of several interfaces replayed without `interface` (a bus carries one: merged, two
+    buses' frames would go on one, out of time order), or an `interface` the trace does not have."""
+    try:
+        doc = scenario.parse(path)
+    except ScenarioError:
+        return []
+    found: list[InputError] = []
+    for key in ("ecus", "commands"):
+        specs = doc.get(key)
+        for i, spec in enumerate(specs if isinstance(specs, list) else []):
+            trace = spec.get("trace") if isinstance(spec, dict) else None
+            seen = interfaces_of.get(path.parent / trace) if isinstance(trace, str) else None
+            if not seen:
+                continue  # no such trace, or no frames: said already
+            only = spec.get("interface")
+            if isinstance(only, str) and only not in seen:
+                found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "interface"]),
+                                           f"{key}.{i}.interface: no frames on '{only}' in {trace} "
+                                           f"({interfaces_said(seen)})"))
+            elif only is None and len(seen) > 1:
+                found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "trace"]),
+                                           f"{key}.{i}.trace: {trace} has {several_interfaces(seen)}"))
+    return found
+
+
 def remap_problems(path: Path) -> list[InputError]:
     """An id_remap that gives an 11-bit frame of its trace an id above 7FF (the frame keeps its
     format): one problem per remapped id, at the remap's line, naming the trace line."""
@@ -80,7 +109,10 @@ def remap_problems(path: Path) -> list[InputError]:
             continue  # the schema's problem
         seen: set[int] = set()
         try:
-            for line, _, _, frame in iter_trace(path.parent / trace, None, lambda e: None, STREAM_CACHE):
+            only = spec.get("interface")
+            for line, _, iface, frame in iter_trace(path.parent / trace, None, lambda e: None, STREAM_CACHE):
+                if only is not None and iface != only:
+                    continue  # another bus's frame: not replayed
                 if not frame.extended and frame.can_id in wide and frame.can_id not in seen:
                     seen.add(frame.can_id)
                     key, target = wide[frame.can_id]
@@ -131,9 +163,11 @@ def problems(path: Path) -> list[InputError]:
     except ScenarioError as e:
         found += getattr(e, "problems", [e])
     found += remap_problems(path)
+    interfaces_of: dict[Path, dict[str | None, int]] = {}
+    traces_found: list[InputError] = []
     for trace in named_traces(path):
-        found += trace_problems(trace)
-    return found
+        traces_found += trace_problems(trace, interfaces_of.setdefault(trace, {}))
+    return found + interface_problems(path, interfaces_of) + traces_found
 
 
 def run(paths: list[Path]) -> int:

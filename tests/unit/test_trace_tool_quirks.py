@@ -1,11 +1,13 @@
 """Recordings as other tools leave them, where python-can's readers alone would read them wrong
 without a word: ASC files with relative stamps, transmit requests or no 'internal events
-logged' line, a text trace cut inside its last line, python-can CSV without its header or with
-'true' flags, a compressed trace; and `canbench scaffold` beside another scenario's files or
+logged' line, a text trace cut inside its last line (whatever its line ends), python-can CSV
+without its header or with 'true' flags, a compressed trace, a BLF its logger never closed, a
+candump -d recording with DROPCOUNT lines; and `canbench scaffold` beside another scenario's files or
 with a DBC whose limits the trace is outside. Each case read a frame wrong, twice or not at all
 before the code it guards."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -66,6 +68,19 @@ def test_an_asc_without_the_events_line_keeps_its_first_frame(tmp_path, head):
 def test_an_asc_cut_inside_its_last_line_is_said_there(tmp_path, last, said):
     path = asc(tmp_path, "   0.010000 1  123  Rx   d 8 01 02 03 04 05 06 07 08\n" + last, end="")
     assert problems(path) == [f"{path}:6: the file ends inside this line: a recording cut there ({last.strip()!r})"]
+
+
+@pytest.mark.parametrize("eol", ["\r", "\r\n"])
+def test_a_cut_last_line_is_said_whatever_the_files_line_ends(tmp_path, eol):
+    # Python's readers split lines at LF, CRLF and a lone CR alike (Windows and old Mac tools)
+    last = "   0.030000 1  123  Rx   d 1 F"
+    path = tmp_path / "t.asc"
+    path.write_bytes((ASC_HEAD + "internal events logged\nBegin Triggerblock Mon Nov 13 10:00:00.000 am 2023\n"
+                      "   0.010000 1  123  Rx   d 1 01\n   0.020000 1  123  Rx   d 1 02\n" + last)
+                     .replace("\n", eol).encode())
+    assert problems(path) == [f"{path}:7: the file ends inside this line: a recording cut there ({last.strip()!r})"]
+    path.write_bytes(path.read_bytes() + b"F" + eol.encode())  # the line whole and ended: read
+    assert [(line, data) for line, _, data in frames(path)] == [(5, "01"), (6, "02"), (7, "ff")]
 
 
 TRC = (";$FILEVERSION=1.1\n;$STARTTIME=45000.5\n;\n"
@@ -205,3 +220,41 @@ def test_a_utf16_trace_is_said_to_be_one(tmp_path, name):
     path.write_text("(1700000000.000100) can0 123#01\n", encoding="utf-16")  # with its byte order mark
     with pytest.raises(TraceError, match=rf"{name}:1: UTF-16 text: save the trace as UTF-8"):
         frames(path)
+
+
+def test_a_recording_with_dropped_frames_is_said_incomplete_by_summarise_and_scaffold(tmp_path, capsys):
+    # candump -d writes DROPCOUNT when the kernel dropped frames for its socket: the recording has holes
+    lines = [f"({1_700_000_000 + i * 0.01:.6f}) can0 123#{i % 256:02X}\n" for i in range(40)]
+    lines.insert(20, "DROPCOUNT: dropped 3 CAN frames on 'can0' socket (total drops 3)\n")
+    path = tmp_path / "drive.log"
+    path.write_text("".join(lines))
+    assert cli.main(["summarise", str(path)]) == 0
+    said = "INCOMPLETE: candump says the kernel dropped 3 frames on can0 while recording (DROPCOUNT lines)"
+    assert f"  {said}: the gaps and cycles below count its holes" in capsys.readouterr().out.splitlines()
+    out = tmp_path / "s.yaml"
+    assert cli.main(["scaffold", str(path), "--name", "d", "--out", str(out)]) == 0
+    assert f"# {said}: the proposed cycles are read across its holes." in out.read_text().splitlines()
+    path.write_text("".join(lines[:20] + lines[21:]))  # the control: no DROPCOUNT, no word of it
+    assert cli.main(["summarise", str(path)]) == 0
+    assert "INCOMPLETE" not in capsys.readouterr().out
+
+
+def test_a_blf_its_logger_never_closed_is_refused_where_it_is_cut(tmp_path):
+    import struct
+
+    import can
+    path = tmp_path / "t.blf"
+    writer = can.BLFWriter(str(path), max_container_size=1024)  # several object containers
+    for i in range(300):
+        writer.on_message_received(can.Message(timestamp=1_700_000_000 + i * 0.01, arbitration_id=0x123,
+                                               data=bytes([i % 256, 1]), is_extended_id=False))
+    writer.stop()
+    unfinished = bytearray(path.read_bytes())
+    struct.pack_into("<QQL", unfinished, 16, 0, 0, 0)  # file size, uncompressed size, objects: never written
+    path.write_bytes(bytes(unfinished))
+    assert len(frames(path)) == 300  # every object whole: read
+    path.write_bytes(bytes(unfinished[:-200]))  # and cut inside its last container
+    said = problems(path)
+    assert len(said) == 1 and re.fullmatch(
+        rf"{re.escape(str(path))}: truncated: its last object \(at byte \d+\) ends past the file's end, and its "
+        r"header was never finished \(a logger stopped without closing the file, or an incomplete copy\)", said[0])
