@@ -392,8 +392,8 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
         if recorded > path.stat().st_size:  # python-can reads a cut BLF to its cut, silently
             fail(None, f"truncated: its header says {recorded} bytes, the file has {path.stat().st_size} "
                        "(a recording cut short, or an incomplete copy)")
-        elif suffix == ".blf" and recorded != path.stat().st_size and (cut := _blf_cut_at(path)) is not None:
-            fail(None, f"truncated: its last object (at byte {cut}) ends past the file's end, and its header was "
+        elif suffix == ".blf" and recorded != path.stat().st_size and (cut_at := _blf_cut_at(path)) is not None:
+            fail(None, f"truncated: its last object (at byte {cut_at}) ends past the file's end, and its header was "
                        "never finished (a logger stopped without closing the file, or an incomplete copy)")
         yield from enumerate(reader, 1)
     except TraceError:
