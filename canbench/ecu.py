@@ -107,7 +107,8 @@ def replay(ecu: Ecu, scenario: Scenario, run_dir: Path) -> dict:
         if last is not None:
             _wait_own_copies(bus, last, plan.last_id_count, seen)
     return {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "trace": str(ecu.trace) if ecu.trace else None,
-            "sent": plan.count, "fidelity_ms": fidelity(errors_ms), "own_send_error_ms": fidelity(own.errors_ms)}
+            **({"interface": ecu.interface} if ecu.interface else {}), "sent": plan.count,
+            "fidelity_ms": fidelity(errors_ms), "own_send_error_ms": fidelity(own.errors_ms)}
 
 
 def _send(bus: can.BusABC, msg: can.Message) -> float:
