@@ -229,7 +229,33 @@ def parse(path: str | Path) -> Any:
                             f"not valid YAML: {said or str(e).splitlines()[0]}") from None
     if not isinstance(doc, dict):
         raise ScenarioError(str(path), 1, "a scenario is a mapping of keys (name, ecus, expect, ...)")
+    if _values_over(doc, MAX_VALUES):
+        raise ScenarioError(str(path), None, f"more than {MAX_VALUES} values once its aliases (*name) are "
+                            "expanded: nested aliases multiply (a scenario needs far fewer)")
     return doc
+
+
+# A scenario's values as its readers see them, aliases expanded: nine aliases of nine aliases ... of
+# a short list are a few lines of YAML and 387 million values (a minute and 6 GiB to say it is wrong)
+MAX_VALUES = 1_000_000
+
+
+def _values_over(doc: Any, limit: int) -> bool:
+    """Whether the document holds more than `limit` values, each alias counted as often as it is used."""
+    count, stack = 0, [doc]
+    while stack:
+        node = stack.pop()
+        count += 1
+        if count > limit:
+            return True
+        if isinstance(node, dict):
+            stack.extend(node.values())
+        elif isinstance(node, list):
+            stack.extend(node)
+    return False
+
+
+MAX_SAID = 300  # characters of a schema message (it holds the value: a long list would be a page)
 
 
 def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
@@ -249,7 +275,9 @@ def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
             hint = f" (YAML reads {error.instance!r} as text: write {text_number(error.instance)})"
         elif isinstance(error.instance, bool) and error.validator in ("type", "oneOf") and "boolean" not in wanted:
             hint = " (YAML 1.1 reads yes, no, on and off as true and false: quote a name meant as text)"
-        problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {error.message}{hint}"))
+        message = error.message if len(error.message) <= MAX_SAID else (
+            f"{error.message[:MAX_SAID // 2]} ... {error.message[-MAX_SAID // 2:]}")  # the value cut, the reason kept
+        problems.append(ScenarioError(str(path), _line_of(doc, line_path), f"{where}: {message}{hint}"))
     return problems
 
 

@@ -130,3 +130,27 @@ def test_partition_gives_the_bridge_its_own_router_listener(tmp_path):
 def test_shipped_scenarios_are_valid():
     for path in sorted(Path(__file__).resolve().parents[2].glob("scenarios/**/*.yaml")):
         assert cli.main(["validate", str(path)]) == 0
+
+
+def test_an_alias_bomb_is_refused_at_once(tmp_path, capsys):
+    # nine aliases of nine ... of a list: 387 million values read through (a minute and 6 GiB before)
+    levels = ["  - &a0 [x, x, x, x, x, x, x, x, x]"] + [
+        f"  - &a{n} [{', '.join([f'*a{n - 1}'] * 9)}]" for n in range(1, 9)]
+    path = write(tmp_path, "s.yaml", scenario_text(ecus="\n" + "\n".join(levels)))
+    write(tmp_path, "trace.log", GOOD_TRACE)
+    with pytest.raises(ScenarioError, match=r"s.yaml: more than 1000000 values once its aliases \(\*name\) are "
+                                            r"expanded"):
+        scenario.load(path)
+    # aliases a scenario really uses (shared settings) are read as ever
+    shared = "\n  - &engine\n    name: engine\n    bus: vcan0\n    trace: trace.log\n  - <<: *engine\n    name: body"
+    path = write(tmp_path, "s.yaml", scenario_text(ecus=shared))
+    assert [e.name for e in scenario.load(path).ecus] == ["engine", "body"]
+
+
+def test_a_long_value_in_a_problem_is_cut_to_its_reason(tmp_path, capsys):
+    path = write(tmp_path, "s.yaml", scenario_text(ecus="\n  - [" + ", ".join(["x"] * 5000) + "]"))
+    write(tmp_path, "trace.log", GOOD_TRACE)
+    assert cli.main(["validate", str(path)]) == 2
+    said = capsys.readouterr().err.splitlines()[0]
+    assert len(said) < 400 and said.startswith(f"{path}:6: ecus.0: ['x', 'x'") and " ... " in said
+    assert said.endswith("'x', 'x'] is not of type 'object'")
