@@ -29,7 +29,10 @@ def test_security_scenario_passes_with_access_control_on():
     assert seen["rogue_bridge_tokens"] == []
     metrics = json.loads((run_dir / "metrics.json").read_text())
     tx = metrics["zenoh_to_can"]["vcan0"]
-    assert tx["unexpected"] == 0 and tx["matched"] == tx["sent"] > 0, tx
+    # every command got through the access control: on the bus, or to the bridge, which refused it as
+    # delivered too late for its deadline (a loaded machine; no_stale_commands explains each)
+    late = metrics["freshness"]["vcan0"]["refused_after_late_delivery"]
+    assert tx["unexpected"] == 0 and tx["matched"] + late == tx["sent"] > 0 and late <= 2, (tx, late)
     cases = junit_cases(run_dir)
     for check in ("access_control", "zenoh_to_can", "bridge_stats_agree", "integrity"):
         assert cases[f"test_check[{check}]"] == "passed", cases
