@@ -361,7 +361,7 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
     def interface_of(spec: dict, where: list) -> str | None:
         if "interface" in spec and "trace" not in spec:
             fail([*where, "interface"], "names an interface of a trace: give the trace")
-        return spec.get("interface")
+        return None if spec.get("interface") is None else str(spec["interface"])  # an ASC channel: 2 or '2'
 
     def messages_of(spec: dict) -> tuple[Message, ...]:
         return tuple(Message(int(m["id"], 16), m["cycle_ms"], m.get("dlc", 8), m.get("extended", False),

@@ -79,8 +79,8 @@ def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, in
             seen = interfaces_of.get(path.parent / trace) if isinstance(trace, str) else None
             if not seen:
                 continue  # no such trace, or no frames: said already
-            only = spec.get("interface")
-            if isinstance(only, str) and only not in seen:
+            only = None if spec.get("interface") is None else str(spec["interface"])
+            if only is not None and only not in seen:
                 found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "interface"]),
                                            f"{key}.{i}.interface: no frames on '{only}' in {trace} "
                                            f"({interfaces_said(seen)})"))
@@ -109,7 +109,7 @@ def remap_problems(path: Path) -> list[InputError]:
             continue  # the schema's problem
         seen: set[int] = set()
         try:
-            only = spec.get("interface")
+            only = None if spec.get("interface") is None else str(spec["interface"])
             for line, _, iface, frame in iter_trace(path.parent / trace, None, lambda e: None, STREAM_CACHE):
                 if only is not None and iface != only:
                     continue  # another bus's frame: not replayed

@@ -82,9 +82,10 @@ def test_an_asc_of_two_channels_is_numbered_as_the_file_has_them(tmp_path, capsy
            "Begin Triggerblock Mon Nov 13 10:00:00.000 am 2023\n"
            "   0.010000 1  123  Rx   d 1 01\n   0.010100 2  456  Rx   d 1 02\n   0.020000 1  123  Rx   d 1 03\n"
            "End TriggerBlock\n")
-    path = scenario_file(tmp_path, asc, "    interface: '2'\n", name="drive.asc")
-    assert cli.main(["validate", str(path)]) == 0
-    assert sent(path) == [(6, 0x456, "vcan0")]
+    for said in ("'2'", "2"):  # a channel number, quoted or not
+        path = scenario_file(tmp_path, asc, f"    interface: {said}\n", name="drive.asc")
+        assert cli.main(["validate", str(path)]) == 0
+        assert sent(path) == [(6, 0x456, "vcan0")]
 
 
 def test_commands_of_a_two_interface_trace_say_which_too(tmp_path, capsys):
