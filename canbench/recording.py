@@ -103,17 +103,20 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int]:
 
     from .viewer_types import LOGGERS
     from .viewer_types.markers import expire
+    from .viewer_types.registry import set_sample_time
     count = malformed = 0
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages():
             if schema is None or schema.encoding != "ros2msg" or schema.name not in LOGGERS:
                 continue
-            rr.set_time("time", timestamp=message.log_time / 1e9)
             ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
             try:
-                LOGGERS[schema.name](ctx, channel.topic.strip("/"), ros2_msgs.decode(schema.name, message.data))
+                msg = ros2_msgs.decode(schema.name, message.data)
+                set_sample_time(message.log_time, msg)
+                LOGGERS[schema.name](ctx, channel.topic.strip("/"), msg)
                 count += 1
             except Exception as e:  # noqa: BLE001 - as live: a bad message is shown and counted, never fatal
+                set_sample_time(message.log_time, None)
                 rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
                 malformed += 1
     expire(ctx)  # markers whose lifetime ends after the last message

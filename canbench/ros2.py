@@ -16,6 +16,7 @@ against hashes published for std_msgs/String and sensor_msgs/Imu. The type
 description is read off the CDR structs of ros2_msgs (one source for the
 wire format and the hash). CDR via pycdr2 (Eclipse Cyclone DDS's Python CDR)."""
 
+import functools
 import hashlib
 import json
 import typing
@@ -77,6 +78,17 @@ class Entity:
     def data_key(self) -> str:
         return data_key(self.domain_id, self.topic, self.type_name, self.type_hash)
 
+    @property
+    def transient_local_depth(self) -> int | None:
+        """The history a TRANSIENT_LOCAL publisher keeps for late subscribers (/tf_static, /map),
+        None for a VOLATILE one. rmw_zenoh's QoS field: reliability:durability:history,depth:..., a
+        default left empty (durability 1 is TRANSIENT_LOCAL; an empty depth is rmw's default 10)."""
+        parts = self.qos.split(":")
+        if len(parts) < 3 or parts[1] != "1":
+            return None
+        depth = parts[2].partition(",")[2]
+        return int(depth) if depth.isascii() and depth.isdigit() and int(depth) > 0 else 10
+
 
 def parse_token(key: str) -> Entity:
     parts = key.split("/")
@@ -84,7 +96,7 @@ def parse_token(key: str) -> Entity:
         raise TokenError(f"not an rmw_zenoh liveliness token (9 or 13 fields): {key!r}")
     if parts[5] not in KINDS:
         raise TokenError(f"unknown entity kind {parts[5]!r} in {key!r}")
-    if not parts[1].isdigit():
+    if not (parts[1].isascii() and parts[1].isdigit()):  # isdigit alone takes '²', which int() refuses
         raise TokenError(f"domain id {parts[1]!r} is not a number in {key!r}")
     node = Entity(int(parts[1]), parts[2], parts[3], parts[4], parts[5], demangle(parts[6]), demangle(parts[7]),
                   parts[8])
@@ -119,14 +131,22 @@ def attachment(sequence: int, source_ns: int, gid: bytes) -> bytes:
 
 
 class Publisher:
-    def __init__(self, node: "Node", eid: int, topic: str, ros_type: str):
+    def __init__(self, node: "Node", eid: int, topic: str, ros_type: str, transient_local: int = 0):
+        """transient_local: the depth a TRANSIENT_LOCAL publisher keeps for late subscribers, as
+        rmw_zenoh keeps it (an AdvancedPublisher's cache, publisher detection on); 0: VOLATILE."""
         self.session, self.topic, self.ros_type = node.session, topic, ros_type
         self.type_hash = type_hash(ros_type)
         self.key = data_key(node.domain_id, topic, ros_type, self.type_hash)
         token = publisher_token(node.domain_id, node.zid, node.nid, eid, node.namespace, node.name, topic, ros_type,
-                                self.type_hash)
+                                self.type_hash, f":1:,{transient_local}:,:,:,," if transient_local else "::,10:,:,:,,")
         self.gid = hashlib.sha256(token.encode()).digest()[:16]
-        self.publisher = self.session.declare_publisher(self.key, congestion_control=node.congestion_control)
+        if transient_local:
+            import zenoh.ext
+            self.publisher = zenoh.ext.declare_advanced_publisher(
+                self.session, self.key, congestion_control=node.congestion_control,
+                cache=zenoh.ext.CacheConfig(transient_local), publisher_detection=True)
+        else:
+            self.publisher = self.session.declare_publisher(self.key, congestion_control=node.congestion_control)
         self.token = self.session.liveliness().declare_token(token)  # after the publisher: ready when seen
         self.sequence = 0
 
@@ -155,8 +175,8 @@ class Node:
         self.token = session.liveliness().declare_token(node_token(domain_id, self.zid, nid, namespace, name))
         self.publishers: list[Publisher] = []
 
-    def publisher(self, topic: str, ros_type: str) -> Publisher:
-        pub = Publisher(self, self.nid + 1 + len(self.publishers), topic, ros_type)
+    def publisher(self, topic: str, ros_type: str, transient_local: int = 0) -> Publisher:
+        pub = Publisher(self, self.nid + 1 + len(self.publishers), topic, ros_type, transient_local)
         self.publishers.append(pub)
         return pub
 
@@ -201,6 +221,14 @@ def fields(ros_type: str) -> list[dict]:
     return out
 
 
+def same_definition(entity: Entity) -> bool:
+    """Whether a publisher's type is the definition ros2_msgs decodes: its token's RIHS01 hash is
+    ours (a same-named type of another definition decodes as garbage); a token without a hash
+    (Humble's TypeHashNotSupported) cannot say otherwise."""
+    return not entity.type_hash.startswith("RIHS01_") or entity.type_hash == type_hash(entity.type_name)
+
+
+@functools.cache
 def type_hash(ros_type: str) -> str:
     """RIHS01_<sha256> of the type description, as rosidl computes it."""
     refs: set[str] = set()

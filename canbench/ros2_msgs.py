@@ -12,9 +12,23 @@ import typing
 from dataclasses import dataclass, field
 
 from pycdr2 import IdlStruct
+from pycdr2._machinery import StringMachine
 from pycdr2.types import array, float32, float64, int8, int32, sequence, uint8, uint32
 
 from .errors import BenchError
+
+
+def _string_as_rclpy_reads_it(self, buffer) -> str:
+    """A CDR string, bytes that are not UTF-8 replaced as rclpy decodes them (C++ nodes send any
+    bytes): pycdr2's strict decode refused the whole message for one byte (a sensor's '°' in Latin-1)."""
+    buffer.align(4)
+    length = buffer.read("I", 4)
+    text = buffer.read_bytes(length - 1)
+    buffer.read("b", 1)
+    return text.decode("utf-8", "replace")
+
+
+StringMachine.deserialize = _string_as_rclpy_reads_it
 
 
 class CdrError(BenchError):

@@ -36,6 +36,7 @@ from .viewer_args import DEFAULT_ENDPOINT
 from .viewer_types import LOGGERS, Context
 from .viewer_types.can import CanColumns
 from .viewer_types.markers import expire
+from .viewer_types.registry import set_sample_time
 
 QUEUE_SAMPLES = 100_000  # samples between the network callbacks and the logger thread
 BATCH_SAMPLES = 2_000    # the logger drains up to this many samples before sending CAN columns
@@ -140,7 +141,12 @@ class Viewer:
         rr.log("discovery/bridges", rr.TextLog(f"{'+' if alive else '-'} {key}"))
 
     def wanted(self, entity: ros2.Entity) -> bool:
-        return entity.kind == "MP" and entity.type_name in LOGGERS and (self.auto or entity.topic in self.topics)
+        return entity.kind == "MP" and self.decodable(entity) and (self.auto or entity.topic in self.topics)
+
+    @staticmethod
+    def decodable(entity: ros2.Entity) -> bool:
+        """A type with a logger, of the definition the viewer decodes (its token's hash)."""
+        return entity.type_name in LOGGERS and ros2.same_definition(entity)
 
     def _on_ros_token(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -150,30 +156,44 @@ class Viewer:
             rr.log("discovery/ros2", rr.TextLog(f"unparsable token: {e}"))
             return
         alive = sample.kind == zenoh.SampleKind.PUT
-        supported = entity.type_name in LOGGERS
+        supported = self.decodable(entity)
+        why = "no logger" if entity.type_name not in LOGGERS else "another definition: its hash is not the viewer's"
         rr.log("discovery/ros2", rr.TextLog(
             f"{'+' if alive else '-'} {ros2.KINDS[entity.kind]} {entity.namespace.rstrip('/')}/{entity.node} "
-            f"{entity.topic} [{entity.type_name or '-'}]" + ("" if supported or not entity.topic else " (no logger)")))
+            f"{entity.topic} [{entity.type_name or '-'}]" + ("" if supported or not entity.topic else f" ({why})")))
         with self.lock:
             if alive:
                 self.entities[key] = entity
             else:
                 self.entities.pop(key, None)
-            if entity.topic and not supported and entity.type_name not in self.unsupported:
-                self.unsupported.add(entity.type_name)  # listed once, however many topics carry it
-                rr.log("discovery/unsupported", rr.TextLog(f"{entity.type_name} (first seen on {entity.topic})"))
+            shown = entity.type_name if entity.type_name not in LOGGERS else f"{entity.type_name} {entity.type_hash}"
+            if entity.topic and not supported and shown not in self.unsupported:
+                self.unsupported.add(shown)  # listed once, however many topics carry it
+                rr.log("discovery/unsupported", rr.TextLog(
+                    f"{shown} (first seen on {entity.topic}{'' if entity.type_name not in LOGGERS else ': ' + why})"))
             if not self.wanted(entity):
                 return
             publishers = self.publishers.setdefault(entity.data_key, set())
             (publishers.add if alive else publishers.discard)(key)
             if publishers and entity.data_key not in self.subscribers:
-                self.subscribers[entity.data_key] = self.session.declare_subscriber(
-                    entity.data_key, self._ros_callback(entity.type_name))
+                self.subscribers[entity.data_key] = self._subscribe(entity)
                 rr.log("discovery/subscriptions", rr.TextLog(f"+ {entity.topic} [{entity.type_name}]"))
             elif not publishers and entity.data_key in self.subscribers:
                 self.subscribers.pop(entity.data_key).undeclare()  # type: ignore[attr-defined]
                 del self.publishers[entity.data_key]
                 rr.log("discovery/subscriptions", rr.TextLog(f"- {entity.topic} [{entity.type_name}]"))
+
+    def _subscribe(self, entity: ros2.Entity):
+        """A subscriber to a topic's data key; for a TRANSIENT_LOCAL publisher one that also asks the
+        publishers' caches (as rmw_zenoh's subscribers do): /tf_static and /map, published once
+        before the viewer started, arrive too."""
+        depth = entity.transient_local_depth
+        if depth is None:
+            return self.session.declare_subscriber(entity.data_key, self._ros_callback(entity.type_name))
+        import zenoh.ext
+        return zenoh.ext.declare_advanced_subscriber(
+            self.session, entity.data_key, self._ros_callback(entity.type_name),
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=depth))
 
     def _ros_callback(self, type_name: str) -> Callable[[zenoh.Sample], None]:
         def on_sample(s: zenoh.Sample) -> None:
@@ -209,7 +229,7 @@ class Viewer:
         topic = "/" + "/".join(sample.key.split("/")[1:-2])
         try:
             msg = ros2_msgs.decode(sample.type_name, sample.payload)
-            rr.set_time("time", timestamp=sample.t_ns / 1e9)
+            set_sample_time(sample.t_ns, msg)
             self.ctx.static, self.ctx.t_ns = topic == "/tf_static", sample.t_ns
             LOGGERS[sample.type_name](self.ctx, "ros2" + topic, msg)
         except Exception as e:  # noqa: BLE001 - a payload, whatever it holds, never stops the viewer

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import rerun as rr
 
-from .registry import Context, logger
+from .registry import Context, frame_name, logger
 from .scalars import vector_scalars
 
 
@@ -12,7 +12,7 @@ from .scalars import vector_scalars
 def log_tf(ctx: Context, path: str, msg) -> None:
     """Each transform at tf/<root>/.../<child>, between the named frames parent and child."""
     for ts in msg.transforms:
-        parent, child = ts.header.frame_id, ts.child_frame_id
+        parent, child = frame_name(ts.header.frame_id), frame_name(ts.child_frame_id)
         if not parent or not child or parent == child:
             raise ValueError(f"transform without two distinct frames: {parent!r} -> {child!r}")
         ctx.parents[child] = parent

@@ -50,6 +50,9 @@ MEDIA_TYPES = {"jpeg": "image/jpeg", "jpg": "image/jpeg", "png": "image/png"}
 def log_compressed_image(ctx: Context, path: str, msg) -> None:
     # format is "jpeg", "png", or image_transport's "<encoding>; jpeg compressed <encoding>"
     words = msg.format.replace(";", " ").lower().split()
+    if "compresseddepth" in words:  # compressed_depth_image_transport: a 12-byte ConfigHeader, then the codec's bytes
+        raise ValueError(f"compressed image format {msg.format!r}: compressedDepth (a depth image behind its "
+                         "transport's own header) is not shown")
     media = next((MEDIA_TYPES[w] for w in words if w in MEDIA_TYPES), None)
     if media is None:
         raise ValueError(f"compressed image format {msg.format!r} is neither jpeg nor png")

@@ -1,6 +1,7 @@
 """visualization_msgs/Marker and MarkerArray: each marker at <topic>/<ns>/<id>, its pose
 a Transform3D there, its shape in the pose's coordinates by marker type; DELETE clears
-that marker, DELETEALL every marker of the topic. A marker with a lifetime is cleared at
+that marker, DELETEALL every marker of its ns (of the topic when it has none). A MarkerArray
+draws every marker it can and counts the array once for those it cannot (a mesh). A marker with a lifetime is cleared at
 its receive time + lifetime unless a newer one of that ns/id came first (as RViz does):
 the Clear is logged at that time once a later sample, the viewer's idle tick or the end
 shows it is due (expire)."""
@@ -72,10 +73,11 @@ def expire(ctx: Context, until_ns: int | None = None) -> None:
 
 
 def log_one(ctx: Context, path: str, m) -> None:
-    if m.action == DELETEALL:
-        for entity in [e for e in ctx.expiries if e.startswith(path + "/")]:
+    if m.action == DELETEALL:  # of the marker's ns when it has one, else of the topic (Marker.msg, RViz)
+        scope = f"{path}/{m.ns}" if m.ns else path
+        for entity in [e for e in ctx.expiries if e.startswith(scope + "/")]:
             del ctx.expiries[entity]
-        rr.log(path, rr.Clear(recursive=True))
+        rr.log(scope, rr.Clear(recursive=True))
         return
     entity = f"{path}/{m.ns or '_'}/{m.id}"
     if m.action == DELETE:
@@ -103,5 +105,11 @@ def log_marker(ctx: Context, path: str, msg) -> None:
 @logger("visualization_msgs/msg/MarkerArray")
 def log_marker_array(ctx: Context, path: str, msg) -> None:
     expire(ctx, ctx.t_ns)
-    for m in msg.markers:
-        log_one(ctx, path, m)
+    refused = []
+    for m in msg.markers:  # one the viewer cannot draw (a mesh) leaves the others drawn, as in RViz
+        try:
+            log_one(ctx, path, m)
+        except ValueError as e:
+            refused.append(str(e))
+    if refused:  # counted for the topic, the first reason said
+        raise ValueError(f"{len(refused)} of {len(msg.markers)} markers not shown: {refused[0]}")

@@ -21,7 +21,10 @@ def cloud_fields(msg) -> dict[str, np.ndarray]:
     for f in msg.fields:
         if f.datatype not in DATATYPES:
             raise ValueError(f"point field {f.name!r}: unknown datatype {f.datatype}")
-        dtype = np.dtype(order + DATATYPES[f.datatype])
+        # PCL packs a colour's bits in a float32 field (0xAARRGGBB: red >= 128 is a NaN): read as
+        # bits, since a float conversion quiets a signalling NaN, and red 128..191 would gain 64
+        kind = "u4" if f.name in PACKED_COLOURS and DATATYPES[f.datatype] == "f4" else DATATYPES[f.datatype]
+        dtype = np.dtype(order + kind)
         require(f.offset + dtype.itemsize <= msg.point_step, f"field {f.name!r} ends past point_step")
         names.append(f.name)
         formats.append(dtype)
@@ -33,11 +36,14 @@ def cloud_fields(msg) -> dict[str, np.ndarray]:
             for n in names}
 
 
+PACKED_COLOURS = ("rgba", "rgb")
+
+
 def cloud_colors(fields: dict[str, np.ndarray]) -> np.ndarray | None:
     """rgb / rgba packed in 32 bits (PCL's convention, also as float32 bits), else intensity as grey."""
-    for name in ("rgba", "rgb"):
+    for name in PACKED_COLOURS:
         if name in fields:
-            packed = fields[name]
+            packed = fields[name]  # float32 fields come as their bits (cloud_fields)
             bits = packed.astype(np.float32).view(np.uint32) if packed.dtype.kind == "f" else packed.astype(np.uint32)
             rgb = np.stack([(bits >> 16) & 0xFF, (bits >> 8) & 0xFF, bits & 0xFF], axis=1)
             alpha = (bits >> 24) & 0xFF if name == "rgba" else np.full(len(bits), 255)

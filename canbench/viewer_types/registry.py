@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import rerun as rr
 
 Logger = Callable[["Context", str, Any], None]
@@ -43,6 +44,7 @@ class Context:
 
     def log(self, path: str, *archetypes, frame: str = "") -> None:
         """rr.log, plus the entity's coordinate frame (header.frame_id) whenever it changes."""
+        frame = frame_name(frame)
         if frame and self.frames_of.get(path) != frame:
             self.frames_of[path] = frame
             archetypes = (*archetypes, rr.CoordinateFrame(frame))
@@ -51,6 +53,7 @@ class Context:
     def pose(self, path: str, position, orientation, frame: str) -> None:
         """A pose as a Transform3D: from its header's frame to a frame named after the entity,
         in which the entity draws its axes (without a frame: relative to the entity's parent)."""
+        frame = frame_name(frame)
         t = [position.x, position.y, position.z]
         q = rr.Quaternion(xyzw=[orientation.x, orientation.y, orientation.z, orientation.w])
         transform = rr.Transform3D(translation=t, quaternion=q, parent_frame=frame or None,
@@ -60,6 +63,24 @@ class Context:
 
     def scalar(self, path: str, value: float) -> None:
         rr.log(path, rr.Scalars(float(value)))
+
+
+def set_sample_time(t_ns: int, msg) -> None:
+    """The timelines of what is logged next: `time`, the receive (or an MCAP's log) time, to the
+    nanosecond; and `header_stamp`, the message's own header.stamp (source time, sim time: what
+    RViz and tf2 go by; data and its TF line up there), absent for a message without one."""
+    rr.set_time("time", timestamp=np.datetime64(t_ns, "ns"))
+    stamp = getattr(getattr(msg, "header", None), "stamp", None)
+    if stamp is not None and (stamp.sec or stamp.nanosec):
+        rr.set_time("header_stamp", timestamp=np.datetime64(stamp.sec * 1_000_000_000 + stamp.nanosec, "ns"))
+    else:
+        rr.disable_timeline("header_stamp")
+
+
+def frame_name(frame_id: str) -> str:
+    """A frame as tf2 names it: without one leading '/' (ROS 1's style, still sent; tf2's BufferCore
+    strips it, so '/odom' and 'odom' are one frame)."""
+    return frame_id[1:] if frame_id.startswith("/") else frame_id
 
 
 def require(condition: bool, what: str) -> None:

@@ -21,6 +21,7 @@ from ros2_catalogue import CASES, malformed_variants
 
 from canbench import ros2
 from canbench.rig import free_port
+from canbench.runkeys import base_config
 
 URDF = Path(__file__).parents[1] / "data" / "viewer" / "car.urdf"
 rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip install -e '.[viewer]')")
@@ -155,3 +156,39 @@ def test_topic_whose_publisher_goes_is_unsubscribed(lone_router, tmp_path):
         session.close()
     lines = read_rrd_columns(rrd)["/discovery/subscriptions"]["TextLog:text"]
     assert lines == [["+ /chatter [std_msgs/msg/String]"], ["- /chatter [std_msgs/msg/String]"]]
+
+
+def test_a_transient_local_topic_published_before_the_viewer_started_is_shown(lone_router, tmp_path):
+    """/tf_static as robot_state_publisher sends it: once, at start, TRANSIENT_LOCAL (rmw_zenoh keeps
+    it in an AdvancedPublisher's cache); the viewer started later asks the cache, as rmw_zenoh's
+    subscribers do. A VOLATILE topic's earlier sample stays unseen (the control)."""
+    conf = base_config()  # as rmw_zenoh's session config: timestamping on (its publishers' caches need it)
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([lone_router.endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")
+    session = zenoh.open(conf)
+    node = ros2.Node(session, "robot_state_publisher")
+    rrd = tmp_path / "late.rrd"
+    msgs = ros2.MESSAGE_TYPES
+    tf = msgs["tf2_msgs/msg/TFMessage"]([msgs["geometry_msgs/msg/TransformStamped"](
+        header=msgs["std_msgs/msg/Header"](frame_id="base_link"), child_frame_id="lidar")])
+    try:
+        static = node.publisher("/tf_static", "tf2_msgs/msg/TFMessage", transient_local=1)
+        chatter = node.publisher("/chatter", "std_msgs/msg/String")
+        static.put(tf)
+        chatter.put(msgs["std_msgs/msg/String"]("before the viewer"))
+        with viewer(session, rrd, "--zenoh-connect", lone_router.endpoint, "--auto-subscribe"):
+            wait_for(lambda: subscribed(session, {static.key, chatter.key}), "the viewer subscribed to both topics")
+            wait_for(lambda: viewer_stats(session)["logged"] >= 1, "the viewer logging the cached /tf_static")
+            chatter.put(msgs["std_msgs/msg/String"]("after"))
+            wait_for(lambda: viewer_stats(session)["logged"] >= 2, "the viewer logging /chatter's second sample")
+            stats = viewer_stats(session)
+    finally:
+        node.close()
+        session.close()
+    assert stats["logged"] == 2 and not stats["malformed"]
+    columns = read_rrd_columns(rrd)
+    joint = columns["/tf/base_link/lidar"]
+    assert (joint["Transform3D:parent_frame"], joint["Transform3D:child_frame"]) == ([["base_link"]], [["lidar"]])
+    assert columns["/ros2/chatter"]["TextLog:text"] == [["after"]]

@@ -1,0 +1,162 @@
+"""ROS 2 traffic as real nodes send it, which the viewer drew wrong: PCL's colour clouds (rgb bits
+in a float32 field, red >= 128 a NaN), a MarkerArray holding a mesh, DELETEALL of one namespace,
+TF frames with ROS 1's leading '/', strings that are not UTF-8 (C++ nodes send any bytes), a
+liveliness token whose domain is not an ASCII number, compressedDepth images, the QoS of a
+TRANSIENT_LOCAL publisher. Each read as the real tools read it (PCL, RViz, tf2, rclpy, rmw_zenoh)."""
+from __future__ import annotations
+
+import struct
+
+import pytest
+
+from canbench import ros2
+from canbench import ros2_msgs as m
+
+pytestmark = pytest.mark.unit
+rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip install -e '.[viewer]')")
+
+from canbench.viewer import read_rrd_columns  # noqa: E402
+from canbench.viewer_types import LOGGERS, Context  # noqa: E402
+from canbench.viewer_types.points import cloud_colors, cloud_fields  # noqa: E402
+
+
+def logged(tmp_path, messages: list[tuple[str, str, object]]) -> tuple[dict, list[str]]:
+    """(type, topic path, message) through CDR and the loggers into an .rrd: its columns, and the
+    errors the viewer would count (one per message a logger refused)."""
+    path = tmp_path / "t.rrd"
+    rec = rr.RecordingStream("canbench-test-traffic")
+    rec.save(str(path))
+    ctx, errors = Context(), []
+    with rec:
+        for i, (type_name, topic, msg) in enumerate(messages):
+            rr.set_time("time", timestamp=1_700_000_000 + i)
+            try:
+                LOGGERS[type_name](ctx, topic, m.decode(type_name, msg.serialize()))  # type: ignore[attr-defined]
+            except ValueError as e:
+                errors.append(str(e))
+    rec.flush()
+    rec.disconnect()
+    return read_rrd_columns(path), errors
+
+
+@pytest.mark.parametrize("red", [0x00, 0x7F, 0x80, 0xBF, 0xC0, 0xFF])
+def test_a_pcl_colour_cloud_keeps_its_red(red):
+    # pcl::toROSMsg(PointXYZRGB): x y z, 4 bytes pad, rgb as float32 bits 0xAARRGGBB (a = 255)
+    bits = 0xFF000000 | red << 16 | 0xC0 << 8 | 0x20
+    F = m.PointField
+    for order, big in (("<", False), (">", True)):
+        point = struct.pack(f"{order}fff4xI12x", 1.0, 2.0, 3.0, bits)
+        msg = m.PointCloud2(header=m.Header(frame_id="camera"), height=1, width=1, is_bigendian=big,
+                            fields=[F("x", 0, 7, 1), F("y", 4, 7, 1), F("z", 8, 7, 1), F("rgb", 16, 7, 1)],
+                            point_step=32, row_step=32, data=list(point), is_dense=True)
+        colours = cloud_colors(cloud_fields(m.decode("sensor_msgs/msg/PointCloud2", msg.serialize())))
+        assert colours is not None and list(colours[0]) == [red, 0xC0, 0x20, 255], (order, hex(bits))
+
+
+def marker(ns: str, ident: int, kind: int = 1, action: int = 0) -> m.Marker:
+    return m.Marker(header=m.Header(frame_id="map"), ns=ns, id=ident, type=kind, action=action,
+                    scale=m.Vector3(1, 1, 1), color=m.ColorRGBA(1, 0, 0, 1), mesh_resource="package://r/a.dae")
+
+
+def test_a_marker_array_with_a_mesh_draws_the_others_and_counts_the_array(tmp_path):
+    array = m.MarkerArray([marker("robot", 0), marker("robot", 1, kind=10), marker("robot", 2, kind=2),
+                           marker("robot", 3)])
+    columns, errors = logged(tmp_path, [("visualization_msgs/msg/MarkerArray", "ros2/viz", array)])
+    drawn = {e for e in columns if e.startswith("/ros2/viz/robot/") and e.endswith("/shape")}
+    assert drawn == {"/ros2/viz/robot/0/shape", "/ros2/viz/robot/2/shape", "/ros2/viz/robot/3/shape"}
+    assert errors == ["1 of 4 markers not shown: marker robot/1: MESH_RESOURCE ('package://r/a.dae') is not shown"]
+
+
+def test_deleteall_of_a_namespace_clears_that_namespace_only(tmp_path):
+    columns, errors = logged(tmp_path, [("visualization_msgs/msg/Marker", "ros2/viz", marker("a", 1)),
+                                        ("visualization_msgs/msg/Marker", "ros2/viz", marker("b", 1)),
+                                        ("visualization_msgs/msg/Marker", "ros2/viz", marker("b", 0, action=3)),
+                                        ("visualization_msgs/msg/Marker", "ros2/viz", marker("", 0, action=3))])
+    cleared = sorted(e for e, values in columns.items() if "Clear:is_recursive" in values)
+    assert errors == [] and cleared == ["/ros2/viz", "/ros2/viz/b"]  # ns b, then (no ns) the whole topic
+
+
+def test_a_leading_slash_names_the_same_tf_frame(tmp_path):
+    tf = m.TFMessage([m.TransformStamped(header=m.Header(frame_id="/odom"), child_frame_id="/base_link")])
+    cloud = m.PointCloud2(header=m.Header(frame_id="/base_link"), height=1, width=1,
+                          fields=[m.PointField("x", 0, 7, 1), m.PointField("y", 4, 7, 1), m.PointField("z", 8, 7, 1)],
+                          point_step=12, row_step=12, data=list(struct.pack("<fff", 1, 2, 3)), is_dense=True)
+    columns, errors = logged(tmp_path, [("tf2_msgs/msg/TFMessage", "ros2/tf", tf),
+                                        ("sensor_msgs/msg/PointCloud2", "ros2/points", cloud)])
+    transform = columns["/tf/odom/base_link"]
+    assert errors == [] and (transform["Transform3D:parent_frame"], transform["Transform3D:child_frame"]) == (
+        [["odom"]], [["base_link"]])
+    assert columns["/ros2/points"]["CoordinateFrame:frame"] == [["base_link"]]  # in the tree tf2 names
+
+
+def test_a_string_that_is_not_utf8_is_read_as_rclpy_reads_it():
+    payload = b"\x00\x01\x00\x00" + struct.pack("<I", 5) + b"23\xb0C\x00"  # a Latin-1 degree sign
+    assert m.decode("std_msgs/msg/String", payload).data == "23\ufffdC"
+    assert m.decode("std_msgs/msg/String", m.String("ok °").serialize()).data == "ok °"
+
+
+def test_a_token_whose_domain_is_not_an_ascii_number_is_a_token_error():
+    key = ros2.publisher_token(0, "z", 0, 1, "/", "n", "/t", "std_msgs/msg/String", "RIHS01_0").replace("/0/", "/²/", 1)
+    with pytest.raises(ros2.TokenError, match="domain id '²' is not a number"):
+        ros2.parse_token(key)
+
+
+def test_compressed_depth_is_refused_not_shown_as_a_broken_png(tmp_path):
+    png = b"\x89PNG\r\n\x1a\n" + bytes(20)
+    msg = m.CompressedImage(header=m.Header(frame_id="depth"), format="16UC1; compressedDepth png",
+                            data=list(struct.pack("<iff", 0, 0.0, 0.0) + png))
+    columns, errors = logged(tmp_path, [("sensor_msgs/msg/CompressedImage", "ros2/depth", msg)])
+    assert "/ros2/depth" not in columns
+    assert errors == ["compressed image format '16UC1; compressedDepth png': compressedDepth (a depth image behind "
+                      "its transport's own header) is not shown"]
+
+
+@pytest.mark.parametrize("qos,depth", [(":1:,1:,:,:,,", 1), (":1:,:,:,:,,", 10), ("2:1:1,5:,:,:,,", 5),
+                                       ("::,10:,:,:,,", None), (":2:,1:,:,:,,", None)])
+def test_the_tokens_qos_says_a_transient_local_publisher_and_its_depth(qos, depth):
+    token = ros2.publisher_token(0, "z", 0, 1, "/", "robot_state_publisher", "/tf_static", "tf2_msgs/msg/TFMessage",
+                                 "RIHS01_0", qos)
+    assert ros2.parse_token(token).transient_local_depth == depth
+
+
+def test_a_same_named_type_of_another_definition_is_not_decoded():
+    from canbench.viewer import Viewer
+    ours = ros2.type_hash("std_msgs/msg/String")
+    tokens = {h: ros2.parse_token(ros2.publisher_token(0, "z", 0, 1, "/", "n", "/chatter", "std_msgs/msg/String", h))
+              for h in (ours, "RIHS01_" + "ab" * 32, "TypeHashNotSupported")}
+    assert {h: Viewer.decodable(e) for h, e in tokens.items()} == {
+        ours: True, "RIHS01_" + "ab" * 32: False, "TypeHashNotSupported": True}
+
+
+def test_a_message_is_on_its_header_stamp_too_and_receive_time_to_the_ns(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from canbench.viewer import Sample, Viewer
+    received = 1_700_000_000_250_000_001  # ns: a float of seconds is 0.24 us coarse here
+    temp = m.Temperature(header=m.Header(stamp=m.Time(1_699_999_999, 900_000_000), frame_id="cabin"),
+                         temperature=21.5)
+    live = Viewer(None, [], True)  # type: ignore[arg-type]
+    h = ros2.type_hash("sensor_msgs/msg/Temperature")
+    live.samples.put(Sample(received, f"0/cabin/temp/sensor_msgs::msg::dds_::Temperature_/{h}", temp.serialize(),
+                            "sensor_msgs/msg/Temperature"))
+    h = ros2.type_hash("std_msgs/msg/String")
+    live.samples.put(Sample(received + 1, f"0/chatter/std_msgs::msg::dds_::String_/{h}", m.String("x").serialize(),
+                            "std_msgs/msg/String"))
+    live.samples.put(None)
+    path = tmp_path / "t.rrd"
+    rec = rr.RecordingStream("canbench-test-stamp")
+    rec.save(str(path))
+    with rec:
+        live._log_loop()
+    rec.flush()
+    rec.disconnect()
+    times: dict[str, dict[str, list]] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        entity = str(chunk.entity_path)
+        if entity.startswith("/ros2/"):
+            times[entity] = {n: batch.column(n).cast("int64").to_pylist() for n in ("time", "header_stamp")
+                             if n in batch.schema.names}
+    assert live.logged == 2 and not live.malformed, live.malformed
+    assert times["/ros2/cabin/temp/temperature"] == {"time": [received], "header_stamp": [1_699_999_999_900_000_000]}
+    assert times["/ros2/chatter"] == {"time": [received + 1]}  # no header: not on header_stamp
