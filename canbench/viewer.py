@@ -84,8 +84,10 @@ def normalise_topic(topic: str) -> str:
 
 class Viewer:
     def __init__(self, session: zenoh.Session, topics: list[str], auto_subscribe: bool, dbc=None,
-                 prefix: str = "vehicle/can", bus_dbcs: dict | None = None):
-        self.session, self.auto, self.prefix = session, auto_subscribe, prefix
+                 prefix: str = "vehicle/can", bus_dbcs: dict | None = None, domain: int | None = None):
+        """domain: the ROS_DOMAIN_ID whose entities it discovers, as an rmw_zenoh node watches its own
+        (None: every domain, each at its own path)."""
+        self.session, self.auto, self.prefix, self.domain = session, auto_subscribe, prefix, domain
         self.topics = {normalise_topic(t) for t in topics}
         self.ctx = Context(dbc, bus_dbcs)  # a bus's own DBC, by the bus its keys name; else dbc
         self.samples: queue.Queue[Sample | None] = queue.Queue(maxsize=QUEUE_SAMPLES)
@@ -115,7 +117,8 @@ class Viewer:
         self.lv_bridges = self.session.liveliness().declare_subscriber(
             f"{self.prefix}/bridges/**", self._on_bridge_token, history=True)
         self.lv_ros = self.session.liveliness().declare_subscriber(
-            f"{ros2.LIVELINESS_PREFIX}/**", self._on_ros_token, history=True)
+            f"{ros2.LIVELINESS_PREFIX}/{'*' if self.domain is None else self.domain}/**", self._on_ros_token,
+            history=True)
         # after the subscribers: whoever sees this token knows they are in place; the
         # queryable answers how much was logged (tests and scripts wait on it, never sleep)
         me = f"canbench/viewers/{self.session.info.zid()}"
@@ -226,7 +229,10 @@ class Viewer:
                                                                          if count == ERRORS_SHOWN else "")))
 
     def _log_ros(self, sample: Sample) -> None:
-        topic = "/" + "/".join(sample.key.split("/")[1:-2])
+        domain, *names = sample.key.split("/")[:-2]
+        # domain 0 (ROS's default) at ros2/<topic>, another at ros2/domain<N>/<topic>: same-named
+        # topics of two domains are two robots, never one entity
+        topic = ("" if domain == "0" else f"/domain{domain}") + "/" + "/".join(names)
         try:
             msg = ros2_msgs.decode(sample.type_name, sample.payload)
             set_sample_time(sample.t_ns, msg)
@@ -320,7 +326,7 @@ def run(args) -> int:
     signal.signal(signal.SIGTERM, _interrupt)
     signal.signal(signal.SIGINT, _interrupt)
     session = open_session(args.zenoh_mode, args.zenoh_connect)
-    viewer = Viewer(session, args.topic, args.auto_subscribe, dbc, bus_dbcs=bus_dbcs)
+    viewer = Viewer(session, args.topic, args.auto_subscribe, dbc, bus_dbcs=bus_dbcs, domain=args.ros_domain)
     viewer.start()
     try:
         deadline = time.monotonic() + args.duration if args.duration else None

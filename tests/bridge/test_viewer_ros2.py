@@ -192,3 +192,22 @@ def test_a_transient_local_topic_published_before_the_viewer_started_is_shown(lo
     joint = columns["/tf/base_link/lidar"]
     assert (joint["Transform3D:parent_frame"], joint["Transform3D:child_frame"]) == ([["base_link"]], [["lidar"]])
     assert columns["/ros2/chatter"]["TextLog:text"] == [["after"]]
+
+
+def test_ros_domain_discovers_that_domain_only(lone_router, tmp_path):
+    session = zenoh_session(lone_router.endpoint)
+    nodes = [ros2.Node(session, "talker", domain_id=d) for d in (0, 7)]
+    try:
+        pubs = [n.publisher("/chatter", "std_msgs/msg/String") for n in nodes]
+        with viewer(session, tmp_path / "d.rrd", "--zenoh-connect", lone_router.endpoint, "--auto-subscribe",
+                    "--ros-domain", "7"):
+            wait_for(lambda: subscribed(session, {pubs[1].key}), "the viewer subscribed to domain 7's /chatter")
+            pubs[1].put(ros2.MESSAGE_TYPES["std_msgs/msg/String"]("seven"))
+            wait_for(lambda: viewer_stats(session)["logged"] >= 1, "the viewer logging domain 7's sample")
+            stats = viewer_stats(session)
+    finally:
+        for n in nodes:
+            n.close()
+        session.close()
+    assert {k for k in stats["subscriptions"] if not k.startswith("vehicle/")} == {pubs[1].key}
+    assert read_rrd_columns(tmp_path / "d.rrd")["/ros2/domain7/chatter"]["TextLog:text"] == [["seven"]]

@@ -160,3 +160,36 @@ def test_a_message_is_on_its_header_stamp_too_and_receive_time_to_the_ns(tmp_pat
     assert live.logged == 2 and not live.malformed, live.malformed
     assert times["/ros2/cabin/temp/temperature"] == {"time": [received], "header_stamp": [1_699_999_999_900_000_000]}
     assert times["/ros2/chatter"] == {"time": [received + 1]}  # no header: not on header_stamp
+
+
+def test_same_named_topics_of_two_domains_stay_apart(tmp_path):
+    from canbench.viewer import Sample, Viewer
+    live = Viewer(None, [], True)  # type: ignore[arg-type]
+    h = ros2.type_hash("std_msgs/msg/String")
+    for domain in (0, 7):
+        key = f"{domain}/chatter/std_msgs::msg::dds_::String_/{h}"
+        live.samples.put(Sample(1_700_000_000_000_000_000 + domain, key, m.String(f"robot {domain}").serialize(),
+                                "std_msgs/msg/String"))
+    live.samples.put(None)
+    path = tmp_path / "d.rrd"
+    rec = rr.RecordingStream("canbench-test-domains")
+    rec.save(str(path))
+    with rec:
+        live._log_loop()
+    rec.flush()
+    rec.disconnect()
+    columns = read_rrd_columns(path)
+    assert columns["/ros2/chatter"]["TextLog:text"] == [["robot 0"]]
+    assert columns["/ros2/domain7/chatter"]["TextLog:text"] == [["robot 7"]]
+
+
+@pytest.mark.parametrize("given,ok", [("0", True), ("232", True), ("233", False), ("²", False), ("-1", False)])
+def test_ros_domain_option_takes_a_domain_id(given, ok):
+    import argparse
+
+    from canbench.viewer_args import ros_domain
+    if ok:
+        assert ros_domain(given) == int(given)
+    else:
+        with pytest.raises(argparse.ArgumentTypeError, match="a ROS_DOMAIN_ID is a whole number from 0 to 232"):
+            ros_domain(given)
