@@ -39,6 +39,7 @@ from .viewer_types.markers import expire
 from .viewer_types.registry import set_sample_time
 
 QUEUE_SAMPLES = 100_000  # samples between the network callbacks and the logger thread
+QUEUE_BYTES = 512 << 20  # and their payloads' bytes: behind a camera's 6 MB frames the count alone held gigabytes
 BATCH_SAMPLES = 2_000    # the logger drains up to this many samples before sending CAN columns
 ERRORS_SHOWN = 10        # malformed samples described per topic; the rest are only counted
 IDLE_TICK_S = 0.5        # with no samples, the logger still clears markers whose lifetime ended
@@ -98,15 +99,23 @@ class Viewer:
         self.unsupported: set[str] = set()
         self.malformed: Counter[str] = Counter()
         self.dropped = 0
+        self.queued_bytes = 0  # payload bytes in self.samples (QUEUE_BYTES)
+        self.queue_lock = threading.Lock()
         self.logged = 0
         self.buses: set[str] = set()
         self.lock = threading.Lock()
 
     def _enqueue(self, sample: Sample) -> None:
-        try:
-            self.samples.put_nowait(sample)
-        except queue.Full:
-            self.dropped += 1  # a viewer never slows the network down; counted
+        with self.queue_lock:  # the network's callback threads (never self.lock: a callback may run under it)
+            if self.queued_bytes + len(sample.payload) > QUEUE_BYTES:
+                self.dropped += 1  # a viewer never slows the network down; counted
+                return
+            try:
+                self.samples.put_nowait(sample)
+            except queue.Full:
+                self.dropped += 1
+                return
+            self.queued_bytes += len(sample.payload)
 
     def start(self) -> None:
         self.logger = threading.Thread(target=self._log_loop, daemon=True, name="loggers")
@@ -218,6 +227,8 @@ class Viewer:
         if batch[-1] is None:
             self.stopping = True
             batch.pop()
+        with self.queue_lock:
+            self.queued_bytes -= sum(len(sample.payload) for sample in batch if sample is not None)
         return batch  # type: ignore[return-value]
 
     def _malformed(self, topic: str, error: Exception) -> None:

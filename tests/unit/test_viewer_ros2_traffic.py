@@ -193,3 +193,16 @@ def test_ros_domain_option_takes_a_domain_id(given, ok):
     else:
         with pytest.raises(argparse.ArgumentTypeError, match="a ROS_DOMAIN_ID is a whole number from 0 to 232"):
             ros_domain(given)
+
+
+def test_the_queue_is_bounded_by_bytes_too(monkeypatch):
+    from canbench import viewer
+    monkeypatch.setattr(viewer, "QUEUE_BYTES", 10 << 20)
+    live = viewer.Viewer(None, [], True)  # type: ignore[arg-type]
+    frame = bytes(6 << 20)  # a 1080p rgb8 camera frame
+    for i in range(3):
+        live._enqueue(viewer.Sample(i, "0/camera/x/h", frame, "sensor_msgs/msg/Image"))
+    assert (live.dropped, live.samples.qsize(), live.queued_bytes) == (2, 1, 6 << 20)  # 3 would be 18 MB
+    assert len(live._batch()) == 1 and live.queued_bytes == 0  # taken: room again
+    live._enqueue(viewer.Sample(3, "0/camera/x/h", frame, "sensor_msgs/msg/Image"))
+    assert (live.dropped, live.samples.qsize()) == (2, 1)
