@@ -61,6 +61,8 @@ def log_compressed_image(ctx: Context, path: str, msg) -> None:
 
 @logger("sensor_msgs/msg/CameraInfo")
 def log_camera_info(ctx: Context, path: str, msg) -> None:
+    if not any(msg.k):
+        return  # an uncalibrated camera (CameraInfo.msg: K all zero): no pinhole to draw, nothing wrong
     require(msg.k[0] > 0 and msg.k[4] > 0, f"camera matrix without focal lengths: {msg.k}")
     ctx.log(path, rr.Pinhole(image_from_camera=np.array(msg.k).reshape(3, 3), width=msg.width, height=msg.height),
             frame=msg.header.frame_id)

@@ -206,3 +206,11 @@ def test_the_queue_is_bounded_by_bytes_too(monkeypatch):
     assert len(live._batch()) == 1 and live.queued_bytes == 0  # taken: room again
     live._enqueue(viewer.Sample(3, "0/camera/x/h", frame, "sensor_msgs/msg/Image"))
     assert (live.dropped, live.samples.qsize()) == (2, 1)
+
+
+def test_an_uncalibrated_camera_is_not_malformed(tmp_path):
+    info = m.CameraInfo(header=m.Header(frame_id="cam"), height=480, width=640)  # K all zero, as .msg allows
+    bad = m.CameraInfo(header=m.Header(frame_id="cam"), height=480, width=640, k=[-1.0, 0, 320, 0, 500, 240, 0, 0, 1])
+    columns, errors = logged(tmp_path, [("sensor_msgs/msg/CameraInfo", "ros2/cam", info),
+                                        ("sensor_msgs/msg/CameraInfo", "ros2/cam", bad)])
+    assert errors == ["camera matrix without focal lengths: [-1.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0]"]
