@@ -51,7 +51,8 @@ def bus_spec(bus: dict) -> str:
 def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: bool = False,
                      can_mode: str = "userspace") -> dict:
     bridge_env = {"ZENOH_NODE_CAN": ",".join(sc.bus_names), "ZENOH_PUBLISH_PERIOD_MS": "0"}
-    bridge_env.update({env: str(sc.bridge[key]) for key, env in BRIDGE_ENV.items() if key in sc.bridge})
+    bridge_env.update({env: str(sc.bridge[key]).lower() if isinstance(sc.bridge[key], bool) else str(sc.bridge[key])
+                       for key, env in BRIDGE_ENV.items() if key in sc.bridge})  # a YAML true as the bridge's "true"
     bridge_env.setdefault(BRIDGE_ENV["tx_max_age_ms"], str(sc.tx_max_age_ms))  # on by default in the bench
     orchestrator_env = {"SCENARIO": scenario_in_container}
     services: dict = {

@@ -11,7 +11,7 @@
 enum opt_id {
 	OPT_ENABLED = 256, OPT_ROUTER, OPT_LISTEN, OPT_MODE, OPT_PERIOD, OPT_BATCH, OPT_PREFIX, OPT_NAME, OPT_CAN,
 	OPT_ALLOW, OPT_DENY, OPT_RX_PRIORITY, OPT_RX_CONGESTION, OPT_RX_EXPRESS, OPT_RX_QUEUE, OPT_TX_QUEUE, OPT_ZENOH_CONFIG,
-	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_TX_MAX_AGE, OPT_RX_QOS, OPT_LOW_LATENCY,
+	OPT_COMPRESSION, OPT_ROS2_TOPIC, OPT_ROS2_DOMAIN, OPT_TX_MAX_AGE, OPT_RX_QOS, OPT_LOW_LATENCY, OPT_ROS2_HUMBLE,
 	OPT_HELP,
 };
 
@@ -41,6 +41,7 @@ static const struct option_spec specs[] = {
 	{ OPT_COMPRESSION, "compression", "ZENOH_COMPRESSION", "0|1", "compress the Zenoh transport (default 0)" },
 	{ OPT_ROS2_TOPIC, "ros2-topic", "ZENOH_ROS2_TOPIC", "TOPIC", "also publish can_msgs/msg/Frame on this ROS 2 topic (default off)" },
 	{ OPT_ROS2_DOMAIN, "ros2-domain", "ZENOH_ROS2_DOMAIN", "N", "ROS_DOMAIN_ID of that topic (default 0)" },
+	{ OPT_ROS2_HUMBLE, "ros2-humble", "ZENOH_ROS2_HUMBLE", "0|1", "that topic as Humble's rmw_zenoh keys it: TypeHashNotSupported, no type hash (default 0)" },
 	{ OPT_TX_MAX_AGE, "tx-max-age-ms", "ZENOH_TX_MAX_AGE_MS", "MS", "refuse commands older than MS (source time: attachment, else Zenoh timestamp); 0 = off (default 0)" },
 	{ OPT_RX_QOS, "rx-qos", "ZENOH_RX_QOS", "TABLE", "CAN -> Zenoh QoS per id range, e.g. 0x000-0x0FF:realtime,express;0x100-0x7FF:data,best-effort (default none)" },
 	{ OPT_LOW_LATENCY, "low-latency", "ZENOH_LOW_LATENCY", "0|1", "Zenoh's low-latency transport, no QoS; the router must enable it too (default 0)" },
@@ -254,6 +255,11 @@ static int apply(zn_node_config_t *cfg, enum opt_id id, const char *value, const
 			return 0;
 		snprintf(err, err_len, "%s='%s' is not 0 or 1", source, value);
 		return -1;
+	case OPT_ROS2_HUMBLE:
+		if (parse_bool(value, &cfg->ros2_humble) == 0)
+			return 0;
+		snprintf(err, err_len, "%s='%s' is not 0 or 1", source, value);
+		return -1;
 	case OPT_ROS2_TOPIC:
 		return set_string(cfg->ros2_topic, sizeof(cfg->ros2_topic), value, source, err, err_len);
 	case OPT_RX_QOS:
@@ -299,7 +305,10 @@ int zn_config_from_env_and_args(zn_node_config_t *cfg, int argc, char **argv, ch
 			return ZN_CONFIG_ERROR;
 		}
 		char source[64];
-		snprintf(source, sizeof(source), "--%s", longopts[opt - OPT_ENABLED].name);
+		size_t at = 0;
+		while (at < NSPECS && specs[at].id != (enum opt_id)opt) /* specs may list options in any order */
+			at++;
+		snprintf(source, sizeof(source), "--%s", at < NSPECS ? specs[at].flag : "?");
 		if (apply(cfg, (enum opt_id)opt, optarg ? optarg : "1", source, err, err_len) < 0)
 			return ZN_CONFIG_ERROR;
 	}

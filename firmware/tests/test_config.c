@@ -56,6 +56,12 @@ static void test_precedence(void)
 	CHECK(parse_args(&cfg, err, (const char *[]){ "--rx-express", "1", NULL }) == ZN_CONFIG_OK);
 	CHECK(cfg.low_latency && cfg.rx_qos.express); /* express asks nothing the transport cannot do */
 	unsetenv("ZENOH_LOW_LATENCY");
+	CHECK(!cfg.ros2_humble);
+	setenv("ZENOH_ROS2_HUMBLE", "1", 1);
+	CHECK(parse_args(&cfg, err, (const char *[]){ "--ros2-topic", "/vehicle/can", NULL }) == ZN_CONFIG_OK);
+	CHECK(cfg.ros2_humble);
+	unsetenv("ZENOH_ROS2_HUMBLE");
+	CHECK(parse_args(&cfg, err, (const char *[]){ "--ros2-humble", "0", NULL }) == ZN_CONFIG_OK && !cfg.ros2_humble);
 }
 
 static void expect_error(const char *const *args, const char *fragment)
@@ -96,6 +102,7 @@ static void test_errors(void)
 	expect_error((const char *[]){ "--tx-queue-frames", "10", NULL }, "tx queue 10 frames");
 	/* the low-latency transport has no QoS and no compression: refused, never silently ignored */
 	expect_error((const char *[]){ "--low-latency", "fast", NULL }, "--low-latency='fast' is not 0 or 1");
+	expect_error((const char *[]){ "--ros2-humble", "humble", NULL }, "--ros2-humble='humble' is not 0 or 1");
 	expect_error((const char *[]){ "--low-latency", "1", "--rx-priority", "2", NULL }, "low-latency transport has no QoS");
 	expect_error((const char *[]){ "--low-latency", "1", "--rx-congestion", "drop", NULL }, "has no QoS");
 	expect_error((const char *[]){ "--low-latency", "1", "--rx-qos", "0x000-0x0FF:realtime", NULL }, "has no QoS");

@@ -60,6 +60,7 @@ typedef struct {
 	bool low_latency; /* CONFIG_ZENOH_LOW_LATENCY: Zenoh's low-latency transport (no QoS) */
 	char ros2_topic[ZN_NAME_MAX]; /* CONFIG_ZENOH_ROS2_TOPIC: also publish can_msgs/msg/Frame here ("" = off) */
 	uint32_t ros2_domain;	      /* CONFIG_ZENOH_ROS2_DOMAIN: ROS_DOMAIN_ID of that topic */
+	bool ros2_humble;	      /* CONFIG_ZENOH_ROS2_HUMBLE: Humble's keys (TypeHashNotSupported, no RIHS01 hash) */
 } zn_node_config_t;
 
 /* Fills cfg with the Kconfig defaults (CONFIG_* from sdkconfig). */

@@ -55,6 +55,9 @@ void zn_node_default_config(zn_node_config_t *cfg)
 	copy_str(cfg->ros2_topic, sizeof(cfg->ros2_topic), CONFIG_ZENOH_ROS2_TOPIC);
 	cfg->ros2_domain = CONFIG_ZENOH_ROS2_DOMAIN;
 #endif
+#ifdef CONFIG_ZENOH_ROS2_HUMBLE
+	cfg->ros2_humble = true;
+#endif
 }
 
 static int valid_key_chunk(const char *s)

@@ -13,6 +13,13 @@ static void put_u64_le(uint8_t *p, uint64_t v)
 		p[i] = (uint8_t)(v >> (8 * i));
 }
 
+/* The type hash in keys and tokens: Humble has none, and its rmw_zenoh says so in the hash's place
+ * (its subscribers match the key exactly: a RIHS01 hash there and they never see a frame). */
+static const char *frame_hash(void)
+{
+	return zn_node.cfg.ros2_humble ? "TypeHashNotSupported" : ZN_ROS2_FRAME_HASH;
+}
+
 /* The ROS 2 topic of one bus and its rmw_zenoh data key. */
 esp_err_t zn_ros2_declare_bus(struct bus *b)
 {
@@ -23,7 +30,7 @@ esp_err_t zn_ros2_declare_bus(struct bus *b)
 		snprintf(b->ros_topic, sizeof(b->ros_topic), "%s/%s", cfg->ros2_topic, b->name);
 	/* <domain>/<topic without the leading '/'>/<DDS type>/<type hash> */
 	snprintf(b->ros_key, sizeof(b->ros_key), "%" PRIu32 "/%s/%s/%s", cfg->ros2_domain, b->ros_topic + 1,
-		 ZN_ROS2_FRAME_TYPE, ZN_ROS2_FRAME_HASH);
+		 ZN_ROS2_FRAME_TYPE, frame_hash());
 	if (zn_declare_publisher(zn_node.session, b->ros_key, &cfg->rx_qos, &b->ros_pub) != 0) {
 		zn_log("E", "cannot declare the ROS 2 publisher %s", b->ros_key);
 		return ESP_FAIL;
@@ -75,7 +82,7 @@ esp_err_t zn_ros2_declare_tokens(const char *zid)
 			if (*c == '/')
 				*c = '%';
 		n = snprintf(key, sizeof(key), "@ros2_lv/%" PRIu32 "/%s/0/%zu/MP/%%/%%/%s/%s/%s/%s/::,10:,:,:,,",
-			     cfg->ros2_domain, zid, i + 1, ros_node, topic, ZN_ROS2_FRAME_TYPE, ZN_ROS2_FRAME_HASH);
+			     cfg->ros2_domain, zid, i + 1, ros_node, topic, ZN_ROS2_FRAME_TYPE, frame_hash());
 		if (n < 0 || (size_t)n >= sizeof(key)) { /* never a truncated key */
 			zn_log("E", "ROS 2: the liveliness token of %s would exceed %zu bytes", b->ros_topic, sizeof(key));
 			return ESP_ERR_INVALID_SIZE;
