@@ -77,7 +77,7 @@ def acl(prefix: str = "vehicle/can", ros2_keys: tuple[str, ...] = (), ros2_domai
     upstream: router2's ACL, where the bench router's face is trusted like a router."""
     p = prefix
     rx, tx, bridges = [f"{p}/rx", f"{p}/*/rx"], [f"{p}/tx", f"{p}/*/tx"], [f"{p}/bridges/**"]
-    # rmw_zenoh's liveliness tokens: the viewer subscribes to all of them (@ros2_lv/**, which a
+    # rmw_zenoh's liveliness tokens: the viewer subscribes to all of them (@ros2_lv/*/**, which a
     # rule for one domain would not include), so the whole prefix when the bridge has ROS 2 output
     ros_lv = ["@ros2_lv/**"] if ros2_domains else []
     ros = list(ros2_keys)

@@ -11,7 +11,7 @@ import can
 
 from . import periodic, restbus
 from .scenario import Ecu, Scenario
-from .trace import read_trace
+from .trace import read_trace, trace_start
 from .wire import Frame
 
 
@@ -38,17 +38,20 @@ def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
                                       if last and (m.can_id, m.extended) == (last.arbitration_id,
                                                                              last.is_extended_id)))
     frames = read_trace(ecu.trace, None, ecu.interface) if ecu.trace else []
-    return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap)
+    t0 = trace_start(ecu.trace) if ecu.trace and ecu.interface is not None else None
+    return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap, t0)
 
 
 def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
-               id_remap: dict[int, int]) -> Plan:
-    """A trace's frames (canbench.trace.TraceFrame) looped `loops` times at `speed`."""
+               id_remap: dict[int, int], t0: float | None = None) -> Plan:
+    """A trace's frames (canbench.trace.TraceFrame) looped `loops` times at `speed`; t0: the time
+    they are sent relative to (default their first: an interface of a trace, the trace's first)."""
     if not frames:
         return Plan(frames=lambda: iter(()), count=0, last=None, last_id_count=0)
-    t0 = frames[0].message.timestamp
-    span = frames[-1].message.timestamp - t0
-    period = span + (frames[1].message.timestamp - t0 if len(frames) > 1 else 0.001)
+    first = frames[0].message.timestamp
+    t0 = first if t0 is None else t0
+    span = frames[-1].message.timestamp - first  # a loop: the frames' own span and first gap
+    period = span + (frames[1].message.timestamp - first if len(frames) > 1 else 0.001)
 
     def timed(tf, loop: int) -> can.Message:
         m = tf.message

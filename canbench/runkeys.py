@@ -45,7 +45,9 @@ def ros2_data_keys(scenario) -> list[str]:
         return []
     topics = [topic] if len(scenario.bus_names) == 1 else [f"{topic}/{b}" for b in scenario.bus_names]
     frame = "can_msgs/msg/Frame"
-    return [ros2.data_key(scenario.bridge.get("ros2_domain", 0), t, frame, ros2.type_hash(frame)) for t in topics]
+    # Humble's keys (bridge.ros2_humble) carry TypeHashNotSupported where later ones carry the hash
+    hash_ = "TypeHashNotSupported" if scenario.bridge.get("ros2_humble") else ros2.type_hash(frame)
+    return [ros2.data_key(scenario.bridge.get("ros2_domain", 0), t, frame, hash_) for t in topics]
 
 
 VIEWERS = "canbench/viewers/*"  # a canbench view's liveliness token

@@ -230,6 +230,9 @@ def parse(path: str | Path) -> Any:
     if not isinstance(doc, dict):
         raise ScenarioError(str(path), 1, "a scenario is a mapping of keys (name, ecus, expect, ...)")
     if _values_over(doc, MAX_VALUES):
+        if _values_over(doc, MAX_VALUES, each_once=True):  # as written: no alias to blame
+            raise ScenarioError(str(path), None, f"more than {MAX_VALUES} values: a scenario this large "
+                                "(a schedule of many entries) belongs in a trace or signal trace file")
         raise ScenarioError(str(path), None, f"more than {MAX_VALUES} values once its aliases (*name) are "
                             "expanded: nested aliases multiply (a scenario needs far fewer)")
     return doc
@@ -240,14 +243,19 @@ def parse(path: str | Path) -> Any:
 MAX_VALUES = 1_000_000
 
 
-def _values_over(doc: Any, limit: int) -> bool:
-    """Whether the document holds more than `limit` values, each alias counted as often as it is used."""
-    count, stack = 0, [doc]
+def _values_over(doc: Any, limit: int, each_once: bool = False) -> bool:
+    """Whether the document holds more than `limit` values, each alias counted as often as it is used
+    (each_once: as written, an aliased mapping or list once)."""
+    count, stack, seen = 0, [doc], set()
     while stack:
         node = stack.pop()
         count += 1
         if count > limit:
             return True
+        if each_once and isinstance(node, (dict, list)):
+            if id(node) in seen:
+                continue
+            seen.add(id(node))
         if isinstance(node, dict):
             stack.extend(node.values())
         elif isinstance(node, list):
@@ -342,6 +350,14 @@ def load(path: str | Path) -> Scenario:
     return sc
 
 
+def interface_name(value: Any) -> str | None:
+    """A replay's `interface:` as a trace names it: 'can1', or an ASC/BLF channel given as 2, '2'
+    or 2.0 (YAML and JSON Schema take 2.0 for an integer)."""
+    if value is None:
+        return None
+    return str(int(value)) if isinstance(value, float) and value.is_integer() else str(value)
+
+
 def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | None:
     """The scenario model and its cross-field checks; problems appended, never raised. Parts that
     the schema already refused are skipped (the checks below rely on the schema's shape)."""
@@ -361,7 +377,7 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
     def interface_of(spec: dict, where: list) -> str | None:
         if "interface" in spec and "trace" not in spec:
             fail([*where, "interface"], "names an interface of a trace: give the trace")
-        return None if spec.get("interface") is None else str(spec["interface"])  # an ASC channel: 2 or '2'
+        return interface_name(spec.get("interface"))
 
     def messages_of(spec: dict) -> tuple[Message, ...]:
         return tuple(Message(int(m["id"], 16), m["cycle_ms"], m.get("dlc", 8), m.get("extended", False),

@@ -393,8 +393,10 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
             fail(None, f"truncated: its header says {recorded} bytes, the file has {path.stat().st_size} "
                        "(a recording cut short, or an incomplete copy)")
         elif suffix == ".blf" and recorded != path.stat().st_size and (cut_at := _blf_cut_at(path)) is not None:
-            fail(None, f"truncated: its last object (at byte {cut_at}) ends past the file's end, and its header was "
-                       "never finished (a logger stopped without closing the file, or an incomplete copy)")
+            unfinished = recorded <= 144  # the sizes a logger writes at the start (python-can: 144), never updated
+            fail(None, f"truncated: its last object (at byte {cut_at}) ends past the file's end" + (
+                ", and its header was never finished (a logger stopped without closing the file, or an incomplete "
+                "copy)" if unfinished else ""))
         yield from enumerate(reader, 1)
     except TraceError:
         raise
@@ -583,11 +585,19 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
         frames.append(TraceFrame(line, can.Message(
             timestamp=t_ns / 1e9, arbitration_id=frame.can_id, is_extended_id=frame.extended,
             is_remote_frame=frame.remote, dlc=frame.dlc, data=frame.data, channel=iface)))
-    if only is not None and only not in seen:
+    if only is not None and seen and only not in seen:
         raise TraceError(str(path), None, f"no frames on interface '{only}' ({interfaces_said(seen)})")
     if not frames:
         raise TraceError(str(path), None, "no frames in trace")
     return frames
+
+
+def trace_start(path: str | Path) -> float:
+    """The trace's first stamp (s) on any interface: what a replay of one interface keeps its
+    timing to (its first frame 3 s after the trace's is sent 3 s after the start)."""
+    for _, t_ns, _, _ in iter_trace(path, None, lambda e: None, STREAM_CACHE):
+        return t_ns / 1e9
+    raise TraceError(str(path), None, "no frames in trace")
 
 
 def interfaces_said(seen) -> str:

@@ -76,10 +76,12 @@ def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, in
         specs = doc.get(key)
         for i, spec in enumerate(specs if isinstance(specs, list) else []):
             trace = spec.get("trace") if isinstance(spec, dict) else None
+            if key == "ecus" and isinstance(spec, dict) and spec.get("role", "replay") != "replay":
+                continue  # only a replay sends its trace
             seen = interfaces_of.get(path.parent / trace) if isinstance(trace, str) else None
             if not seen:
                 continue  # no such trace, or no frames: said already
-            only = None if spec.get("interface") is None else str(spec["interface"])
+            only = scenario.interface_name(spec.get("interface"))
             if only is not None and only not in seen:
                 found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "interface"]),
                                            f"{key}.{i}.interface: no frames on '{only}' in {trace} "
@@ -109,7 +111,7 @@ def remap_problems(path: Path) -> list[InputError]:
             continue  # the schema's problem
         seen: set[int] = set()
         try:
-            only = None if spec.get("interface") is None else str(spec["interface"])
+            only = scenario.interface_name(spec.get("interface"))
             for line, _, iface, frame in iter_trace(path.parent / trace, None, lambda e: None, STREAM_CACHE):
                 if only is not None and iface != only:
                     continue  # another bus's frame: not replayed

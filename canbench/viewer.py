@@ -1,8 +1,9 @@
 """canbench view: see what is on a Zenoh network in Rerun.
 
 Discovers, live, by liveliness tokens: the bridges (vehicle/can/bridges/<name>/
-<bus>/<mode>) and ROS 2 entities (rmw_zenoh's @ros2_lv/**, a hermetic prefix
-that wildcards never match, so it is asked for explicitly). Subscribes to the
+<bus>/<mode>) and ROS 2 entities (rmw_zenoh's @ros2_lv/*/**, or one domain's
+@ros2_lv/<N>/**: a hermetic prefix that wildcards never match, so it is asked
+for explicitly). Subscribes to the
 bridges' CAN keys and to the selected ROS 2 topics (-t, or every supported one
 with --auto-subscribe), one subscriber per data key, dropped again when the
 last publisher's token goes away. Callbacks only enqueue; one thread decodes
@@ -96,6 +97,7 @@ class Viewer:
         self.bridges: set[str] = set()
         self.subscribers: dict[str, object] = {}
         self.publishers: dict[str, set[str]] = {}  # ROS 2 data key -> tokens of its live publishers
+        self.asks_caches: set[str] = set()  # data keys whose subscriber asks TRANSIENT_LOCAL publishers' caches
         self.unsupported: set[str] = set()
         self.malformed: Counter[str] = Counter()
         self.dropped = 0
@@ -190,8 +192,14 @@ class Viewer:
             if publishers and entity.data_key not in self.subscribers:
                 self.subscribers[entity.data_key] = self._subscribe(entity)
                 rr.log("discovery/subscriptions", rr.TextLog(f"+ {entity.topic} [{entity.type_name}]"))
+            elif (alive and entity.transient_local_depth is not None and entity.data_key in self.subscribers
+                  and entity.data_key not in self.asks_caches):
+                # a TRANSIENT_LOCAL publisher after VOLATILE ones on the key: a subscriber that asks its cache
+                self.subscribers.pop(entity.data_key).undeclare()  # type: ignore[attr-defined]
+                self.subscribers[entity.data_key] = self._subscribe(entity)
             elif not publishers and entity.data_key in self.subscribers:
                 self.subscribers.pop(entity.data_key).undeclare()  # type: ignore[attr-defined]
+                self.asks_caches.discard(entity.data_key)
                 del self.publishers[entity.data_key]
                 rr.log("discovery/subscriptions", rr.TextLog(f"- {entity.topic} [{entity.type_name}]"))
 
@@ -202,6 +210,7 @@ class Viewer:
         depth = entity.transient_local_depth
         if depth is None:
             return self.session.declare_subscriber(entity.data_key, self._ros_callback(entity.type_name))
+        self.asks_caches.add(entity.data_key)
         import zenoh.ext
         return zenoh.ext.declare_advanced_subscriber(
             self.session, entity.data_key, self._ros_callback(entity.type_name),
@@ -247,7 +256,8 @@ class Viewer:
         try:
             msg = ros2_msgs.decode(sample.type_name, sample.payload)
             set_sample_time(sample.t_ns, msg)
-            self.ctx.static, self.ctx.t_ns = topic == "/tf_static", sample.t_ns
+            self.ctx.static, self.ctx.t_ns = names == ["tf_static"], sample.t_ns
+            self.ctx.domain = "" if domain == "0" else f"domain{domain}"  # its own TF tree
             LOGGERS[sample.type_name](self.ctx, "ros2" + topic, msg)
         except Exception as e:  # noqa: BLE001 - a payload, whatever it holds, never stops the viewer
             self._malformed(topic, e)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import rerun as rr
 
-from .registry import Context, frame_name, logger
+from .registry import Context, header_stamp, logger
 from .scalars import vector_scalars
 
 
@@ -12,10 +12,11 @@ from .scalars import vector_scalars
 def log_tf(ctx: Context, path: str, msg) -> None:
     """Each transform at tf/<root>/.../<child>, between the named frames parent and child."""
     for ts in msg.transforms:
-        parent, child = frame_name(ts.header.frame_id), frame_name(ts.child_frame_id)
+        parent, child = ctx.frame(ts.header.frame_id), ctx.frame(ts.child_frame_id)
         if not parent or not child or parent == child:
             raise ValueError(f"transform without two distinct frames: {parent!r} -> {child!r}")
         ctx.parents[child] = parent
+        header_stamp(ts.header.stamp)  # each transform at its own stamp: where data of that moment lines up
         t, q = ts.transform.translation, ts.transform.rotation
         transform = rr.Transform3D(translation=[t.x, t.y, t.z], quaternion=rr.Quaternion(xyzw=[q.x, q.y, q.z, q.w]),
                                    parent_frame=parent, child_frame=child)

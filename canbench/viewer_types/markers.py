@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import rerun as rr
 
-from .registry import Context, logger
+from .registry import Context, header_stamp, logger
 
 ARROW, CUBE, SPHERE, CYLINDER, LINE_STRIP, LINE_LIST, CUBE_LIST, SPHERE_LIST, POINTS, TEXT_VIEW_FACING, \
     MESH_RESOURCE, TRIANGLE_LIST, ARROW_STRIP = range(13)
@@ -64,6 +64,8 @@ def expire(ctx: Context, until_ns: int | None = None) -> None:
     """Clear every marker whose lifetime ended by until_ns (None: all still running, at the
     end), at the time it ended; the timeline is left at the current sample's time."""
     due = [(t, e) for e, t in ctx.expiries.items() if until_ns is None or t <= until_ns]
+    if due:
+        rr.disable_timeline("header_stamp")  # a lifetime runs in receive time: its end has no source stamp
     for t_ns, entity in sorted(due):
         del ctx.expiries[entity]
         rr.set_time("time", timestamp=np.datetime64(t_ns, "ns"))
@@ -99,6 +101,7 @@ def log_one(ctx: Context, path: str, m) -> None:
 @logger("visualization_msgs/msg/Marker")
 def log_marker(ctx: Context, path: str, msg) -> None:
     expire(ctx, ctx.t_ns)
+    header_stamp(msg.header.stamp)  # expire took it off that timeline
     log_one(ctx, path, msg)
 
 
@@ -107,6 +110,7 @@ def log_marker_array(ctx: Context, path: str, msg) -> None:
     expire(ctx, ctx.t_ns)
     refused = []
     for m in msg.markers:  # one the viewer cannot draw (a mesh) leaves the others drawn, as in RViz
+        header_stamp(m.header.stamp)
         try:
             log_one(ctx, path, m)
         except ValueError as e:

@@ -34,17 +34,26 @@ class Context:
         self.static = False  # set per sample by the viewer
         self.t_ns = 0  # the sample's receive time, also set per sample
         self.expiries: dict[str, int] = {}  # marker entity -> when its lifetime ends (ns, receive time)
+        self.domain = ""  # the sample's ROS domain other than 0 ('domain7'), set per sample: a TF tree each
+
+    def frame(self, frame_id: str) -> str:
+        """A frame's name: as tf2 names it, and of its domain's tree (domain7/odom) for a domain other
+        than 0 (two robots both have an odom and a base_link)."""
+        name = frame_name(frame_id)
+        return f"{self.domain}/{name}" if name and self.domain else name
 
     def frame_path(self, frame: str) -> str:
-        """tf/<root>/.../<frame> as far as the tree is known (a cycle stops the walk)."""
+        """tf/[<domain>/]<root>/.../<frame> as far as the tree is known (a cycle stops the walk);
+        frame as frame() names it."""
         chain = [frame]
         while (parent := self.parents.get(chain[-1])) is not None and parent not in chain:
             chain.append(parent)
-        return "tf/" + "/".join(reversed(chain))
+        prefix = f"{self.domain}/" if self.domain else ""
+        return "tf/" + prefix + "/".join(f.removeprefix(prefix) for f in reversed(chain))
 
     def log(self, path: str, *archetypes, frame: str = "") -> None:
         """rr.log, plus the entity's coordinate frame (header.frame_id) whenever it changes."""
-        frame = frame_name(frame)
+        frame = self.frame(frame)
         if frame and self.frames_of.get(path) != frame:
             self.frames_of[path] = frame
             archetypes = (*archetypes, rr.CoordinateFrame(frame))
@@ -53,7 +62,7 @@ class Context:
     def pose(self, path: str, position, orientation, frame: str) -> None:
         """A pose as a Transform3D: from its header's frame to a frame named after the entity,
         in which the entity draws its axes (without a frame: relative to the entity's parent)."""
-        frame = frame_name(frame)
+        frame = self.frame(frame)
         t = [position.x, position.y, position.z]
         q = rr.Quaternion(xyzw=[orientation.x, orientation.y, orientation.z, orientation.w])
         transform = rr.Transform3D(translation=t, quaternion=q, parent_frame=frame or None,
@@ -70,7 +79,12 @@ def set_sample_time(t_ns: int, msg) -> None:
     nanosecond; and `header_stamp`, the message's own header.stamp (source time, sim time: what
     RViz and tf2 go by; data and its TF line up there), absent for a message without one."""
     rr.set_time("time", timestamp=np.datetime64(t_ns, "ns"))
-    stamp = getattr(getattr(msg, "header", None), "stamp", None)
+    header_stamp(getattr(getattr(msg, "header", None), "stamp", None))
+
+
+def header_stamp(stamp) -> None:
+    """What is logged next is at this builtin_interfaces/Time on `header_stamp` (None or 0: off it).
+    Messages of several headers (a TF message, a MarkerArray) set it per transform or marker."""
     if stamp is not None and (stamp.sec or stamp.nanosec):
         rr.set_time("header_stamp", timestamp=np.datetime64(stamp.sec * 1_000_000_000 + stamp.nanosec, "ns"))
     else:

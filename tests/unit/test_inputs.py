@@ -154,3 +154,10 @@ def test_a_long_value_in_a_problem_is_cut_to_its_reason(tmp_path, capsys):
     said = capsys.readouterr().err.splitlines()[0]
     assert len(said) < 400 and said.startswith(f"{path}:6: ecus.0: ['x', 'x'") and " ... " in said
     assert said.endswith("'x', 'x'] is not of type 'object'")
+
+
+def test_a_large_scenario_is_not_blamed_on_aliases():
+    shared = [0] * 1000
+    assert scenario._values_over({"a": [shared] * 2000}, scenario.MAX_VALUES)  # 2 million values read through
+    assert not scenario._values_over({"a": [shared] * 2000}, scenario.MAX_VALUES, each_once=True)  # 1 001 written
+    assert scenario._values_over({"a": list(range(1_000_001))}, scenario.MAX_VALUES, each_once=True)

@@ -82,7 +82,7 @@ def test_an_asc_of_two_channels_is_numbered_as_the_file_has_them(tmp_path, capsy
            "Begin Triggerblock Mon Nov 13 10:00:00.000 am 2023\n"
            "   0.010000 1  123  Rx   d 1 01\n   0.010100 2  456  Rx   d 1 02\n   0.020000 1  123  Rx   d 1 03\n"
            "End TriggerBlock\n")
-    for said in ("'2'", "2"):  # a channel number, quoted or not
+    for said in ("'2'", "2", "2.0"):  # a channel number, quoted or not (2.0: an integer to YAML's readers)
         path = scenario_file(tmp_path, asc, f"    interface: {said}\n", name="drive.asc")
         assert cli.main(["validate", str(path)]) == 0
         assert sent(path) == [(6, 0x456, "vcan0")]
@@ -105,3 +105,25 @@ def test_a_trace_of_one_interface_needs_no_interface(tmp_path, capsys):
     assert cli.main(["validate", str(path)]) == 0
     assert sent(path) == [(1, 0x123, "vcan0"), (2, 0x123, "vcan0")]
     assert len(read_trace(tmp_path / "drive.log")) == 2
+
+
+def test_an_interface_keeps_its_timing_to_the_traces_start(tmp_path):
+    # can1 recorded from 3 s after can0: replayed alone, its first frame still goes 3 s in
+    trace = ("(1700000000.000000) can0 123#01\n(1700000003.000000) can1 456#01\n"
+             "(1700000003.500000) can1 456#02\n(1700000004.000000) can0 123#02\n")
+    path = scenario_file(tmp_path, trace, "    interface: can1\n")
+    sc = scenario.load(path)
+    assert [(line, round(msg.timestamp, 6)) for line, msg in plans.schedule(sc.ecus[0], sc).frames()] == [
+        (2, 3.0), (3, 3.5)]
+    entry = "commands:\n  - bus: vcan0\n    trace: drive.log\n    interface: can1\n"
+    path = scenario_file(tmp_path, trace, "    interface: can0\n", more=entry)
+    assert [(round(t, 6), line) for t, _, line, _ in commands.plan(scenario.load(path))] == [(3.0, 2), (3.5, 3)]
+
+
+def test_a_role_that_sends_no_trace_needs_no_interface(tmp_path, capsys):
+    (tmp_path / "drive.log").write_text(TWO)
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\nduration_s: 5\nbuses:\n  - name: vcan0\necus:\n  - name: engine\n    bus: vcan0\n"
+                    "    trace: drive.log\n    interface: can0\n  - name: echo\n    bus: vcan0\n    role: echo\n"
+                    "    echo_ids: ['7E0']\n    trace: drive.log\nexpect:\n  integrity: true\n")
+    assert cli.main(["validate", str(path)]) == 0

@@ -214,3 +214,53 @@ def test_an_uncalibrated_camera_is_not_malformed(tmp_path):
     columns, errors = logged(tmp_path, [("sensor_msgs/msg/CameraInfo", "ros2/cam", info),
                                         ("sensor_msgs/msg/CameraInfo", "ros2/cam", bad)])
     assert errors == ["camera matrix without focal lengths: [-1.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0]"]
+
+
+def test_the_runs_ros2_keys_are_humbles_when_the_bridge_keys_them_so(tmp_path):
+    # the ACL and the viewer's readiness wait on these keys: the bridge's own, or the run is denied and waits
+    from canbench import runkeys, scenario
+    path = tmp_path / "s.yaml"
+    (tmp_path / "t.log").write_text("(1700000000.000100) vcan0 123#01\n")
+    for humble, tail in ((False, ros2.type_hash("can_msgs/msg/Frame")), (True, "TypeHashNotSupported")):
+        path.write_text("name: t\nduration_s: 5\nbuses:\n  - name: vcan0\necus:\n  - name: e\n    bus: vcan0\n"
+                        f"    trace: t.log\nbridge:\n  ros2_topic: /vehicle/can\n  ros2_humble: {str(humble).lower()}\n"
+                        "expect:\n  integrity: true\n")
+        assert runkeys.ros2_data_keys(scenario.load(path)) == [f"0/vehicle/can/can_msgs::msg::dds_::Frame_/{tail}"]
+
+
+def test_two_domains_tf_trees_stay_apart_and_transforms_are_on_their_stamps(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from canbench.viewer import Sample, Viewer
+    live = Viewer(None, [], True)  # type: ignore[arg-type]
+    h = ros2.type_hash("tf2_msgs/msg/TFMessage")
+    for n, (domain, topic) in enumerate(((0, "tf"), (7, "tf"), (7, "tf_static"))):
+        stamp = m.Time(1_699_999_990 + n, 5)
+        tf = m.TFMessage([m.TransformStamped(header=m.Header(stamp=stamp, frame_id="odom"), child_frame_id="base_link",
+                                             transform=m.Transform(translation=m.Vector3(float(domain), 0, 0)))])
+        live.samples.put(Sample(1_700_000_000_000_000_000 + n, f"{domain}/{topic}/tf2_msgs::msg::dds_::TFMessage_/{h}",
+                                tf.serialize(), "tf2_msgs/msg/TFMessage"))
+    live.samples.put(None)
+    path = tmp_path / "tf.rrd"
+    rec = rr.RecordingStream("canbench-test-tf-domains")
+    rec.save(str(path))
+    with rec:
+        live._log_loop()
+    rec.flush()
+    rec.disconnect()
+    assert live.logged == 3 and not live.malformed, live.malformed
+    columns = read_rrd_columns(path)
+    assert columns["/tf/odom/base_link"]["Transform3D:parent_frame"][0] == ["odom"]
+    seven = columns["/tf/domain7/odom/base_link"]
+    assert seven["Transform3D:parent_frame"][0] == ["domain7/odom"] and seven["Transform3D:child_frame"][0] == [
+        "domain7/base_link"]
+    stamps: dict[str, list] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if "Transform3D:translation" in batch.schema.names:
+            stamps.setdefault(str(chunk.entity_path), []).extend(
+                batch.column("header_stamp").cast("int64").to_pylist() if "header_stamp" in batch.schema.names
+                else ["static"])
+    assert {entity: sorted(values, key=str) for entity, values in stamps.items()} == {
+        "/tf/odom/base_link": [1_699_999_990_000_000_005],
+        "/tf/domain7/odom/base_link": [1_699_999_991_000_000_005, "static"]}  # domain 7's tf_static: static
