@@ -128,56 +128,53 @@ def test_a_same_named_type_of_another_definition_is_not_decoded():
         ours: True, "RIHS01_" + "ab" * 32: False, "TypeHashNotSupported": True}
 
 
-def test_a_message_is_on_its_header_stamp_too_and_receive_time_to_the_ns(tmp_path):
-    from rerun.chunk import RrdReader
-
+def viewed(tmp_path, samples: list[tuple[int, int, str, str, object]]):
+    """(receive ns, domain, topic, type, message) as samples of the live viewer's queue, logged by its
+    logger loop into an .rrd: the viewer and the file."""
     from canbench.viewer import Sample, Viewer
+    live = Viewer(None, [], True)  # type: ignore[arg-type]
+    for t_ns, domain, topic, type_name, msg in samples:
+        key = ros2.data_key(domain, topic, type_name, ros2.type_hash(type_name))
+        live.samples.put(Sample(t_ns, key, msg.serialize(), type_name))  # type: ignore[attr-defined]
+    live.samples.put(None)
+    path = tmp_path / "live.rrd"
+    rec = rr.RecordingStream("canbench-test-live")
+    rec.save(str(path))
+    with rec:
+        live._log_loop()
+    rec.flush()
+    rec.disconnect()
+    return live, path
+
+
+def timelines(path, component: str) -> dict[str, list[dict]]:
+    """Per entity logging `component`, per chunk its time and header_stamp values (none: static)."""
+    from rerun.chunk import RrdReader
+    out: dict[str, list[dict]] = {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if any(name.startswith(component) for name in batch.schema.names):
+            out.setdefault(str(chunk.entity_path), []).append(
+                {n: batch.column(n).cast("int64").to_pylist() for n in ("time", "header_stamp")
+                 if n in batch.schema.names})
+    return out
+
+
+def test_a_message_is_on_its_header_stamp_too_and_receive_time_to_the_ns(tmp_path):
     received = 1_700_000_000_250_000_001  # ns: a float of seconds is 0.24 us coarse here
     temp = m.Temperature(header=m.Header(stamp=m.Time(1_699_999_999, 900_000_000), frame_id="cabin"),
                          temperature=21.5)
-    live = Viewer(None, [], True)  # type: ignore[arg-type]
-    h = ros2.type_hash("sensor_msgs/msg/Temperature")
-    live.samples.put(Sample(received, f"0/cabin/temp/sensor_msgs::msg::dds_::Temperature_/{h}", temp.serialize(),
-                            "sensor_msgs/msg/Temperature"))
-    h = ros2.type_hash("std_msgs/msg/String")
-    live.samples.put(Sample(received + 1, f"0/chatter/std_msgs::msg::dds_::String_/{h}", m.String("x").serialize(),
-                            "std_msgs/msg/String"))
-    live.samples.put(None)
-    path = tmp_path / "t.rrd"
-    rec = rr.RecordingStream("canbench-test-stamp")
-    rec.save(str(path))
-    with rec:
-        live._log_loop()
-    rec.flush()
-    rec.disconnect()
-    times: dict[str, dict[str, list]] = {}
-    for chunk in RrdReader(path).stream().to_chunks():
-        batch = chunk.to_record_batch()
-        entity = str(chunk.entity_path)
-        if entity.startswith("/ros2/"):
-            times[entity] = {n: batch.column(n).cast("int64").to_pylist() for n in ("time", "header_stamp")
-                             if n in batch.schema.names}
+    live, path = viewed(tmp_path, [(received, 0, "/cabin/temp", "sensor_msgs/msg/Temperature", temp),
+                                   (received + 1, 0, "/chatter", "std_msgs/msg/String", m.String("x"))])
     assert live.logged == 2 and not live.malformed, live.malformed
-    assert times["/ros2/cabin/temp/temperature"] == {"time": [received], "header_stamp": [1_699_999_999_900_000_000]}
-    assert times["/ros2/chatter"] == {"time": [received + 1]}  # no header: not on header_stamp
+    assert timelines(path, "Scalars:")["/ros2/cabin/temp/temperature"] == [
+        {"time": [received], "header_stamp": [1_699_999_999_900_000_000]}]
+    assert timelines(path, "TextLog:")["/ros2/chatter"] == [{"time": [received + 1]}]  # no header: not on it
 
 
 def test_same_named_topics_of_two_domains_stay_apart(tmp_path):
-    from canbench.viewer import Sample, Viewer
-    live = Viewer(None, [], True)  # type: ignore[arg-type]
-    h = ros2.type_hash("std_msgs/msg/String")
-    for domain in (0, 7):
-        key = f"{domain}/chatter/std_msgs::msg::dds_::String_/{h}"
-        live.samples.put(Sample(1_700_000_000_000_000_000 + domain, key, m.String(f"robot {domain}").serialize(),
-                                "std_msgs/msg/String"))
-    live.samples.put(None)
-    path = tmp_path / "d.rrd"
-    rec = rr.RecordingStream("canbench-test-domains")
-    rec.save(str(path))
-    with rec:
-        live._log_loop()
-    rec.flush()
-    rec.disconnect()
+    _, path = viewed(tmp_path, [(1_700_000_000_000_000_000 + d, d, "/chatter", "std_msgs/msg/String",
+                                 m.String(f"robot {d}")) for d in (0, 7)])
     columns = read_rrd_columns(path)
     assert columns["/ros2/chatter"]["TextLog:text"] == [["robot 0"]]
     assert columns["/ros2/domain7/chatter"]["TextLog:text"] == [["robot 7"]]
@@ -229,38 +226,20 @@ def test_the_runs_ros2_keys_are_humbles_when_the_bridge_keys_them_so(tmp_path):
 
 
 def test_two_domains_tf_trees_stay_apart_and_transforms_are_on_their_stamps(tmp_path):
-    from rerun.chunk import RrdReader
-
-    from canbench.viewer import Sample, Viewer
-    live = Viewer(None, [], True)  # type: ignore[arg-type]
-    h = ros2.type_hash("tf2_msgs/msg/TFMessage")
-    for n, (domain, topic) in enumerate(((0, "tf"), (7, "tf"), (7, "tf_static"))):
+    samples = []
+    for n, (domain, topic) in enumerate(((0, "/tf"), (7, "/tf"), (7, "/tf_static"))):
         stamp = m.Time(1_699_999_990 + n, 5)
         tf = m.TFMessage([m.TransformStamped(header=m.Header(stamp=stamp, frame_id="odom"), child_frame_id="base_link",
                                              transform=m.Transform(translation=m.Vector3(float(domain), 0, 0)))])
-        live.samples.put(Sample(1_700_000_000_000_000_000 + n, f"{domain}/{topic}/tf2_msgs::msg::dds_::TFMessage_/{h}",
-                                tf.serialize(), "tf2_msgs/msg/TFMessage"))
-    live.samples.put(None)
-    path = tmp_path / "tf.rrd"
-    rec = rr.RecordingStream("canbench-test-tf-domains")
-    rec.save(str(path))
-    with rec:
-        live._log_loop()
-    rec.flush()
-    rec.disconnect()
+        samples.append((1_700_000_000_000_000_000 + n, domain, topic, "tf2_msgs/msg/TFMessage", tf))
+    live, path = viewed(tmp_path, samples)
     assert live.logged == 3 and not live.malformed, live.malformed
     columns = read_rrd_columns(path)
     assert columns["/tf/odom/base_link"]["Transform3D:parent_frame"][0] == ["odom"]
     seven = columns["/tf/domain7/odom/base_link"]
     assert seven["Transform3D:parent_frame"][0] == ["domain7/odom"] and seven["Transform3D:child_frame"][0] == [
         "domain7/base_link"]
-    stamps: dict[str, list] = {}
-    for chunk in RrdReader(path).stream().to_chunks():
-        batch = chunk.to_record_batch()
-        if "Transform3D:translation" in batch.schema.names:
-            stamps.setdefault(str(chunk.entity_path), []).extend(
-                batch.column("header_stamp").cast("int64").to_pylist() if "header_stamp" in batch.schema.names
-                else ["static"])
-    assert {entity: sorted(values, key=str) for entity, values in stamps.items()} == {
-        "/tf/odom/base_link": [1_699_999_990_000_000_005],
-        "/tf/domain7/odom/base_link": [1_699_999_991_000_000_005, "static"]}  # domain 7's tf_static: static
+    stamps = {entity: sorted((chunk.get("header_stamp", ["static"])[0] for chunk in chunks), key=str)
+              for entity, chunks in timelines(path, "Transform3D:translation").items()}
+    assert stamps == {"/tf/odom/base_link": [1_699_999_990_000_000_005],
+                      "/tf/domain7/odom/base_link": [1_699_999_991_000_000_005, "static"]}  # domain 7's tf_static
