@@ -4,7 +4,7 @@ scripts/bench-run runs it (in the orchestrator image) before anything starts."""
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from functools import partial
 from pathlib import Path
 
@@ -55,13 +55,20 @@ def named_traces(path: Path) -> list[Path]:
     except ScenarioError:
         return []
     traces: list[Path] = []
+    for _, _, _, trace in trace_specs(doc):
+        if (path.parent / trace).is_file() and path.parent / trace not in traces:
+            traces.append(path.parent / trace)
+    return traces
+
+
+def trace_specs(doc) -> Iterator[tuple[str, int, dict, str]]:
+    """(ecus or commands, index, entry, its trace as written) of every entry of a parsed scenario that
+    names a trace, whatever else in it is wrong."""
     for key in ("ecus", "commands"):
         specs = doc.get(key)
-        for spec in specs if isinstance(specs, list) else []:
-            trace = spec.get("trace") if isinstance(spec, dict) else None
-            if isinstance(trace, str) and (path.parent / trace).is_file() and path.parent / trace not in traces:
-                traces.append(path.parent / trace)
-    return traces
+        for i, spec in enumerate(specs if isinstance(specs, list) else []):
+            if isinstance(spec, dict) and isinstance(spec.get("trace"), str):
+                yield key, i, spec, spec["trace"]
 
 
 def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, int]]) -> list[InputError]:
@@ -72,23 +79,20 @@ def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, in
     except ScenarioError:
         return []
     found: list[InputError] = []
-    for key in ("ecus", "commands"):
-        specs = doc.get(key)
-        for i, spec in enumerate(specs if isinstance(specs, list) else []):
-            trace = spec.get("trace") if isinstance(spec, dict) else None
-            if key == "ecus" and isinstance(spec, dict) and spec.get("role", "replay") != "replay":
-                continue  # only a replay sends its trace
-            seen = interfaces_of.get(path.parent / trace) if isinstance(trace, str) else None
-            if not seen:
-                continue  # no such trace, or no frames: said already
-            only = scenario.interface_name(spec.get("interface"))
-            if only is not None and only not in seen:
-                found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "interface"]),
-                                           f"{key}.{i}.interface: no frames on '{only}' in {trace} "
-                                           f"({interfaces_said(seen)})"))
-            elif only is None and len(seen) > 1:
-                found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "trace"]),
-                                           f"{key}.{i}.trace: {trace} has {several_interfaces(seen)}"))
+    for key, i, spec, trace in trace_specs(doc):
+        if key == "ecus" and spec.get("role", "replay") != "replay":
+            continue  # only a replay sends its trace
+        seen = interfaces_of.get(path.parent / trace)
+        if not seen:
+            continue  # no such trace, or no frames: said already
+        only = scenario.interface_name(spec.get("interface"))
+        if only is not None and only not in seen:
+            found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "interface"]),
+                                       f"{key}.{i}.interface: no frames on '{only}' in {trace} "
+                                       f"({interfaces_said(seen)})"))
+        elif only is None and len(seen) > 1:
+            found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "trace"]),
+                                       f"{key}.{i}.trace: {trace} has {several_interfaces(seen)}"))
     return found
 
 
