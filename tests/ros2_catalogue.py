@@ -141,6 +141,24 @@ def check_bgr8(c: Columns) -> None:
     assert tuple(image_pixels(c, "/ros2/camera/bgr")[0, 1]) == (30, 20, 10)
 
 
+def check_8uc3(c: Columns) -> None:
+    fmt = last(c, "/ros2/camera/cv_8uc3", "Image:format")[0]
+    assert fmt["color_model"] == 4  # OpenCV's 8UC3 is BGR, as RViz shows it
+    assert tuple(image_pixels(c, "/ros2/camera/cv_8uc3")[0, 0]) == (30, 20, 10)
+
+
+def check_bayer(c: Columns) -> None:
+    fmt = last(c, "/ros2/camera/bayer", "Image:format")[0]
+    assert fmt["pixel_format"] == 131 and fmt["width"] == 2  # Rerun's BayerGRBG8: it debayers
+    assert bytes(last(c, "/ros2/camera/bayer", "Image:buffer")[0]) == bytes([10, 200, 30, 40])
+
+
+def check_uyvy(c: Columns) -> None:
+    fmt = last(c, "/ros2/camera/uyvy", "Image:format")[0]
+    assert fmt["pixel_format"] == 27  # Rerun's YUY2: ROS's yuv422 (UYVY) reordered, row padding dropped
+    assert bytes(last(c, "/ros2/camera/uyvy", "Image:buffer")[0]) == bytes([16, 128, 235, 100, 81, 90, 145, 240])
+
+
 def check_mono16(c: Columns) -> None:
     assert image_pixels(c, "/ros2/camera/mono16")[0, 1, 0] == 0x1234
 
@@ -245,6 +263,13 @@ CASES = [
     Case("/camera/image", "sensor_msgs/msg/Image", rgb8_image(), check_rgb8),
     Case("/camera/bgr", "sensor_msgs/msg/Image", m.Image(header=header(), height=1, width=2, encoding="bgr8", step=6,
                                                          data=[0, 0, 0, 30, 20, 10]), check_bgr8),
+    Case("/camera/cv_8uc3", "sensor_msgs/msg/Image", m.Image(header=header(), height=1, width=1, encoding="8UC3",
+                                                              step=3, data=[30, 20, 10]), check_8uc3),
+    Case("/camera/bayer", "sensor_msgs/msg/Image", m.Image(header=header(), height=2, width=2, encoding="bayer_grbg8",
+                                                           step=2, data=[10, 200, 30, 40]), check_bayer),
+    Case("/camera/uyvy", "sensor_msgs/msg/Image", m.Image(  # 2 x 2, 2 bytes of padding a row
+        header=header(), height=2, width=2, encoding="yuv422", step=6,
+        data=[128, 16, 100, 235, 0, 0, 90, 81, 240, 145, 0, 0]), check_uyvy),
     Case("/camera/mono16", "sensor_msgs/msg/Image", mono16_be_image(), check_mono16),
     Case("/camera/depth", "sensor_msgs/msg/Image", depth_image(), check_depth),
     Case("/camera/depth32", "sensor_msgs/msg/Image", m.Image(header=header(), height=1, width=1, encoding="32FC1",

@@ -7,39 +7,55 @@ import rerun as rr
 
 from .registry import Context, logger, require
 
-# encoding -> (numpy element type, channels, Rerun colour model or None for a depth image, metres per unit)
-ENCODINGS: dict[str, tuple[str, int, str | None, float]] = {
+# encoding -> (numpy element type, channels, how Rerun shows it: a colour model, a pixel format it
+# decodes itself, or None for a depth image; metres per unit of a depth image). OpenCV's type names
+# are read as RViz reads them (rviz_default_plugins, ros_image_texture.cpp): 8UC3 BGR, 8UC4 BGRA,
+# 8UC1 grey; a 16-bit Bayer mosaic is shown raw in grey, as RViz shows every Bayer image.
+ENCODINGS: dict[str, tuple[str, int, str | rr.PixelFormat | None, float]] = {
     "rgb8": ("u1", 3, "RGB", 0), "rgba8": ("u1", 4, "RGBA", 0), "bgr8": ("u1", 3, "BGR", 0),
     "bgra8": ("u1", 4, "BGRA", 0), "mono8": ("u1", 1, "L", 0), "mono16": ("u2", 1, "L", 0),
+    "8UC1": ("u1", 1, "L", 0), "8UC3": ("u1", 3, "BGR", 0), "8UC4": ("u1", 4, "BGRA", 0),
+    "bayer_rggb8": ("u1", 1, rr.PixelFormat.BayerRGGB8, 0), "bayer_bggr8": ("u1", 1, rr.PixelFormat.BayerBGGR8, 0),
+    "bayer_gbrg8": ("u1", 1, rr.PixelFormat.BayerGBRG8, 0), "bayer_grbg8": ("u1", 1, rr.PixelFormat.BayerGRBG8, 0),
+    "bayer_rggb16": ("u2", 1, "L", 0), "bayer_bggr16": ("u2", 1, "L", 0),
+    "bayer_gbrg16": ("u2", 1, "L", 0), "bayer_grbg16": ("u2", 1, "L", 0),
+    # 4:2:2, two bytes a pixel: yuv422 is UYVY (U Y0 V Y1), reordered to the YUY2 Rerun decodes
+    "yuv422": ("u1", 2, rr.PixelFormat.YUY2, 0), "yuv422_yuy2": ("u1", 2, rr.PixelFormat.YUY2, 0),
     "16UC1": ("u2", 1, None, 1000.0), "32FC1": ("f4", 1, None, 1.0),  # REP 118: depth in mm or m
 }
+UYVY_AS_YUY2 = [1, 0, 3, 2]  # byte order of each two pixels
 
 
-def image_array(msg) -> tuple[np.ndarray, str | None, float]:
-    """(height x width [x channels] array, colour model, meter) of a sensor_msgs/Image."""
+def image_array(msg) -> tuple[np.ndarray, str | rr.PixelFormat | None, float]:
+    """(height x width [x channels] array, how Rerun shows it, meter) of a sensor_msgs/Image."""
     if msg.encoding not in ENCODINGS:
         raise ValueError(f"image encoding {msg.encoding!r} not supported (known: {', '.join(ENCODINGS)})")
-    kind, channels, model, meter = ENCODINGS[msg.encoding]
+    kind, channels, shown, meter = ENCODINGS[msg.encoding]
     dtype = np.dtype(kind).newbyteorder(">" if msg.is_bigendian else "<")
     row = msg.width * channels * dtype.itemsize
     require(msg.width > 0 and msg.height > 0, f"empty image {msg.width}x{msg.height}")
+    require(shown != rr.PixelFormat.YUY2 or msg.width % 2 == 0, f"{msg.encoding}: odd width {msg.width}")
     require(msg.step >= row, f"step {msg.step} < width * pixel size {row}")
     require(len(msg.data) >= msg.step * msg.height,
             f"{len(msg.data)} data bytes < step {msg.step} * height {msg.height}")
-    rows = np.asarray(msg.data, dtype=np.uint8)[:msg.step * msg.height].reshape(msg.height, msg.step)
+    rows = np.frombuffer(bytes(msg.data), dtype=np.uint8)[:msg.step * msg.height].reshape(msg.height, msg.step)
+    if msg.encoding == "yuv422":
+        return rows[:, :row].reshape(msg.height, msg.width // 2, 4)[:, :, UYVY_AS_YUY2].copy(), shown, meter
     pixels = rows[:, :row].copy().view(dtype).astype(dtype.newbyteorder("="))
-    return pixels.reshape(msg.height, msg.width, channels) if channels > 1 else pixels, model, meter
+    return pixels.reshape(msg.height, msg.width, channels) if channels > 1 else pixels, shown, meter
 
 
 @logger("sensor_msgs/msg/Image")
 def log_image(ctx: Context, path: str, msg) -> None:
-    pixels, model, meter = image_array(msg)
+    pixels, shown, meter = image_array(msg)
     archetype: rr.Image | rr.DepthImage
-    if model is None:
+    if shown is None:
         archetype = rr.DepthImage(pixels, meter=meter)
+    elif isinstance(shown, rr.PixelFormat):  # Rerun debayers or converts from YUV itself
+        archetype = rr.Image(bytes=pixels.tobytes(), width=msg.width, height=msg.height, pixel_format=shown)
     else:  # explicit sizes: from an array's shape alone Rerun would take a 1-pixel-high image for 2D
         archetype = rr.Image(bytes=pixels.tobytes(), width=msg.width, height=msg.height,
-                             color_model=model, datatype=pixels.dtype.type)  # type: ignore[arg-type]
+                             color_model=shown, datatype=pixels.dtype.type)  # type: ignore[arg-type]
     ctx.log(path, archetype)  # no coordinate frame: an image is 2D; CameraInfo's pinhole carries the camera's
 
 

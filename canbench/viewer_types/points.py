@@ -30,7 +30,7 @@ def cloud_fields(msg) -> dict[str, np.ndarray]:
         formats.append(dtype)
         offsets.append(f.offset)
     layout = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": msg.point_step})
-    rows = np.asarray(msg.data, dtype=np.uint8)[:msg.row_step * msg.height].reshape(msg.height, msg.row_step)
+    rows = np.frombuffer(bytes(msg.data), dtype=np.uint8)[:msg.row_step * msg.height].reshape(msg.height, msg.row_step)
     points = rows[:, :msg.width * msg.point_step].copy().view(layout).reshape(-1)
     return {n: points[n].astype(np.float64 if points[n].dtype.kind == "f" else points[n].dtype.newbyteorder("="))
             for n in names}

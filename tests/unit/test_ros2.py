@@ -101,6 +101,21 @@ def test_decode_refuses_what_is_not_ros2_cdr():
             ros2_msgs.decode("std_msgs/msg/String", bad)
 
 
+
+def test_byte_sequences_are_read_as_one_slice_and_checked_against_the_payload():
+    """An image's data comes back as bytes (one slice of the payload, not a list of ints built one
+    by one), equal to what was sent; a length past the payload is malformed, not a short image."""
+    pixels = bytes(range(256)) * 12  # 32 x 32 rgb8
+    image = ros2_msgs.Image(height=32, width=32, encoding="rgb8", step=96, data=pixels)
+    payload = image.serialize()
+    decoded = ros2_msgs.decode("sensor_msgs/msg/Image", payload)
+    assert type(decoded.data) is bytes and decoded.data == pixels and decoded == image
+    as_list = ros2_msgs.Image(height=32, width=32, encoding="rgb8", step=96, data=list(pixels))
+    assert as_list.serialize() == payload  # a list of ints is still written as before
+    for bad in (payload[:-1], payload[:-len(pixels) - 4] + (2**32 - 1).to_bytes(4, "little") + pixels):
+        with pytest.raises(ros2_msgs.CdrError, match="ends past the payload"):
+            ros2_msgs.decode("sensor_msgs/msg/Image", bad)
+
 @pytest.mark.parametrize("ros_type", sorted(ros2.MESSAGE_TYPES))
 def test_msg_definitions_decode_our_cdr(ros_type):
     """The ros2msg schema text of every type, parsed by the MCAP ROS 2 decoder, reads our CDR."""
