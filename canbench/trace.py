@@ -581,7 +581,7 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
         if only is None and len(seen) > 1:
             raise TraceError(str(path), line, several_interfaces(seen))
         if len(frames) >= MAX_TRACE_FRAMES:
-            raise TraceError(str(path), line, f"more than {MAX_TRACE_FRAMES} frames: split the trace")
+            raise TraceError(str(path), line, too_many_frames())
         frames.append(TraceFrame(line, can.Message(
             timestamp=t_ns / 1e9, arbitration_id=frame.can_id, is_extended_id=frame.extended,
             is_remote_frame=frame.remote, dlc=frame.dlc, data=frame.data, channel=iface)))
@@ -600,6 +600,11 @@ def trace_start(path: str | Path) -> float:
     raise TraceError(str(path), None, "no frames in trace")
 
 
+def too_many_frames() -> str:
+    """The problem of a trace (of the interface replayed) longer than a run reads."""
+    return f"more than {MAX_TRACE_FRAMES} frames: split the trace"
+
+
 def interfaces_said(seen) -> str:
     """A trace's interfaces as a problem names them: 'it has can0, can1', or that it names none."""
     named = sorted(i for i in seen if i is not None)
@@ -608,5 +613,6 @@ def interfaces_said(seen) -> str:
 
 def several_interfaces(seen) -> str:
     """The problem of a trace of several interfaces replayed without saying which."""
-    return (f"frames of {len(seen)} interfaces ({', '.join(sorted(str(i) for i in seen))}) and one bus: say which "
+    names = sorted(i for i in seen if i is not None) + (["lines that name none"] if None in seen else [])
+    return (f"frames of {len(seen)} interfaces ({', '.join(names)}) and one bus: say which "
             f"the scenario replays (interface:), or split the trace one bus each (canbench scaffold)")

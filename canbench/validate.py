@@ -10,7 +10,7 @@ from pathlib import Path
 
 from . import scenario
 from .errors import InputError, ScenarioError, TraceError
-from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, interfaces_said, iter_trace, several_interfaces
+from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, interfaces_said, iter_trace, several_interfaces, too_many_frames
 from .wire import EXT_ID_MAX, STD_ID_MAX
 
 MAX_PER_TRACE = 20  # a trace of FD frames would give one line per frame: the rest are counted
@@ -19,7 +19,8 @@ MAX_PER_TRACE = 20  # a trace of FD frames would give one line per frame: the re
 def trace_problems(path: Path, interfaces: dict[str | None, int] | None = None) -> list[InputError]:
     """Every problem of a trace (iter_trace's checks, in every format): the scan goes on after each
     bad frame (read_trace stops at the first); one that stops its reader ends the list.
-    interfaces: filled with the trace's interfaces, each with its first line."""
+    interfaces: filled with the trace's interfaces, each with its count of frames (a trace of
+    several is too long only on the one a scenario replays: interface_problems)."""
     found: list[InputError] = []
     more = frames = 0
     seen = {} if interfaces is None else interfaces
@@ -32,16 +33,16 @@ def trace_problems(path: Path, interfaces: dict[str | None, int] | None = None) 
             more += 1
 
     try:
-        for line, _, iface, _ in iter_trace(path, None, problem, STREAM_CACHE):
+        for _, _, iface, _ in iter_trace(path, None, problem, STREAM_CACHE):
             frames += 1
-            seen.setdefault(iface, line)
+            seen[iface] = seen.get(iface, 0) + 1
     except TraceError as error:
         found.append(error)
     else:
         if not frames and not found:
             found.append(TraceError(str(path), None, "no frames in trace"))
-        elif frames > MAX_TRACE_FRAMES:
-            found.append(TraceError(str(path), None, f"more than {MAX_TRACE_FRAMES} frames: split the trace"))
+        elif len(seen) == 1 and frames > MAX_TRACE_FRAMES:
+            found.append(TraceError(str(path), None, too_many_frames()))
     if more:
         found.append(TraceError(str(path), None, f"{more} more problems like the ones above"))
     return found
@@ -93,6 +94,9 @@ def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, in
         elif only is None and len(seen) > 1:
             found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "trace"]),
                                        f"{key}.{i}.trace: {trace} has {several_interfaces(seen)}"))
+        elif only is not None and len(seen) > 1 and seen[only] > MAX_TRACE_FRAMES:
+            found.append(ScenarioError(str(path), scenario.line_of(doc, [key, i, "interface"]),
+                                       f"{key}.{i}.interface: {trace} on '{only}': {too_many_frames()}"))
     return found
 
 

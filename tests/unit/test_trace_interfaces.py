@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from canbench import cli, commands, plans, scenario
+from canbench import cli, commands, plans, scenario, trace, validate
 from canbench.errors import TraceError
 from canbench.trace import read_trace
 
@@ -127,3 +127,25 @@ def test_a_role_that_sends_no_trace_needs_no_interface(tmp_path, capsys):
                     "    trace: drive.log\n    interface: can0\n  - name: echo\n    bus: vcan0\n    role: echo\n"
                     "    echo_ids: ['7E0']\n    trace: drive.log\nexpect:\n  integrity: true\n")
     assert cli.main(["validate", str(path)]) == 0
+
+
+@pytest.mark.parametrize("interface,refused", [("can0", True), ("can1", False)])
+def test_the_frame_limit_counts_the_interface_replayed(tmp_path, capsys, monkeypatch, interface, refused):
+    """validate and the run agree: a trace longer than a run reads only on the interface that is not
+    replayed is fine (validate counted every interface's frames and refused it)."""
+    monkeypatch.setattr(trace, "MAX_TRACE_FRAMES", 2)
+    monkeypatch.setattr(validate, "MAX_TRACE_FRAMES", 2)
+    path = scenario_file(tmp_path, TWO + "(1700000000.000500) can0 123#03\n", f"    interface: {interface}\n")
+    assert cli.main(["validate", str(path)]) == (2 if refused else 0)
+    if refused:
+        assert capsys.readouterr().err.splitlines()[0] == (
+            f"{path}:9: ecus.0.interface: drive.log on 'can0': more than 2 frames: split the trace")
+        with pytest.raises(TraceError, match="drive.log:5: more than 2 frames: split the trace"):
+            sent(path)
+    else:
+        assert sent(path) == [(3, 0x456, "vcan0"), (4, 0x456, "vcan0")]
+
+
+def test_lines_that_name_no_interface_are_said_so():
+    assert trace.several_interfaces({"2": 1, None: 3, "1": 5}).startswith(
+        "frames of 3 interfaces (1, 2, lines that name none) and one bus")
