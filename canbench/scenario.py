@@ -335,8 +335,11 @@ def problems_error(problems: list[ScenarioError]) -> ScenarioError:
 
 def load(path: str | Path) -> Scenario:
     """The scenario, or a ScenarioError naming every problem (file:line each, in line order)."""
-    path = Path(path)
-    doc = parse(path)
+    return build(Path(path), parse(path))
+
+
+def build(path: Path, doc: Any) -> Scenario:
+    """The scenario of a parsed document (parse's) of the file at path, or load's ScenarioError."""
     problems = schema_problems(path, doc)
     sc = None
     try:

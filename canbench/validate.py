@@ -48,13 +48,9 @@ def trace_problems(path: Path, interfaces: dict[str | None, int] | None = None) 
     return found
 
 
-def named_traces(path: Path) -> list[Path]:
-    """The traces a scenario names that exist, as the user wrote them (relative to the scenario),
-    even when other parts of the scenario are wrong."""
-    try:
-        doc = scenario.parse(path)
-    except ScenarioError:
-        return []
+def named_traces(path: Path, doc) -> list[Path]:
+    """The traces a scenario (path, its parsed document) names that exist, as the user wrote them
+    (relative to the scenario), even when other parts of the scenario are wrong."""
     traces: list[Path] = []
     for _, _, _, trace in trace_specs(doc):
         if (path.parent / trace).is_file() and path.parent / trace not in traces:
@@ -72,13 +68,9 @@ def trace_specs(doc) -> Iterator[tuple[str, int, dict, str]]:
                 yield key, i, spec, spec["trace"]
 
 
-def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, int]]) -> list[InputError]:
+def interface_problems(path: Path, doc, interfaces_of: dict[Path, dict[str | None, int]]) -> list[InputError]:
     """A trace of several interfaces replayed without `interface` (a bus carries one: merged, two
     buses' frames would go on one, out of time order), or an `interface` the trace does not have."""
-    try:
-        doc = scenario.parse(path)
-    except ScenarioError:
-        return []
     found: list[InputError] = []
     for key, i, spec, trace in trace_specs(doc):
         if key == "ecus" and spec.get("role", "replay") != "replay":
@@ -100,13 +92,9 @@ def interface_problems(path: Path, interfaces_of: dict[Path, dict[str | None, in
     return found
 
 
-def remap_problems(path: Path) -> list[InputError]:
+def remap_problems(path: Path, doc) -> list[InputError]:
     """An id_remap that gives an 11-bit frame of its trace an id above 7FF (the frame keeps its
     format): one problem per remapped id, at the remap's line, naming the trace line."""
-    try:
-        doc = scenario.parse(path)
-    except ScenarioError:
-        return []
     found: list[InputError] = []
     for i, spec in enumerate(doc.get("ecus") or []):
         remap = spec.get("id_remap") if isinstance(spec, dict) else None
@@ -134,12 +122,11 @@ def remap_problems(path: Path) -> list[InputError]:
     return found
 
 
-def encoding_problems(path: Path, sc: scenario.Scenario) -> list[InputError]:
+def encoding_problems(path: Path, doc, sc: scenario.Scenario) -> list[InputError]:
     """What the DBC encodes (restbus ECUs, commands in signals) made as the run makes it: a frame
     cantools cannot encode (whatever the value checks of scenario.load let through) is a problem
     at the entry's line here, not a traceback once the run started."""
     from . import plans
-    doc = scenario.parse(path)
     found: list[InputError] = []
     def check(where: list, make: Callable[[], object]) -> None:
         try:
@@ -167,17 +154,29 @@ def _first_frame(command: scenario.Commands) -> object:
 
 def problems(path: Path) -> list[InputError]:
     """Every problem of one scenario file and its traces, scenario first, each in line order."""
-    found: list[InputError] = []
+    return checked(path)[0]
+
+
+def checked(path: Path) -> tuple[list[InputError], scenario.Scenario | None]:
+    """(every problem of one scenario file and its traces, the scenario when it loads), the file
+    read and parsed once."""
     try:
-        found += encoding_problems(path, scenario.load(path))
+        doc = scenario.parse(path)
+    except ScenarioError as e:
+        return [e], None
+    found: list[InputError] = []
+    sc = None
+    try:
+        sc = scenario.build(path, doc)
+        found += encoding_problems(path, doc, sc)
     except ScenarioError as e:
         found += getattr(e, "problems", [e])
-    found += remap_problems(path)
+    found += remap_problems(path, doc)
     interfaces_of: dict[Path, dict[str | None, int]] = {}
     traces_found: list[InputError] = []
-    for trace in named_traces(path):
+    for trace in named_traces(path, doc):
         traces_found += trace_problems(trace, interfaces_of.setdefault(trace, {}))
-    return found + interface_problems(path, interfaces_of) + traces_found
+    return found + interface_problems(path, doc, interfaces_of) + traces_found, sc
 
 
 def run(paths: list[Path]) -> int:
@@ -185,14 +184,13 @@ def run(paths: list[Path]) -> int:
     bad = 0
     count = 0
     for path in paths:
-        found = problems(path)
+        found, sc = checked(path)
         for problem in found:
             print(problem, file=sys.stderr)
-        if found:
+        if found or sc is None:
             bad += 1
             count += len(found)
         else:
-            sc = scenario.load(path)
             print(f"{path}: ok ({len(sc.ecus)} ECUs on {', '.join(sc.bus_names)})")
             for ecu in sc.ecus:
                 if ecu.left_out:
