@@ -139,6 +139,7 @@ class Publisher:
         self.key = data_key(node.domain_id, topic, ros_type, self.type_hash)
         token = publisher_token(node.domain_id, node.zid, node.nid, eid, node.namespace, node.name, topic, ros_type,
                                 self.type_hash, f":1:,{transient_local}:,:,:,," if transient_local else "::,10:,:,:,,")
+        self.token_key = token
         self.gid = hashlib.sha256(token.encode()).digest()[:16]
         if transient_local:
             import zenoh.ext

@@ -211,3 +211,38 @@ def test_ros_domain_discovers_that_domain_only(lone_router, tmp_path):
         session.close()
     assert {k for k in stats["subscriptions"] if not k.startswith("vehicle/")} == {pubs[1].key}
     assert read_rrd_columns(tmp_path / "d.rrd")["/ros2/domain7/chatter"]["TextLog:text"] == [["seven"]]
+
+
+def test_a_transient_local_publisher_seen_after_a_volatile_one_on_its_topic_gets_its_cache_asked(lone_router):
+    """/map of two publishers, a VOLATILE one and a TRANSIENT_LOCAL one that published before the
+    viewer started. The viewer learns of them in either order (its liveliness history); here the
+    VOLATILE token first, so its first subscriber asks no cache: it must be replaced by one that
+    does when the TRANSIENT_LOCAL token comes, or the map never arrives."""
+    from types import SimpleNamespace
+
+    from canbench.viewer import Viewer
+    conf = base_config()
+    for key, value in (("mode", '"client"'), ("connect/endpoints", json.dumps([lone_router.endpoint])),
+                       ("scouting/multicast/enabled", "false"), ("timestamping/enabled", "true")):
+        conf.insert_json5(key, value)
+    publishing, viewing = zenoh.open(conf), zenoh_session(lone_router.endpoint)
+    node = ros2.Node(publishing, "map_server")
+    grid_type = "nav_msgs/msg/OccupancyGrid"
+    grid = ros2.MESSAGE_TYPES[grid_type](data=[0, 100, -1])
+    live = Viewer(viewing, [], True)
+    try:
+        latched = node.publisher("/map", grid_type, transient_local=1)
+        latched.put(grid)
+        volatile = ros2.publisher_token(0, node.zid, 0, 99, "/", "map_relay", "/map", grid_type,
+                                        latched.type_hash, "::,10:,:,:,,")
+        for token in (volatile, latched.token_key):
+            live._on_ros_token(SimpleNamespace(key_expr=token, kind=zenoh.SampleKind.PUT))
+        assert live.asks_caches == {latched.key}
+        sample = live.samples.get(timeout=10)  # the cache's reply
+        assert sample.key == latched.key and ros2.MESSAGE_TYPES[grid_type].deserialize(sample.payload) == grid
+    finally:
+        for sub in live.subscribers.values():
+            sub.undeclare()  # type: ignore[attr-defined]
+        node.close()
+        publishing.close()
+        viewing.close()
