@@ -49,11 +49,16 @@ def _bytes_in_one_slice(self, buffer):
 
 
 def _bytes_written_whole(self, buffer, value, for_key=False):
-    if self.code != "B" or not isinstance(value, (bytes, bytearray, memoryview)):
+    """A uint8 sequence given as bytes or any buffer (a numpy array) written in one piece; its
+    length the buffer's bytes (a memoryview's len counts rows or wider items)."""
+    if self.code != "B" or isinstance(value, (list, tuple)):
         return _write_primitive_sequence(self, buffer, value, for_key)
+    data = value if isinstance(value, bytes) else memoryview(value).tobytes()
+    if self.max_length is not None and len(data) > self.max_length:
+        raise ValueError(f"a sequence of {len(data)} bytes is longer than its bound {self.max_length}")
     buffer.align(4)
-    buffer.write("I", 4, len(value))
-    buffer.write_bytes(bytes(value))
+    buffer.write("I", 4, len(data))
+    buffer.write_bytes(data)
     return None
 
 

@@ -10,7 +10,7 @@ from .registry import Context, logger, require
 # encoding -> (numpy element type, channels, how Rerun shows it: a colour model, a pixel format it
 # decodes itself, or None for a depth image; metres per unit of a depth image). OpenCV's type names
 # are read as RViz reads them (rviz_default_plugins, ros_image_texture.cpp): 8UC3 BGR, 8UC4 BGRA,
-# 8UC1 grey; a 16-bit Bayer mosaic is shown raw in grey, as RViz shows every Bayer image.
+# 8UC1 grey; a 16-bit Bayer mosaic is shown raw, 16-bit grey (RViz reads every Bayer image as 8-bit grey).
 ENCODINGS: dict[str, tuple[str, int, str | rr.PixelFormat | None, float]] = {
     "rgb8": ("u1", 3, "RGB", 0), "rgba8": ("u1", 4, "RGBA", 0), "bgr8": ("u1", 3, "BGR", 0),
     "bgra8": ("u1", 4, "BGRA", 0), "mono8": ("u1", 1, "L", 0), "mono16": ("u2", 1, "L", 0),

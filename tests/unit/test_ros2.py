@@ -7,6 +7,7 @@ implementation), and the .msg texts MCAP's ros2msg schemas carry, parsed by
 mcap-ros2-support."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from canbench import ros2, ros2_msgs
@@ -112,6 +113,9 @@ def test_byte_sequences_are_read_as_one_slice_and_checked_against_the_payload():
     assert type(decoded.data) is bytes and decoded.data == pixels and decoded == image
     as_list = ros2_msgs.Image(height=32, width=32, encoding="rgb8", step=96, data=list(pixels))
     assert as_list.serialize() == payload  # a list of ints is still written as before
+    as_array = np.frombuffer(pixels, np.uint8).reshape(32, 32, 3)  # len() counts rows: the length is its bytes
+    for buffer in (as_array, memoryview(as_array), bytearray(pixels)):
+        assert ros2_msgs.Image(height=32, width=32, encoding="rgb8", step=96, data=buffer).serialize() == payload
     for bad in (payload[:-1], payload[:-len(pixels) - 4] + (2**32 - 1).to_bytes(4, "little") + pixels):
         with pytest.raises(ros2_msgs.CdrError, match="ends past the payload"):
             ros2_msgs.decode("sensor_msgs/msg/Image", bad)
