@@ -192,7 +192,10 @@ class Node:
 # rosidl's FieldType ids (type_description_interfaces/msg/FieldType.msg)
 T_NESTED = 1
 PRIMITIVES = {"int8": 2, "uint8": 3, "int16": 4, "uint16": 5, "int32": 6, "uint32": 7, "int64": 8, "uint64": 9,
-              "float32": 10, "float64": 11, "char": 13, bool: 15, str: 17}
+              "float32": 10, "float64": 11, "char": 13, bool: 15, "byte": 16, str: 17}
+# .msg fields of type byte: one octet on the wire as a uint8 (how ros2_msgs declares them), but
+# byte to the type hash and the .msg text
+BYTE_FIELDS = {("diagnostic_msgs/msg/DiagnosticStatus", "level")}
 ARRAY, BOUNDED_SEQUENCE, SEQUENCE = 48, 96, 144  # added to the element's id
 
 
@@ -215,6 +218,8 @@ def fields(ros_type: str) -> list[dict]:
         elif isinstance(meta, sequence):
             (type_id, nested), capacity = _element(meta.subtype), meta.max_length or 0
             type_id += BOUNDED_SEQUENCE if capacity else SEQUENCE
+        elif (ros_type, name) in BYTE_FIELDS:
+            type_id, nested = PRIMITIVES["byte"], ""
         else:
             type_id, nested = _element(annotation)
         out.append({"name": name, "type": {"type_id": type_id, "capacity": capacity, "string_capacity": 0,

@@ -1,7 +1,7 @@
 # mypy: disable-error-code="valid-type,assignment,type-arg"
 # (pycdr2 declares CDR types with annotations such as array[float64, 9] that are not Python types)
 """ROS 2 message types as CDR structs (pycdr2), field for field the .msg files of
-ros2/common_interfaces (std_msgs, geometry_msgs, sensor_msgs, nav_msgs,
+ros2/common_interfaces (std_msgs, geometry_msgs, sensor_msgs, nav_msgs, diagnostic_msgs,
 visualization_msgs), ros2/geometry2 (tf2_msgs), ros2/rcl_interfaces
 (builtin_interfaces) and ros-drivers/ros_canopen (can_msgs). Order and types
 are the wire format and, through ros2.type_hash, the RIHS01 hash: change
@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from pycdr2 import IdlStruct
 from pycdr2._machinery import PlainCdrV2SequenceOfPrimitiveMachine, StringMachine
-from pycdr2.types import array, float32, float64, int8, int32, sequence, uint8, uint32
+from pycdr2.types import array, float32, float64, int8, int16, int32, int64, sequence, uint8, uint16, uint32, uint64
 
 from .errors import BenchError
 
@@ -113,6 +113,56 @@ class Float64(IdlStruct, typename="std_msgs/msg/Float64"):
 
 
 @dataclass
+class Bool(IdlStruct, typename="std_msgs/msg/Bool"):
+    data: bool = False
+
+
+@dataclass
+class Int8(IdlStruct, typename="std_msgs/msg/Int8"):
+    data: int8 = 0
+
+
+@dataclass
+class Int16(IdlStruct, typename="std_msgs/msg/Int16"):
+    data: int16 = 0
+
+
+@dataclass
+class Int32(IdlStruct, typename="std_msgs/msg/Int32"):
+    data: int32 = 0
+
+
+@dataclass
+class Int64(IdlStruct, typename="std_msgs/msg/Int64"):
+    data: int64 = 0
+
+
+@dataclass
+class UInt8(IdlStruct, typename="std_msgs/msg/UInt8"):
+    data: uint8 = 0
+
+
+@dataclass
+class UInt16(IdlStruct, typename="std_msgs/msg/UInt16"):
+    data: uint16 = 0
+
+
+@dataclass
+class UInt32(IdlStruct, typename="std_msgs/msg/UInt32"):
+    data: uint32 = 0
+
+
+@dataclass
+class UInt64(IdlStruct, typename="std_msgs/msg/UInt64"):
+    data: uint64 = 0
+
+
+@dataclass
+class Float32(IdlStruct, typename="std_msgs/msg/Float32"):
+    data: float32 = 0.0
+
+
+@dataclass
 class ColorRGBA(IdlStruct, typename="std_msgs/msg/ColorRGBA"):
     r: float32 = 0.0
     g: float32 = 0.0
@@ -175,6 +225,48 @@ class TwistWithCovariance(IdlStruct, typename="geometry_msgs/msg/TwistWithCovari
 
 
 @dataclass
+class TwistStamped(IdlStruct, typename="geometry_msgs/msg/TwistStamped"):
+    header: Header = field(default_factory=Header)
+    twist: Twist = field(default_factory=Twist)
+
+
+@dataclass
+class Accel(IdlStruct, typename="geometry_msgs/msg/Accel"):
+    linear: Vector3 = field(default_factory=Vector3)
+    angular: Vector3 = field(default_factory=Vector3)
+
+
+@dataclass
+class AccelStamped(IdlStruct, typename="geometry_msgs/msg/AccelStamped"):
+    header: Header = field(default_factory=Header)
+    accel: Accel = field(default_factory=Accel)
+
+
+@dataclass
+class Vector3Stamped(IdlStruct, typename="geometry_msgs/msg/Vector3Stamped"):
+    header: Header = field(default_factory=Header)
+    vector: Vector3 = field(default_factory=Vector3)
+
+
+@dataclass
+class PointStamped(IdlStruct, typename="geometry_msgs/msg/PointStamped"):
+    header: Header = field(default_factory=Header)
+    point: Point = field(default_factory=Point)
+
+
+@dataclass
+class PoseWithCovarianceStamped(IdlStruct, typename="geometry_msgs/msg/PoseWithCovarianceStamped"):
+    header: Header = field(default_factory=Header)
+    pose: PoseWithCovariance = field(default_factory=PoseWithCovariance)
+
+
+@dataclass
+class PoseArray(IdlStruct, typename="geometry_msgs/msg/PoseArray"):
+    header: Header = field(default_factory=Header)
+    poses: sequence[Pose] = _list()
+
+
+@dataclass
 class Transform(IdlStruct, typename="geometry_msgs/msg/Transform"):
     translation: Vector3 = field(default_factory=Vector3)
     rotation: Quaternion = field(default_factory=Quaternion)
@@ -231,6 +323,63 @@ class Illuminance(IdlStruct, typename="sensor_msgs/msg/Illuminance"):
     header: Header = field(default_factory=Header)
     illuminance: float64 = 0.0
     variance: float64 = 0.0
+
+
+@dataclass
+class NavSatStatus(IdlStruct, typename="sensor_msgs/msg/NavSatStatus"):
+    status: int8 = -2  # STATUS_UNKNOWN; NO_FIX -1, FIX 0, SBAS_FIX 1, GBAS_FIX 2
+    service: uint16 = 0
+
+
+@dataclass
+class NavSatFix(IdlStruct, typename="sensor_msgs/msg/NavSatFix"):
+    header: Header = field(default_factory=Header)
+    status: NavSatStatus = field(default_factory=NavSatStatus)
+    latitude: float64 = 0.0  # degrees, + north
+    longitude: float64 = 0.0  # degrees, + east
+    altitude: float64 = 0.0  # m above the WGS 84 ellipsoid (NaN: none)
+    position_covariance: array[float64, 9] = _zeros(9)
+    position_covariance_type: uint8 = 0
+
+
+@dataclass
+class Range(IdlStruct, typename="sensor_msgs/msg/Range"):
+    header: Header = field(default_factory=Header)
+    radiation_type: uint8 = 0  # ULTRASOUND 0, INFRARED 1
+    field_of_view: float32 = 0.0
+    min_range: float32 = 0.0
+    max_range: float32 = 0.0
+    range: float32 = 0.0  # +inf: nothing within max_range, -inf: closer than min_range (REP 117)
+    variance: float32 = 0.0
+
+
+@dataclass
+class JointState(IdlStruct, typename="sensor_msgs/msg/JointState"):
+    header: Header = field(default_factory=Header)
+    name: sequence[str] = _list()
+    position: sequence[float64] = _list()  # each empty, or one per name
+    velocity: sequence[float64] = _list()
+    effort: sequence[float64] = _list()
+
+
+@dataclass
+class BatteryState(IdlStruct, typename="sensor_msgs/msg/BatteryState"):
+    header: Header = field(default_factory=Header)
+    voltage: float32 = 0.0  # V; this and the next, NaN when not measured
+    temperature: float32 = 0.0  # °C
+    current: float32 = 0.0  # A, negative when discharging
+    charge: float32 = 0.0  # Ah
+    capacity: float32 = 0.0  # Ah
+    design_capacity: float32 = 0.0  # Ah
+    percentage: float32 = 0.0  # 0..1
+    power_supply_status: uint8 = 0
+    power_supply_health: uint8 = 0
+    power_supply_technology: uint8 = 0
+    present: bool = False
+    cell_voltage: sequence[float32] = _list()
+    cell_temperature: sequence[float32] = _list()
+    location: str = ""
+    serial_number: str = ""
 
 
 @dataclass
@@ -384,6 +533,29 @@ class MarkerArray(IdlStruct, typename="visualization_msgs/msg/MarkerArray"):
     markers: sequence[Marker] = _list()
 
 
+# ---- diagnostic_msgs ----
+
+@dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs/msg/KeyValue"):
+    key: str = ""
+    value: str = ""
+
+
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs/msg/DiagnosticStatus"):
+    level: uint8 = 0  # the .msg's byte (ros2.BYTE_FIELDS): OK 0, WARN 1, ERROR 2, STALE 3
+    name: str = ""
+    message: str = ""
+    hardware_id: str = ""
+    values: sequence[KeyValue] = _list()
+
+
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs/msg/DiagnosticArray"):
+    header: Header = field(default_factory=Header)
+    status: sequence[DiagnosticStatus] = _list()
+
+
 # ---- can_msgs ----
 
 @dataclass
@@ -397,11 +569,13 @@ class CanFrame(IdlStruct, typename="can_msgs/msg/Frame"):
     data: array[uint8, 8] = field(default_factory=lambda: bytes(8))  # CDR gives uint8 arrays back as bytes
 
 
-ALL = (Time, Duration, Header, String, Float64, ColorRGBA, Vector3, Point, Quaternion, Pose, PoseStamped,
-       PoseWithCovariance, Twist, TwistWithCovariance, Transform, TransformStamped, TFMessage, Imu, Temperature,
-       FluidPressure, RelativeHumidity, Illuminance, Image, CompressedImage, PointField, PointCloud2, LaserScan,
-       RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate, MeshFile, Marker,
-       MarkerArray, CanFrame)
+ALL = (Time, Duration, Header, String, Float64, Bool, Int8, Int16, Int32, Int64, UInt8, UInt16, UInt32, UInt64,
+       Float32, ColorRGBA, Vector3, Point, Quaternion, Pose, PoseStamped, PoseWithCovariance, Twist,
+       TwistWithCovariance, TwistStamped, Accel, AccelStamped, Vector3Stamped, PointStamped, PoseWithCovarianceStamped,
+       PoseArray, Transform, TransformStamped, TFMessage, Imu, Temperature, FluidPressure, RelativeHumidity,
+       Illuminance, NavSatStatus, NavSatFix, Range, JointState, BatteryState, Image, CompressedImage, PointField,
+       PointCloud2, LaserScan, RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate,
+       MeshFile, Marker, MarkerArray, KeyValue, DiagnosticStatus, DiagnosticArray, CanFrame)
 MESSAGE_TYPES: dict[str, type[IdlStruct]] = {cls.__idl_typename__: cls for cls in ALL}  # type: ignore[attr-defined]
 
 # encapsulation kinds ROS 2 sends (plain CDR, big/little endian); XCDR2 and PL_CDR are not ROS 2 messages

@@ -254,6 +254,71 @@ def check_markers_cleared(c: Columns) -> None:
     assert c["/ros2/markers_cleared"]["Clear:is_recursive"] == [[True]]  # DELETEALL: the whole topic
 
 
+def scalar_is(entity: str, value: float) -> Callable[[Columns], None]:
+    def check(c: Columns) -> None:
+        assert close(last(c, entity, "Scalars:scalars"), [value]), f"{entity}: {c.get(entity)}"
+    return check
+
+
+def check_fix(c: Columns) -> None:
+    assert close(last(c, "/ros2/gnss/fix", "GeoPoints:positions"), [[48.137, 11.575]])
+    assert c["/ros2/gnss/fix/altitude"]["Scalars:scalars"] == [[519.5]]
+    assert c["/ros2/gnss/fix/status"]["Scalars:scalars"] == [[0.0]]
+
+
+def check_no_fix(c: Columns) -> None:
+    assert "/ros2/gnss/no_fix" not in c  # no point for a receiver without a fix: NaN coordinates
+    assert c["/ros2/gnss/no_fix/status"]["Scalars:scalars"] == [[-1.0]]
+
+
+def check_range(c: Columns) -> None:
+    assert close(last(c, "/ros2/park/front_left/range", "Scalars:scalars"), [1.5])
+    assert close(last(c, "/ros2/park/front_left/detection", "Points3D:positions"), [[1.5, 0, 0]])
+    assert last(c, "/ros2/park/front_left/detection", "CoordinateFrame:frame") == ["sonar_fl"]
+
+
+def check_battery(c: Columns) -> None:
+    assert close(last(c, "/ros2/battery/voltage", "Scalars:scalars"), [12.6])
+    assert close(last(c, "/ros2/battery/percentage", "Scalars:scalars"), [0.75])
+    assert "/ros2/battery/current" not in c  # NaN: not measured
+
+
+def check_joints(c: Columns) -> None:
+    assert close(last(c, "/ros2/joint_states/steering/position", "Scalars:scalars"), [0.1])
+    assert close(last(c, r"/ros2/joint_states/wheel\/fl/position", "Scalars:scalars"), [2.0])
+    assert close(last(c, "/ros2/joint_states/steering/velocity", "Scalars:scalars"), [0.5])
+    assert "/ros2/joint_states/steering/effort" not in c  # no efforts given
+
+
+def check_point_stamped(c: Columns) -> None:
+    assert close(last(c, "/ros2/clicked_point", "Points3D:positions"), [[1, 2, 0]])
+    assert last(c, "/ros2/clicked_point", "CoordinateFrame:frame") == ["map"]
+
+
+def check_initial_pose(c: Columns) -> None:
+    assert close(last(c, "/ros2/initialpose", "Transform3D:translation"), [[3, 4, 0]])
+    assert last(c, "/ros2/initialpose", "Transform3D:parent_frame") == ["map"]
+
+
+def check_pose_array(c: Columns) -> None:
+    assert close(last(c, "/ros2/particles", "Arrows3D:origins"), [[0, 0, 0], [1, 1, 0]])
+    assert close(last(c, "/ros2/particles", "Arrows3D:vectors"), [[1, 0, 0], [0, 1, 0]])  # the second turned 90°
+
+
+def check_twist_stamped(c: Columns) -> None:
+    assert c["/ros2/cmd_vel/linear/x"]["Scalars:scalars"] == [[2.5]]
+    assert c["/ros2/cmd_vel/angular/z"]["Scalars:scalars"] == [[0.2]]
+
+
+def check_diagnostics(c: Columns) -> None:
+    engine = c[r"/ros2/diagnostics/ecu\/engine"]
+    assert engine["TextLog:text"] == [["coolant too hot (ECU1) temp=110, limit=105"]]
+    assert engine["TextLog:level"] == [["ERROR"]]
+    assert c[r"/ros2/diagnostics/ecu\/engine/level"]["Scalars:scalars"] == [[2.0]]
+    gateway = c["/ros2/diagnostics/gateway"]
+    assert (gateway["TextLog:text"], gateway["TextLog:level"]) == ([["[stale] no update"]], [["WARN"]])
+
+
 CASES = [
     Case("/tf", "tf2_msgs/msg/TFMessage", m.TFMessage(transforms=[
         tf("map", "odom", (1, 0, 0)), tf("odom", "base_link", (2, 3, 0), q_z(90)),
@@ -323,6 +388,42 @@ CASES = [
          lambda c: c["/ros2/cabin/humidity/relative_humidity"]["Scalars:scalars"] == [[0.4]] or _fail(c, "h")),
     Case("/cabin/light", "sensor_msgs/msg/Illuminance", m.Illuminance(illuminance=300.0),
          lambda c: c["/ros2/cabin/light/illuminance"]["Scalars:scalars"] == [[300.0]] or _fail(c, "lux")),
+    Case("/gnss/fix", "sensor_msgs/msg/NavSatFix", m.NavSatFix(
+        header=header("gnss"), status=m.NavSatStatus(status=0, service=1), latitude=48.137, longitude=11.575,
+        altitude=519.5), check_fix),
+    Case("/gnss/no_fix", "sensor_msgs/msg/NavSatFix", m.NavSatFix(
+        header=header("gnss"), status=m.NavSatStatus(status=-1), latitude=math.nan, longitude=math.nan,
+        altitude=math.nan), check_no_fix),
+    Case("/park/front_left", "sensor_msgs/msg/Range", m.Range(
+        header=header("sonar_fl"), field_of_view=0.5, min_range=0.2, max_range=4.0, range=1.5), check_range),
+    Case("/battery", "sensor_msgs/msg/BatteryState", m.BatteryState(
+        header=header(), voltage=12.6, current=math.nan, percentage=0.75, temperature=math.nan), check_battery),
+    Case("/joint_states", "sensor_msgs/msg/JointState", m.JointState(
+        header=header(), name=["steering", "wheel/fl"], position=[0.1, 2.0], velocity=[0.5, 30.0]), check_joints),
+    Case("/clicked_point", "geometry_msgs/msg/PointStamped", m.PointStamped(header=header("map"),
+                                                                            point=m.Point(1, 2, 0)),
+         check_point_stamped),
+    Case("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", m.PoseWithCovarianceStamped(
+        header=header("map"), pose=m.PoseWithCovariance(pose=m.Pose(position=m.Point(3, 4, 0)))), check_initial_pose),
+    Case("/particles", "geometry_msgs/msg/PoseArray", m.PoseArray(header=header("map"), poses=[
+        m.Pose(), m.Pose(position=m.Point(1, 1, 0), orientation=q_z(90))]), check_pose_array),
+    Case("/cmd_vel", "geometry_msgs/msg/TwistStamped", m.TwistStamped(
+        header=header("base_link"), twist=m.Twist(linear=m.Vector3(2.5, 0, 0), angular=m.Vector3(0, 0, 0.2))),
+         check_twist_stamped),
+    Case("/accel", "geometry_msgs/msg/AccelStamped", m.AccelStamped(
+        header=header("base_link"), accel=m.Accel(linear=m.Vector3(0, 0, 9.81))),
+         scalar_is("/ros2/accel/linear/z", 9.81)),
+    Case("/magnet", "geometry_msgs/msg/Vector3Stamped", m.Vector3Stamped(
+        header=header("imu"), vector=m.Vector3(0.2, 0, 0)), scalar_is("/ros2/magnet/x", 0.2)),
+    Case("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", m.DiagnosticArray(header=header(), status=[
+        m.DiagnosticStatus(level=2, name="ecu/engine", message="coolant too hot", hardware_id="ECU1",
+                           values=[m.KeyValue("temp", "110"), m.KeyValue("limit", "105")]),
+        m.DiagnosticStatus(level=3, name="gateway", message="no update")]), check_diagnostics),
+    *[Case(f"/numbers/{name.lower()}", f"std_msgs/msg/{name}", getattr(m, name)(value),
+           scalar_is(f"/ros2/numbers/{name.lower()}", float(value)))
+      for name, value in (("Bool", True), ("Int8", -5), ("Int16", -300), ("Int32", -70000), ("Int64", -2**40),
+                          ("UInt8", 200), ("UInt16", 60000), ("UInt32", 4_000_000_000), ("UInt64", 2**40),
+                          ("Float32", 1.5))],
     Case("/vehicle/can_in", "can_msgs/msg/Frame", m.CanFrame(id=0x0C0, dlc=8, data=bytes.fromhex("C1E803000000000B")),
          lambda c: c["/ros2/vehicle/can_in/0C0/raw"]["TextLog:text"] == [["0C0#C1E803000000000B"]] or _fail(c, "can")),
 ]

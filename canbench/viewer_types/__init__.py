@@ -13,7 +13,7 @@ ids, so data carrying header.frame_id sits in the TF tree the tf loggers build
 (and in a URDF's links, which Rerun names the same way)."""
 from __future__ import annotations
 
-from . import can, geometry, images, markers, points, scalars  # noqa: F401 - they register their loggers
+from . import can, diagnostics, geometry, images, markers, points, scalars, sensors  # noqa: F401 - they register their loggers
 from .registry import LOGGERS, Context, Logger, logger, require
 
 __all__ = ["LOGGERS", "Context", "Logger", "logger", "require"]

@@ -1,7 +1,8 @@
-"""Poses and frames: tf2_msgs/TFMessage (the TF tree), geometry_msgs/PoseStamped,
-nav_msgs/Odometry, nav_msgs/Path."""
+"""Poses and frames: tf2_msgs/TFMessage (the TF tree), geometry_msgs' stamped types (poses,
+points, pose arrays, twists, accelerations, vectors), nav_msgs/Odometry, nav_msgs/Path."""
 from __future__ import annotations
 
+import numpy as np
 import rerun as rr
 
 from .registry import Context, header_stamp, logger
@@ -26,6 +27,51 @@ def log_tf(ctx: Context, path: str, msg) -> None:
 @logger("geometry_msgs/msg/PoseStamped")
 def log_pose_stamped(ctx: Context, path: str, msg) -> None:
     ctx.pose(path, msg.pose.position, msg.pose.orientation, msg.header.frame_id)
+
+
+@logger("geometry_msgs/msg/PoseWithCovarianceStamped")
+def log_pose_with_covariance_stamped(ctx: Context, path: str, msg) -> None:
+    ctx.pose(path, msg.pose.pose.position, msg.pose.pose.orientation, msg.header.frame_id)
+
+
+@logger("geometry_msgs/msg/PointStamped")
+def log_point_stamped(ctx: Context, path: str, msg) -> None:
+    p = msg.point
+    ctx.log(path, rr.Points3D([[p.x, p.y, p.z]]), frame=msg.header.frame_id)
+
+
+def x_axis(q) -> list[float]:
+    """Where a quaternion turns the x axis (RViz draws a pose array's poses as arrows along it);
+    one that is not of unit length is normalised, a zero one leaves x as it is."""
+    n = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w
+    s = 2 / n if n else 0.0
+    return [1 - s * (q.y * q.y + q.z * q.z), s * (q.x * q.y + q.w * q.z), s * (q.x * q.z - q.w * q.y)]
+
+
+@logger("geometry_msgs/msg/PoseArray")
+def log_pose_array(ctx: Context, path: str, msg) -> None:
+    origins = [[p.position.x, p.position.y, p.position.z] for p in msg.poses]
+    vectors = [x_axis(p.orientation) for p in msg.poses]
+    ctx.log(path, rr.Arrows3D(origins=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
+                              vectors=np.asarray(vectors, dtype=np.float64).reshape(-1, 3)),
+            frame=msg.header.frame_id)
+
+
+@logger("geometry_msgs/msg/TwistStamped")
+def log_twist_stamped(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/linear", msg.twist.linear)
+    vector_scalars(ctx, f"{path}/angular", msg.twist.angular)
+
+
+@logger("geometry_msgs/msg/AccelStamped")
+def log_accel_stamped(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/linear", msg.accel.linear)
+    vector_scalars(ctx, f"{path}/angular", msg.accel.angular)
+
+
+@logger("geometry_msgs/msg/Vector3Stamped")
+def log_vector3_stamped(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, path, msg.vector)
 
 
 @logger("nav_msgs/msg/Odometry")

@@ -1,4 +1,5 @@
-"""Text and scalar series: std_msgs/String, the single-value sensor_msgs, Imu."""
+"""Text and scalar series: std_msgs/String and the std_msgs numbers, the single-value sensor_msgs,
+Imu."""
 from __future__ import annotations
 
 import rerun as rr
@@ -42,3 +43,13 @@ def log_imu(ctx: Context, path: str, msg) -> None:
 @logger("std_msgs/msg/Float64")
 def log_float64(ctx: Context, path: str, msg) -> None:
     ctx.scalar(path, msg.data)  # recording.mcap's decoded signals
+
+
+def _number_logger(type_name: str) -> None:
+    @logger(type_name)
+    def log(ctx: Context, path: str, msg) -> None:
+        ctx.scalar(path, msg.data)  # a Bool as 0 or 1
+
+
+for _number in ("Bool", "Int8", "Int16", "Int32", "Int64", "UInt8", "UInt16", "UInt32", "UInt64", "Float32"):
+    _number_logger(f"std_msgs/msg/{_number}")

@@ -38,7 +38,8 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
               session.liveliness().declare_token(ros2.publisher_token(
                   0, zid, 0, 1, "/cabin", "climate", "/cabin/temperature", "sensor_msgs/msg/Temperature", temp_hash)),
               session.liveliness().declare_token(ros2.publisher_token(
-                  0, zid, 0, 2, "/", "arm", "/joint_states", "sensor_msgs/msg/JointState", "RIHS01_" + "0" * 64))]
+                  0, zid, 0, 2, "/", "arm", "/arm/trajectory", "trajectory_msgs/msg/JointTrajectory",
+                  "RIHS01_" + "0" * 64))]
     rrd = tmp_path / "view.rrd"
     viewer = subprocess.Popen([sys.executable, "-m", "canbench.cli", "view", "--zenoh-connect", router.endpoint,
                                "--auto-subscribe", "--dbc", str(REPO / "scenarios" / "dbc" / "powertrain.dbc"),
@@ -76,6 +77,6 @@ def test_viewer_records_bridge_frames_and_ros2_topics(bus, bridge, router, sessi
     assert "/vehicle/can [can_msgs/msg/Frame]" in " ".join(logged["/discovery/ros2"])
     discovery = " ".join(logged["/discovery/ros2"])
     assert "/cabin/temperature [sensor_msgs/msg/Temperature]" in discovery
-    assert "/joint_states [sensor_msgs/msg/JointState] (no logger)" in discovery
-    assert logged["/discovery/unsupported"] == ["sensor_msgs/msg/JointState (first seen on /joint_states)"]
+    assert "/arm/trajectory [trajectory_msgs/msg/JointTrajectory] (no logger)" in discovery
+    assert logged["/discovery/unsupported"] == ["trajectory_msgs/msg/JointTrajectory (first seen on /arm/trajectory)"]
     assert any("vehicle/can/bridges/" in line for line in logged["/discovery/bridges"])

@@ -1,0 +1,61 @@
+"""A vehicle's other sensors: sensor_msgs/NavSatFix (a point on Rerun's map), Range (an
+ultrasonic or infrared distance), BatteryState, JointState (scalar series)."""
+from __future__ import annotations
+
+import math
+
+import rerun as rr
+
+from .registry import Context, logger, require
+
+STATUS_FIX = 0  # NavSatStatus: NO_FIX -1 and UNKNOWN -2 carry no position
+
+
+@logger("sensor_msgs/msg/NavSatFix")
+def log_nav_sat_fix(ctx: Context, path: str, msg) -> None:
+    """A fix as a GeoPoint (Rerun's map view), its altitude and status as scalars; a message
+    without a fix (or NaN coordinates, as receivers send them then) places no point."""
+    ctx.scalar(f"{path}/status", msg.status.status)
+    if msg.status.status < STATUS_FIX or not (math.isfinite(msg.latitude) and math.isfinite(msg.longitude)):
+        return
+    require(-90 <= msg.latitude <= 90 and -180 <= msg.longitude <= 180,
+            f"a fix at latitude {msg.latitude}, longitude {msg.longitude}: outside the globe's degrees")
+    rr.log(path, rr.GeoPoints(lat_lon=[[msg.latitude, msg.longitude]]), static=ctx.static)
+    if math.isfinite(msg.altitude):
+        ctx.scalar(f"{path}/altitude", msg.altitude)
+
+
+@logger("sensor_msgs/msg/Range")
+def log_range(ctx: Context, path: str, msg) -> None:
+    """A distance within [min_range, max_range] as a scalar and a point on the sensor's x axis
+    in its frame; +inf (nothing in range) and -inf (too close), REP 117's readings, place none."""
+    if math.isfinite(msg.range) and msg.min_range <= msg.range <= msg.max_range:
+        ctx.scalar(f"{path}/range", msg.range)
+        ctx.log(f"{path}/detection", rr.Points3D([[msg.range, 0.0, 0.0]]), frame=msg.header.frame_id)
+
+
+BATTERY_SCALARS = ("voltage", "current", "charge", "capacity", "percentage", "temperature")
+
+
+@logger("sensor_msgs/msg/BatteryState")
+def log_battery_state(ctx: Context, path: str, msg) -> None:
+    for name in BATTERY_SCALARS:
+        value = getattr(msg, name)
+        if math.isfinite(value):  # NaN: not measured (BatteryState.msg)
+            ctx.scalar(f"{path}/{name}", value)
+
+
+@logger("sensor_msgs/msg/JointState")
+def log_joint_state(ctx: Context, path: str, msg) -> None:
+    """Each joint's position, velocity and effort at <topic>/<joint>/<quantity>, as given: each
+    list is empty or holds one value per name."""
+    for quantity in ("position", "velocity", "effort"):
+        values = getattr(msg, quantity)
+        require(not values or len(values) == len(msg.name),
+                f"{len(values)} {quantity} values for {len(msg.name)} joint names")
+    for i, name in enumerate(msg.name):
+        joint = f"{path}/{rr.escape_entity_path_part(name)}"
+        for quantity in ("position", "velocity", "effort"):
+            values = getattr(msg, quantity)
+            if values:
+                ctx.scalar(f"{joint}/{quantity}", values[i])
