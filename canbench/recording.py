@@ -96,18 +96,32 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
         w.writer.finish()
 
 
-def view_mcap(path: Path, ctx: Context) -> tuple[int, int]:
+def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
     """Every ROS 2 (CDR) channel of an MCAP file through the viewer's loggers, at the
-    topic's path (/can/vcan0 -> can/vcan0/<id>/raw); (messages logged, malformed)."""
+    topic's path (/can/vcan0 -> can/vcan0/<id>/raw); (messages logged, malformed, not decoded
+    because the recording's definition of their type is not the viewer's: an older distribution's,
+    a same-named custom type; each such channel said once under discovery/errors)."""
     import rerun as rr
 
+    from .ros2 import definition_difference
     from .viewer_types import LOGGERS
     from .viewer_types.markers import expire
     from .viewer_types.registry import set_sample_time
-    count = malformed = 0
+    count = malformed = other = 0
+    differences: dict[int, str | None] = {}  # schema id -> how its definition differs from ours
+    told: set[int] = set()  # channels of such a schema already said
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages():
             if schema is None or schema.encoding != "ros2msg" or schema.name not in LOGGERS:
+                continue
+            if schema.id not in differences:
+                differences[schema.id] = definition_difference(schema.name, schema.data.decode("utf-8", "replace"))
+            if differences[schema.id]:
+                if channel.id not in told:
+                    told.add(channel.id)
+                    rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: recorded with another definition of "
+                                                          f"{schema.name} ({differences[schema.id]}): not decoded"))
+                other += 1
                 continue
             ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
             try:
@@ -120,4 +134,4 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int]:
                 rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
                 malformed += 1
     expire(ctx)  # markers whose lifetime ends after the last message
-    return count, malformed
+    return count, malformed, other

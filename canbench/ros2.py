@@ -278,3 +278,67 @@ def msg_definition(ros_type: str) -> str:
         body = "\n".join(_msg_field(f) for f in fields(name))
         parts.append(f"{'=' * 80}\nMSG: {name.replace('/msg/', '/')}\n{body}")
     return "\n".join(parts) + "\n"
+
+
+# ---- a recording's definitions (an MCAP's ros2msg schemas) against ours ----
+
+# the .msg primitive types (a bounded string is string<=N)
+MSG_BUILTINS = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32", "uint32",
+                "int64", "uint64", "string", "wstring"}
+SECTION_RULE = "=" * 80
+
+
+def _msg_type(written: str, package: str) -> str:
+    """A field's type as msg_definition writes it: primitives as they are, a nested type as
+    pkg/Type (a .msg names its own package's types without it; ROS 1's Header is std_msgs')."""
+    base, bracket, suffix = written.partition("[")
+    if base.split("<=")[0] in MSG_BUILTINS:
+        return written
+    parts = base.split("/")
+    if len(parts) == 1:
+        base = "std_msgs/Header" if base == "Header" else f"{package}/{base}"
+    else:
+        base = f"{parts[0]}/{parts[-1]}"
+    return base + bracket + suffix
+
+
+def msg_fields(type_name: str, text: str) -> dict[str, list[tuple[str, str]]]:
+    """pkg/Type -> [(type, name)] of each section of a ros2msg schema (the type's .msg text, then
+    '=' * 80 and 'MSG: pkg/Type' per nested type); comments, constants and default values left out."""
+    sections: dict[str, list[tuple[str, str]]] = {}
+    current = type_name.replace("/msg/", "/")
+    for raw in text.splitlines():
+        line = raw.split("#", 1)[0].strip()
+        if not line or line == SECTION_RULE:
+            continue
+        if line.startswith("MSG:"):
+            current = line[4:].strip().replace("/msg/", "/")
+            continue
+        written, _, rest = line.partition(" ")
+        rest = rest.strip()
+        name = rest.split("=", 1)[0].split()[0] if rest else ""
+        if not name or rest[len(name):].lstrip().startswith("="):
+            continue  # a constant (TYPE NAME=VALUE) or a line that is no field
+        sections.setdefault(current, []).append((_msg_type(written, current.split("/")[0]), name))
+    return sections
+
+
+def definition_difference(type_name: str, schema_text: str) -> str | None:
+    """How a recording's definition of a type (its MCAP schema) differs from the one ros2_msgs
+    decodes, in the first type of it that differs; None when they agree. A nested type the schema
+    does not carry cannot be compared and is taken as ours."""
+    ours = msg_fields(type_name, msg_definition(type_name))
+    theirs = msg_fields(type_name, schema_text)
+    for name, fields in ours.items():
+        recorded = theirs.get(name)
+        if recorded is None and name != type_name.replace("/msg/", "/"):
+            continue
+        if recorded != fields:
+            recorded = recorded or []
+            pairs = zip(recorded, fields, strict=False)  # up to the shorter: the rest is a count apart
+            i = next((i for i, (a, b) in enumerate(pairs) if a != b), min(len(recorded), len(fields)))
+            said = (f"field {i + 1} is '{' '.join(recorded[i])}' there, '{' '.join(fields[i])}' here"
+                    if i < len(recorded) and i < len(fields) else
+                    f"{len(recorded)} fields there, {len(fields)} here")
+            return f"{name}: {said}"
+    return None

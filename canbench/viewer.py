@@ -338,8 +338,9 @@ def run(args) -> int:
     dbc = read_dbc(args.dbc) if args.dbc else None
     if args.source:
         from .recording import view_mcap
-        count, malformed = view_mcap(args.source, Context(dbc, bus_dbcs))
-        print(f"canbench view: {count} messages from {args.source}, {malformed} malformed")
+        count, malformed, other = view_mcap(args.source, Context(dbc, bus_dbcs))
+        print(f"canbench view: {count} messages from {args.source}, {malformed} malformed, {other} not decoded "
+              "(recorded with another definition of their type: discovery/errors says which)")
         rr.disconnect()
         return 0
     # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete; SIGINT explicitly too,

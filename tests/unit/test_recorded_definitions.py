@@ -1,0 +1,109 @@
+"""A recording's definitions of its types (an MCAP's ros2msg schemas, as rosbag2 writes them: the
+.msg texts with comments, constants, defaults and names of the type's own package) against the
+ones the viewer decodes: the same definition agrees however it is written; another one (an older
+distribution's Marker, Humble's Range) is said, naming the field, and its messages are not
+decoded into garbage or counted malformed one by one."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from mcap.writer import Writer
+
+from canbench import ros2, ros2_msgs
+
+pytestmark = pytest.mark.unit
+
+# geometry_msgs/PoseArray as rosbag2 stores it (the .msg files of Jazzy's common_interfaces, trimmed comments)
+POSE_ARRAY_AS_RECORDED = """# An array of poses with a header for global reference.
+
+std_msgs/Header header
+
+Pose[] poses
+================================================================================
+MSG: geometry_msgs/Pose
+# A representation of pose in free space, composed of position and orientation.
+
+Point position
+Quaternion orientation
+================================================================================
+MSG: geometry_msgs/Point
+# This contains the position of a point in free space
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+# This represents an orientation in free space in quaternion form.
+
+float64 x 0
+float64 y 0
+float64 z 0
+float64 w 1
+================================================================================
+MSG: std_msgs/Header
+# Standard metadata for higher-level stamped data types.
+builtin_interfaces/Time stamp  # the time
+string frame_id
+uint8 UNUSED_CONSTANT=3  # constants are not fields
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+"""
+
+
+def test_the_same_definition_agrees_however_it_is_written():
+    assert ros2.definition_difference("geometry_msgs/msg/PoseArray", POSE_ARRAY_AS_RECORDED) is None
+    for ros_type in ros2.MESSAGE_TYPES:
+        assert ros2.definition_difference(ros_type, ros2.msg_definition(ros_type)) is None, ros_type
+
+
+def test_jazzys_definitions_agree_and_older_ones_are_named():
+    from rosbags.typesys import Stores, get_typestore
+    stores = {name: get_typestore(store) for name, store in
+              (("jazzy", Stores.ROS2_JAZZY), ("humble", Stores.ROS2_HUMBLE), ("foxy", Stores.ROS2_FOXY))}
+
+    def differences(name: str) -> dict[str, str | None]:
+        store = stores[name]
+        return {t: d for t in ros2.MESSAGE_TYPES if t in store.fielddefs
+                and (d := ros2.definition_difference(t, store.generate_msgdef(t, ros_version=2)[0]))}
+
+    assert differences("jazzy") == {}
+    assert differences("humble") == {"sensor_msgs/msg/Range": "sensor_msgs/Range: 6 fields there, 7 here"}
+    assert differences("foxy")["visualization_msgs/msg/MarkerArray"] == (
+        "visualization_msgs/Marker: field 13 is 'string text' there, 'string texture_resource' here")
+
+
+def test_a_changed_field_type_is_named():
+    changed = POSE_ARRAY_AS_RECORDED.replace("float64 w 1", "float32 w 1")
+    assert ros2.definition_difference("geometry_msgs/msg/PoseArray", changed) == (
+        "geometry_msgs/Quaternion: field 4 is 'float32 w' there, 'float64 w' here")
+
+
+def test_the_viewer_decodes_the_channels_of_its_definition_only(tmp_path):
+    pytest.importorskip("rerun", reason="the viewer needs rerun-sdk")
+    path = tmp_path / "bag.mcap"
+    pose_array = ros2_msgs.PoseArray(header=ros2_msgs.Header(frame_id="map"), poses=[ros2_msgs.Pose()])
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="test")
+        ours = w.register_schema("geometry_msgs/msg/PoseArray", "ros2msg", POSE_ARRAY_AS_RECORDED.encode())
+        other = w.register_schema("geometry_msgs/msg/PoseArray", "ros2msg",
+                                  POSE_ARRAY_AS_RECORDED.replace("float64 w 1", "float32 w 1").encode())
+        channels = [w.register_channel("/particlecloud", "cdr", ours), w.register_channel("/legacy", "cdr", other)]
+        for i in range(3):
+            for channel in channels:
+                w.add_message(channel, log_time=i, publish_time=i, sequence=i, data=pose_array.serialize())
+        w.finish()
+    rrd = tmp_path / "bag.rrd"
+    out = subprocess.run([sys.executable, "-m", "canbench.cli", "view", str(path), "--save", str(rrd)],
+                         capture_output=True, text=True, check=True, timeout=120).stdout
+    assert "3 messages from" in out and "0 malformed, 3 not decoded" in out
+    from canbench.viewer import read_rrd_columns
+    columns = read_rrd_columns(rrd)
+    assert columns["/discovery/errors"]["TextLog:text"] == [[
+        "/legacy: recorded with another definition of geometry_msgs/msg/PoseArray (geometry_msgs/Quaternion: "
+        "field 4 is 'float32 w' there, 'float64 w' here): not decoded"]]
+    assert len(columns["/particlecloud"]["Arrows3D:vectors"]) == 3 and "/legacy" not in columns
