@@ -110,12 +110,18 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
     count = malformed = other = 0
     differences: dict[int, str | None] = {}  # schema id -> how its definition differs from ours
     told: set[int] = set()  # channels of such a schema already said
+    humble: set[int] = set()  # schemas of Humble's definition of a type (ros2_msgs.HUMBLE_VARIANTS)
     with open(path, "rb") as f:
         for schema, channel, message in make_reader(f).iter_messages():
             if schema is None or schema.encoding != "ros2msg" or schema.name not in LOGGERS:
                 continue
             if schema.id not in differences:
-                differences[schema.id] = definition_difference(schema.name, schema.data.decode("utf-8", "replace"))
+                text = schema.data.decode("utf-8", "replace")
+                differences[schema.id] = definition_difference(schema.name, text)
+                variant = ros2_msgs.HUMBLE_VARIANTS.get(schema.name)
+                if differences[schema.id] and variant and not definition_difference(schema.name, text, variant):
+                    differences[schema.id] = None
+                    humble.add(schema.id)  # recorded by Humble: read with its definition
             if differences[schema.id]:
                 if channel.id not in told:
                     told.add(channel.id)
@@ -125,7 +131,7 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
                 continue
             ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
             try:
-                msg = ros2_msgs.decode(schema.name, message.data)
+                msg = ros2_msgs.decode(schema.name, message.data, schema.id in humble)
                 set_sample_time(message.log_time, msg)
                 LOGGERS[schema.name](ctx, channel.topic.strip("/"), msg)
                 count += 1

@@ -207,9 +207,10 @@ def _element(annotation) -> tuple[int, str]:
     return PRIMITIVES[key], ""
 
 
-def fields(ros_type: str) -> list[dict]:
+def fields(ros_type: str, cls=None) -> list[dict]:
+    """The type description's fields of a type (of cls, another definition of it, when given)."""
     out = []
-    for name, annotation in typing.get_type_hints(MESSAGE_TYPES[ros_type], include_extras=True).items():
+    for name, annotation in typing.get_type_hints(cls or MESSAGE_TYPES[ros_type], include_extras=True).items():
         meta = getattr(annotation, "__metadata__", (None,))[0]
         capacity = 0
         if isinstance(meta, array):
@@ -264,16 +265,18 @@ def _msg_field(f: dict) -> str:
     return f"{name}{suffix} {f['name']}"
 
 
-def msg_definition(ros_type: str) -> str:
+def msg_definition(ros_type: str, cls=None) -> str:
     """The type's .msg text with its nested types appended, as ROS 2 bags (and so MCAP's
-    ros2msg schemas) carry it: '=' * 80, then 'MSG: pkg/Type' and its fields, per type."""
+    ros2msg schemas) carry it: '=' * 80, then 'MSG: pkg/Type' and its fields, per type
+    (cls: another definition of the type, its nested types ours)."""
     order, queue = [], [ros_type]
     while queue:
         name = queue.pop(0)
         if name not in order:
             order.append(name)
-            queue += [f["type"]["nested_type_name"] for f in fields(name) if f["type"]["nested_type_name"]]
-    parts = ["\n".join(_msg_field(f) for f in fields(order[0]))]
+            queue += [f["type"]["nested_type_name"] for f in fields(name, cls if name == ros_type else None)
+                      if f["type"]["nested_type_name"]]
+    parts = ["\n".join(_msg_field(f) for f in fields(order[0], cls))]
     for name in order[1:]:
         body = "\n".join(_msg_field(f) for f in fields(name))
         parts.append(f"{'=' * 80}\nMSG: {name.replace('/msg/', '/')}\n{body}")
@@ -323,11 +326,11 @@ def msg_fields(type_name: str, text: str) -> dict[str, list[tuple[str, str]]]:
     return sections
 
 
-def definition_difference(type_name: str, schema_text: str) -> str | None:
+def definition_difference(type_name: str, schema_text: str, cls=None) -> str | None:
     """How a recording's definition of a type (its MCAP schema) differs from the one ros2_msgs
-    decodes, in the first type of it that differs; None when they agree. A nested type the schema
-    does not carry cannot be compared and is taken as ours."""
-    ours = msg_fields(type_name, msg_definition(type_name))
+    decodes (cls: another of ours, HUMBLE_VARIANTS'), in the first type of it that differs; None
+    when they agree. A nested type the schema does not carry cannot be compared and is taken as ours."""
+    ours = msg_fields(type_name, msg_definition(type_name, cls))
     theirs = msg_fields(type_name, schema_text)
     for name, fields in ours.items():
         recorded = theirs.get(name)

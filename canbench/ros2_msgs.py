@@ -354,6 +354,17 @@ class Range(IdlStruct, typename="sensor_msgs/msg/Range"):
 
 
 @dataclass
+class RangeHumble(IdlStruct, typename="sensor_msgs/msg/Range"):
+    """Range as Humble (and every distribution before Iron) defines it: no variance."""
+    header: Header = field(default_factory=Header)
+    radiation_type: uint8 = 0
+    field_of_view: float32 = 0.0
+    min_range: float32 = 0.0
+    max_range: float32 = 0.0
+    range: float32 = 0.0
+
+
+@dataclass
 class JointState(IdlStruct, typename="sensor_msgs/msg/JointState"):
     header: Header = field(default_factory=Header)
     name: sequence[str] = _list()
@@ -577,6 +588,10 @@ ALL = (Time, Duration, Header, String, Float64, Bool, Int8, Int16, Int32, Int64,
        PointCloud2, LaserScan, RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate,
        MeshFile, Marker, MarkerArray, KeyValue, DiagnosticStatus, DiagnosticArray, CanFrame)
 MESSAGE_TYPES: dict[str, type[IdlStruct]] = {cls.__idl_typename__: cls for cls in ALL}  # type: ignore[attr-defined]
+# The types whose Humble definition is not Jazzy's (ros2_msgs' are Jazzy's): what a Humble node
+# sends (its rmw_zenoh keys say TypeHashNotSupported) or a Humble bag records is read with these
+HUMBLE_VARIANTS: dict[str, type[IdlStruct]] = {"sensor_msgs/msg/Range": RangeHumble}
+HUMBLE_HASH = "TypeHashNotSupported"  # the type hash of Humble's rmw_zenoh keys and tokens
 
 # encapsulation kinds ROS 2 sends (plain CDR, big/little endian); XCDR2 and PL_CDR are not ROS 2 messages
 ENCAPSULATIONS = {b"\x00\x00", b"\x00\x01"}
@@ -594,12 +609,14 @@ def _byte_arrays(cls) -> list[tuple[str, int]]:
 BYTE_ARRAYS = {name: fields for name, cls in MESSAGE_TYPES.items() if (fields := _byte_arrays(cls))}
 
 
-def decode(type_name: str, payload: bytes):
-    """The message a payload holds, or CdrError saying why not (never another exception)."""
+def decode(type_name: str, payload: bytes, humble: bool = False):
+    """The message a payload holds, or CdrError saying why not (never another exception).
+    humble: sent or recorded by Humble (HUMBLE_VARIANTS' definition where it has one)."""
     if len(payload) < 4 or payload[:2] not in ENCAPSULATIONS:
         raise CdrError(f"{type_name}: not a CDR encapsulation header: {payload[:4].hex() or 'empty payload'}")
+    cls = (HUMBLE_VARIANTS.get(type_name) if humble else None) or MESSAGE_TYPES[type_name]
     try:
-        msg = MESSAGE_TYPES[type_name].deserialize(payload)
+        msg = cls.deserialize(payload)
     except Exception as e:  # noqa: BLE001 - pycdr2 raises struct.error, IndexError, UnicodeDecodeError...
         raise CdrError(f"{type_name}: malformed CDR ({len(payload)} bytes): {e}") from None
     for name, length in BYTE_ARRAYS.get(type_name, ()):

@@ -254,7 +254,8 @@ class Viewer:
         # topics of two domains are two robots, never one entity
         topic = ("" if domain == "0" else f"/domain{domain}") + "/" + "/".join(names)
         try:
-            msg = ros2_msgs.decode(sample.type_name, sample.payload)
+            humble = sample.key.endswith("/" + ros2_msgs.HUMBLE_HASH)  # Humble's rmw_zenoh: its definitions
+            msg = ros2_msgs.decode(sample.type_name, sample.payload, humble)
             set_sample_time(sample.t_ns, msg)
             self.ctx.static, self.ctx.t_ns = names == ["tf_static"], sample.t_ns
             self.ctx.domain = "" if domain == "0" else f"domain{domain}"  # its own TF tree

@@ -72,6 +72,9 @@ def test_jazzys_definitions_agree_and_older_ones_are_named():
 
     assert differences("jazzy") == {}
     assert differences("humble") == {"sensor_msgs/msg/Range": "sensor_msgs/Range: 6 fields there, 7 here"}
+    for ros_type, variant in ros2_msgs.HUMBLE_VARIANTS.items():  # what a Humble node or bag is read with
+        humble_text = stores["humble"].generate_msgdef(ros_type, ros_version=2)[0]
+        assert ros2.definition_difference(ros_type, humble_text, variant) is None
     assert differences("foxy")["visualization_msgs/msg/MarkerArray"] == (
         "visualization_msgs/Marker: field 13 is 'string text' there, 'string texture_resource' here")
 
@@ -83,6 +86,8 @@ def test_a_changed_field_type_is_named():
 
 
 def test_the_viewer_decodes_the_channels_of_its_definition_only(tmp_path):
+    """A channel of another definition is said and skipped; one of Humble's Range (recorded by a
+    Humble rosbag2) is read with Humble's definition."""
     pytest.importorskip("rerun", reason="the viewer needs rerun-sdk")
     path = tmp_path / "bag.mcap"
     pose_array = ros2_msgs.PoseArray(header=ros2_msgs.Header(frame_id="map"), poses=[ros2_msgs.Pose()])
@@ -96,14 +101,20 @@ def test_the_viewer_decodes_the_channels_of_its_definition_only(tmp_path):
         for i in range(3):
             for channel in channels:
                 w.add_message(channel, log_time=i, publish_time=i, sequence=i, data=pose_array.serialize())
+        humble = w.register_schema("sensor_msgs/msg/Range", "ros2msg", ros2.msg_definition(
+            "sensor_msgs/msg/Range", ros2_msgs.RangeHumble).encode())
+        sonar = ros2_msgs.RangeHumble(header=ros2_msgs.Header(frame_id="sonar"), max_range=4.0, range=1.25)
+        w.add_message(w.register_channel("/sonar", "cdr", humble), log_time=5, publish_time=5, sequence=0,
+                      data=sonar.serialize())
         w.finish()
     rrd = tmp_path / "bag.rrd"
     out = subprocess.run([sys.executable, "-m", "canbench.cli", "view", str(path), "--save", str(rrd)],
                          capture_output=True, text=True, check=True, timeout=120).stdout
-    assert "3 messages from" in out and "0 malformed, 3 not decoded" in out
+    assert "4 messages from" in out and "0 malformed, 3 not decoded" in out
     from canbench.viewer import read_rrd_columns
     columns = read_rrd_columns(rrd)
     assert columns["/discovery/errors"]["TextLog:text"] == [[
         "/legacy: recorded with another definition of geometry_msgs/msg/PoseArray (geometry_msgs/Quaternion: "
         "field 4 is 'float32 w' there, 'float64 w' here): not decoded"]]
     assert len(columns["/particlecloud"]["Arrows3D:vectors"]) == 3 and "/legacy" not in columns
+    assert columns["/sonar/range"]["Scalars:scalars"] == [[1.25]]

@@ -243,3 +243,26 @@ def test_two_domains_tf_trees_stay_apart_and_transforms_are_on_their_stamps(tmp_
               for entity, chunks in timelines(path, "Transform3D:translation").items()}
     assert stamps == {"/tf/odom/base_link": [1_699_999_990_000_000_005],
                       "/tf/domain7/odom/base_link": [1_699_999_991_000_000_005, "static"]}  # domain 7's tf_static
+
+
+def test_a_humble_nodes_range_is_read_with_humbles_definition(tmp_path):
+    """Humble's Range has no variance (Iron added it): what a Humble node sends (its rmw_zenoh keys
+    say TypeHashNotSupported) is read with Humble's definition, a Jazzy node's with Jazzy's; read
+    with Jazzy's, every Humble Range was malformed (4 bytes short)."""
+    from canbench.viewer import Sample, Viewer
+    humble = m.RangeHumble(header=m.Header(frame_id="sonar"), min_range=0.2, max_range=4.0, range=1.25)
+    jazzy = m.Range(header=m.Header(frame_id="sonar"), min_range=0.2, max_range=4.0, range=2.5, variance=0.01)
+    live = Viewer(None, [], True)  # type: ignore[arg-type]
+    for t_ns, msg, key_hash in ((1, humble, m.HUMBLE_HASH), (2, jazzy, ros2.type_hash("sensor_msgs/msg/Range"))):
+        key = ros2.data_key(0, "/sonar", "sensor_msgs/msg/Range", key_hash)
+        live.samples.put(Sample(t_ns, key, msg.serialize(), "sensor_msgs/msg/Range"))  # type: ignore[attr-defined]
+    live.samples.put(None)
+    path = tmp_path / "live.rrd"
+    rec = rr.RecordingStream("canbench-test-humble")
+    rec.save(str(path))
+    with rec:
+        live._log_loop()
+    rec.flush()
+    rec.disconnect()
+    assert not live.malformed
+    assert read_rrd_columns(path)["/ros2/sonar/range"]["Scalars:scalars"] == [[1.25], [2.5]]
