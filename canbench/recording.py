@@ -96,6 +96,9 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
         w.writer.finish()
 
 
+FLUSH_EVERY = 1000  # messages of a recording whose scalars are sent together (one column per entity)
+
+
 def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
     """Every ROS 2 (CDR) channel of an MCAP file through the viewer's loggers, at the
     topic's path (/can/vcan0 -> can/vcan0/<id>/raw); (messages logged, malformed, not decoded
@@ -106,8 +109,9 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
     from .ros2 import definition_difference
     from .viewer_types import LOGGERS
     from .viewer_types.markers import expire
-    from .viewer_types.registry import set_sample_time
+    from .viewer_types.registry import ScalarColumns, set_sample_time
     count = malformed = other = 0
+    scalars = ctx.scalars = ScalarColumns()  # sent per entity every FLUSH_EVERY messages
     differences: dict[int, str | None] = {}  # schema id -> how its definition differs from ours
     told: set[int] = set()  # channels of such a schema already said
     humble: set[int] = set()  # schemas of Humble's definition of a type (ros2_msgs.HUMBLE_VARIANTS)
@@ -132,12 +136,15 @@ def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
             ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
             try:
                 msg = ros2_msgs.decode(schema.name, message.data, schema.id in humble)
-                set_sample_time(message.log_time, msg)
+                ctx.stamp_ns = set_sample_time(message.log_time, msg)
                 LOGGERS[schema.name](ctx, channel.topic.strip("/"), msg)
                 count += 1
+                if count % FLUSH_EVERY == 0:
+                    scalars.flush()
             except Exception as e:  # noqa: BLE001 - as live: a bad message is shown and counted, never fatal
                 set_sample_time(message.log_time, None)
                 rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
                 malformed += 1
+    scalars.flush()
     expire(ctx)  # markers whose lifetime ends after the last message
     return count, malformed, other

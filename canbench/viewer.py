@@ -37,7 +37,7 @@ from .viewer_args import DEFAULT_ENDPOINT
 from .viewer_types import LOGGERS, Context
 from .viewer_types.can import CanColumns
 from .viewer_types.markers import expire
-from .viewer_types.registry import set_sample_time
+from .viewer_types.registry import ScalarColumns, set_sample_time
 
 QUEUE_SAMPLES = 100_000  # samples between the network callbacks and the logger thread
 QUEUE_BYTES = 512 << 20  # and their payloads' bytes: behind a camera's 6 MB frames the count alone held gigabytes
@@ -92,6 +92,7 @@ class Viewer:
         self.session, self.auto, self.prefix, self.domain = session, auto_subscribe, prefix, domain
         self.topics = {normalise_topic(t) for t in topics}
         self.ctx = Context(dbc, bus_dbcs)  # a bus's own DBC, by the bus its keys name; else dbc
+        self.scalars = self.ctx.scalars = ScalarColumns()  # sent per entity after each batch
         self.samples: queue.Queue[Sample | None] = queue.Queue(maxsize=QUEUE_SAMPLES)
         self.entities: dict[str, ros2.Entity] = {}
         self.bridges: set[str] = set()
@@ -256,7 +257,7 @@ class Viewer:
         try:
             humble = sample.key.endswith("/" + ros2_msgs.HUMBLE_HASH)  # Humble's rmw_zenoh: its definitions
             msg = ros2_msgs.decode(sample.type_name, sample.payload, humble)
-            set_sample_time(sample.t_ns, msg)
+            self.ctx.stamp_ns = set_sample_time(sample.t_ns, msg)
             self.ctx.static, self.ctx.t_ns = names == ["tf_static"], sample.t_ns
             self.ctx.domain = "" if domain == "0" else f"domain{domain}"  # its own TF tree
             LOGGERS[sample.type_name](self.ctx, "ros2" + topic, msg)
@@ -281,6 +282,7 @@ class Viewer:
                     except ValueError as e:  # WireError
                         self._malformed(sample.key, e)
             can.flush()
+            self.scalars.flush()
             # markers' lifetimes: up to the newest sample logged (older ones may still be queued)
             expire(self.ctx, batch[-1].t_ns if batch else time.time_ns())
             with self.lock:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import rerun as rr
 
-from .registry import Context, logger
+from .registry import Context, logger, require
 
 # DiagnosticStatus levels: OK 0, WARN 1, ERROR 2, STALE 3 (no update from its source)
-LEVELS = {0: rr.TextLogLevel.INFO, 1: rr.TextLogLevel.WARN, 2: rr.TextLogLevel.ERROR, 3: rr.TextLogLevel.WARN}
+LEVELS: dict[int, str] = {0: "INFO", 1: "WARN", 2: "ERROR", 3: "WARN"}  # Rerun's TextLogLevel names
 STALE = 3
 
 
@@ -21,9 +21,18 @@ def status_text(status) -> str:
     return text
 
 
+MAX_STATUSES = 1000  # a message with more is refused: each status is an entity of its own
+
+
 @logger("diagnostic_msgs/msg/DiagnosticArray")
 def log_diagnostic_array(ctx: Context, path: str, msg) -> None:
+    """Each status's level every time; its text when it changed (diagnostic_updater republishes
+    unchanged statuses every second: an aggregator's hundreds would fill the log with repeats)."""
+    require(len(msg.status) <= MAX_STATUSES, f"{len(msg.status)} statuses: more than {MAX_STATUSES}")
     for status in msg.status:
         entity = f"{path}/{rr.escape_entity_path_part(status.name or '(unnamed)')}"
-        rr.log(entity, rr.TextLog(status_text(status), level=LEVELS.get(status.level, f"LEVEL {status.level}")))
+        text, level = status_text(status), LEVELS.get(status.level, f"LEVEL {status.level}")
+        if ctx.texts.get(entity) != (text, level):
+            ctx.texts[entity] = (text, level)
+            rr.log(entity, rr.TextLog(text, level=level))
         ctx.scalar(f"{entity}/level", status.level)

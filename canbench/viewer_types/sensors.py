@@ -25,13 +25,28 @@ def log_nav_sat_fix(ctx: Context, path: str, msg) -> None:
         ctx.scalar(f"{path}/altitude", msg.altitude)
 
 
+def detected_range(msg) -> float | None:
+    """The distance a Range reports, or None for no detection: a value within [min_range,
+    max_range]; for a fixed-distance ranger (min_range == max_range, an IR proximity switch)
+    -inf is a detection at that distance (Range.msg; RViz draws it there); +inf (nothing in
+    range), -inf of a ranging sensor (too close) and NaN are none."""
+    if msg.min_range <= msg.range <= msg.max_range:
+        return msg.range
+    if msg.min_range == msg.max_range and msg.range == -math.inf:
+        return msg.min_range
+    return None
+
+
 @logger("sensor_msgs/msg/Range")
 def log_range(ctx: Context, path: str, msg) -> None:
-    """A distance within [min_range, max_range] as a scalar and a point on the sensor's x axis
-    in its frame; +inf (nothing in range) and -inf (too close), REP 117's readings, place none."""
-    if math.isfinite(msg.range) and msg.min_range <= msg.range <= msg.max_range:
-        ctx.scalar(f"{path}/range", msg.range)
-        ctx.log(f"{path}/detection", rr.Points3D([[msg.range, 0.0, 0.0]]), frame=msg.header.frame_id)
+    """A detection as a scalar and a point on the sensor's x axis in its frame; no detection
+    clears the point (an obstacle gone from a parking sensor must not stay on screen)."""
+    detected = detected_range(msg)
+    if detected is None:
+        ctx.log(f"{path}/detection", rr.Clear(recursive=False), frame=msg.header.frame_id)
+        return
+    ctx.scalar(f"{path}/range", detected)
+    ctx.log(f"{path}/detection", rr.Points3D([[detected, 0.0, 0.0]]), frame=msg.header.frame_id)
 
 
 BATTERY_SCALARS = ("voltage", "current", "charge", "capacity", "percentage", "temperature")
@@ -45,16 +60,20 @@ def log_battery_state(ctx: Context, path: str, msg) -> None:
             ctx.scalar(f"{path}/{name}", value)
 
 
+MAX_JOINTS = 1000  # a message naming more is refused: each joint is an entity of its own
+
+
 @logger("sensor_msgs/msg/JointState")
 def log_joint_state(ctx: Context, path: str, msg) -> None:
     """Each joint's position, velocity and effort at <topic>/<joint>/<quantity>, as given: each
     list is empty or holds one value per name."""
+    require(len(msg.name) <= MAX_JOINTS, f"{len(msg.name)} joints: more than {MAX_JOINTS}")
     for quantity in ("position", "velocity", "effort"):
         values = getattr(msg, quantity)
         require(not values or len(values) == len(msg.name),
                 f"{len(values)} {quantity} values for {len(msg.name)} joint names")
     for i, name in enumerate(msg.name):
-        joint = f"{path}/{rr.escape_entity_path_part(name)}"
+        joint = f"{path}/{rr.escape_entity_path_part(name or '(unnamed)')}"
         for quantity in ("position", "velocity", "effort"):
             values = getattr(msg, quantity)
             if values:

@@ -5,6 +5,7 @@ liveliness token whose domain is not an ASCII number, compressedDepth images, th
 TRANSIENT_LOCAL publisher. Each read as the real tools read it (PCL, RViz, tf2, rclpy, rmw_zenoh)."""
 from __future__ import annotations
 
+import math
 import struct
 
 import pytest
@@ -266,3 +267,50 @@ def test_a_humble_nodes_range_is_read_with_humbles_definition(tmp_path):
     rec.disconnect()
     assert not live.malformed
     assert read_rrd_columns(path)["/ros2/sonar/range"]["Scalars:scalars"] == [[1.25], [2.5]]
+
+
+def test_a_batchs_scalars_go_one_column_per_entity(tmp_path, monkeypatch):
+    """/joint_states of 30 joints at a controller's rate: one rr.log per value (25-35 µs each) was
+    more than the logger thread has; a batch's scalars go as one column per entity, each value on
+    its message's receive time and, where it has one, its header stamp."""
+    joints = [f"joint_{i}" for i in range(30)]
+    samples = [(1_700_000_000_000_000_000 + k, 0, "/joint_states", "sensor_msgs/msg/JointState", m.JointState(
+        header=m.Header(stamp=m.Time(1_699_999_999, k) if k % 2 else m.Time()), name=joints,
+        position=[k + i / 100 for i in range(30)], velocity=[float(k)] * 30)) for k in range(50)]
+    calls = {"log": 0, "send_columns": 0}
+    for name in calls:
+        real = getattr(rr, name)
+
+        def counted(*args, _real=real, _name=name, **kwargs):
+            calls[_name] += 1
+            return _real(*args, **kwargs)
+        monkeypatch.setattr(rr, name, counted)
+    live, path = viewed(tmp_path, samples)
+    assert live.logged == 50 and not live.malformed
+    assert calls["send_columns"] <= 2 * 60 + 5 and calls["log"] < 50  # per entity and batch, not per value
+    columns = read_rrd_columns(path)
+    values = sorted(v for [v] in columns["/ros2/joint_states/joint_3/position"]["Scalars:scalars"])
+    assert values == pytest.approx([k + 0.03 for k in range(50)])  # (stamped ones a column of their own)
+    stamps = timelines(path, "Scalars:")["/ros2/joint_states/joint_3/velocity"]
+    assert sorted(t for chunk in stamps for t in chunk.get("header_stamp", [])) == [
+        1_699_999_999_000_000_000 + k for k in range(1, 50, 2)]  # an unstamped message is not on that timeline
+
+
+def test_a_range_clears_its_detection_when_nothing_is_in_range_and_a_ranger_detects_at_its_distance(tmp_path):
+    sonar = {"header": m.Header(frame_id="sonar"), "min_range": 0.2, "max_range": 4.0}
+    ir = {"header": m.Header(frame_id="ir"), "min_range": 0.3, "max_range": 0.3}
+    columns, errors = logged(tmp_path, [
+        ("sensor_msgs/msg/Range", "ros2/park", m.Range(**sonar, range=1.5)),
+        ("sensor_msgs/msg/Range", "ros2/park", m.Range(**sonar, range=math.inf)),  # the obstacle has gone
+        ("sensor_msgs/msg/Range", "ros2/ir", m.Range(**ir, range=-math.inf)),  # a fixed-distance detection
+        ("sensor_msgs/msg/Range", "ros2/ir", m.Range(**ir, range=math.inf))])
+    assert not errors
+    assert columns["/ros2/park/detection"]["Clear:is_recursive"] == [[False]]
+    assert columns["/ros2/park/range"]["Scalars:scalars"] == [[1.5]]
+    assert columns["/ros2/ir/range"]["Scalars:scalars"] == [[pytest.approx(0.3)]]
+    assert close_to(columns["/ros2/ir/detection"]["Points3D:positions"], [[[0.3, 0, 0]]])
+
+
+def close_to(a, b) -> bool:
+    import numpy as np
+    return bool(np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), atol=1e-6))
