@@ -281,6 +281,8 @@ def check_battery(c: Columns) -> None:
     assert close(last(c, "/ros2/battery/voltage", "Scalars:scalars"), [12.6])
     assert close(last(c, "/ros2/battery/percentage", "Scalars:scalars"), [0.75])
     assert "/ros2/battery/current" not in c  # NaN: not measured
+    assert close(last(c, "/ros2/battery/cell_voltage/1", "Scalars:scalars"), [4.1])
+    assert "/ros2/battery/cell_voltage/2" not in c
 
 
 def check_joints(c: Columns) -> None:
@@ -302,7 +304,7 @@ def check_initial_pose(c: Columns) -> None:
 
 def check_pose_array(c: Columns) -> None:
     assert close(last(c, "/ros2/particles", "Arrows3D:origins"), [[0, 0, 0], [1, 1, 0]])
-    assert close(last(c, "/ros2/particles", "Arrows3D:vectors"), [[1, 0, 0], [0, 1, 0]])  # the second turned 90°
+    assert close(last(c, "/ros2/particles", "Arrows3D:vectors"), [[0.3, 0, 0], [0, 0.3, 0]])  # RViz's 0.3 m, 90°
 
 
 def check_twist_stamped(c: Columns) -> None:
@@ -397,7 +399,8 @@ CASES = [
     Case("/park/front_left", "sensor_msgs/msg/Range", m.Range(
         header=header("sonar_fl"), field_of_view=0.5, min_range=0.2, max_range=4.0, range=1.5), check_range),
     Case("/battery", "sensor_msgs/msg/BatteryState", m.BatteryState(
-        header=header(), voltage=12.6, current=math.nan, percentage=0.75, temperature=math.nan), check_battery),
+        header=header(), voltage=12.6, current=math.nan, percentage=0.75, temperature=math.nan,
+        cell_voltage=[4.2, 4.1, math.nan]), check_battery),
     Case("/joint_states", "sensor_msgs/msg/JointState", m.JointState(
         header=header(), name=["steering", "wheel/fl"], position=[0.1, 2.0], velocity=[0.5, 30.0]), check_joints),
     Case("/clicked_point", "geometry_msgs/msg/PointStamped", m.PointStamped(header=header("map"),

@@ -48,13 +48,18 @@ def x_axis(q) -> list[float]:
     return [1 - s * (q.y * q.y + q.z * q.z), s * (q.x * q.y + q.w * q.z), s * (q.x * q.z - q.w * q.y)]
 
 
+POSE_ARROW_M = 0.3  # RViz's PoseArray arrow length: a particle cloud of 1 m arrows is a hairball
+
+
 @logger("geometry_msgs/msg/PoseArray")
 def log_pose_array(ctx: Context, path: str, msg) -> None:
-    origins = [[p.position.x, p.position.y, p.position.z] for p in msg.poses]
-    vectors = [x_axis(p.orientation) for p in msg.poses]
-    ctx.log(path, rr.Arrows3D(origins=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
-                              vectors=np.asarray(vectors, dtype=np.float64).reshape(-1, 3)),
-            frame=msg.header.frame_id)
+    """Each pose an arrow along its x axis; a pose with a NaN or infinite value is left out."""
+    origins = np.asarray([[p.position.x, p.position.y, p.position.z] for p in msg.poses],
+                         dtype=np.float64).reshape(-1, 3)
+    vectors = np.asarray([x_axis(p.orientation) for p in msg.poses], dtype=np.float64).reshape(-1, 3) * POSE_ARROW_M
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.isfinite(origins).all(axis=1) & np.isfinite(vectors).all(axis=1)
+    ctx.log(path, rr.Arrows3D(origins=origins[finite], vectors=vectors[finite]), frame=msg.header.frame_id)
 
 
 @logger("geometry_msgs/msg/TwistStamped")

@@ -15,12 +15,13 @@ STATUS_FIX = 0  # NavSatStatus: NO_FIX -1 and UNKNOWN -2 carry no position
 def log_nav_sat_fix(ctx: Context, path: str, msg) -> None:
     """A fix as a GeoPoint (Rerun's map view), its altitude and status as scalars; a message
     without a fix (or NaN coordinates, as receivers send them then) places no point."""
+    fixed = msg.status.status >= STATUS_FIX and math.isfinite(msg.latitude) and math.isfinite(msg.longitude)
+    require(not fixed or -90 <= msg.latitude <= 90, f"a fix at latitude {msg.latitude}: beyond a pole")
     ctx.scalar(f"{path}/status", msg.status.status)
-    if msg.status.status < STATUS_FIX or not (math.isfinite(msg.latitude) and math.isfinite(msg.longitude)):
+    if not fixed:
         return
-    require(-90 <= msg.latitude <= 90 and -180 <= msg.longitude <= 180,
-            f"a fix at latitude {msg.latitude}, longitude {msg.longitude}: outside the globe's degrees")
-    rr.log(path, rr.GeoPoints(lat_lon=[[msg.latitude, msg.longitude]]), static=ctx.static)
+    longitude = (msg.longitude + 180) % 360 - 180  # east of 180 as some receivers give it (0..360)
+    rr.log(path, rr.GeoPoints(lat_lon=[[msg.latitude, longitude]]), static=ctx.static)
     if math.isfinite(msg.altitude):
         ctx.scalar(f"{path}/altitude", msg.altitude)
 
@@ -49,15 +50,26 @@ def log_range(ctx: Context, path: str, msg) -> None:
     ctx.log(f"{path}/detection", rr.Points3D([[detected, 0.0, 0.0]]), frame=msg.header.frame_id)
 
 
-BATTERY_SCALARS = ("voltage", "current", "charge", "capacity", "percentage", "temperature")
+BATTERY_SCALARS = ("voltage", "current", "charge", "capacity", "percentage", "temperature",
+                   "power_supply_status", "power_supply_health", "present")
+MAX_CELLS = 1000  # a message with more cells is refused: each cell is an entity of its own
 
 
 @logger("sensor_msgs/msg/BatteryState")
 def log_battery_state(ctx: Context, path: str, msg) -> None:
+    """Its measurements, status and health codes (BatteryState.msg's constants), and each cell's
+    voltage and temperature at <topic>/cell_voltage/<i>, <topic>/cell_temperature/<i> (from 0);
+    a NaN value (not measured) left out."""
     for name in BATTERY_SCALARS:
-        value = getattr(msg, name)
-        if math.isfinite(value):  # NaN: not measured (BatteryState.msg)
+        value = float(getattr(msg, name))
+        if math.isfinite(value):
             ctx.scalar(f"{path}/{name}", value)
+    for series in ("cell_voltage", "cell_temperature"):
+        values = getattr(msg, series)
+        require(len(values) <= MAX_CELLS, f"{len(values)} {series} values: more than {MAX_CELLS}")
+        for i, value in enumerate(values):
+            if math.isfinite(value):
+                ctx.scalar(f"{path}/{series}/{i}", value)
 
 
 MAX_JOINTS = 1000  # a message naming more is refused: each joint is an entity of its own

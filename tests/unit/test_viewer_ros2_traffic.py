@@ -314,3 +314,21 @@ def test_a_range_clears_its_detection_when_nothing_is_in_range_and_a_ranger_dete
 def close_to(a, b) -> bool:
     import numpy as np
     return bool(np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), atol=1e-6))
+
+
+def test_a_fix_east_of_180_is_placed_and_one_beyond_a_pole_is_malformed_and_logs_nothing(tmp_path):
+    fix = {"header": m.Header(frame_id="gnss"), "status": m.NavSatStatus(status=0)}
+    columns, errors = logged(tmp_path, [
+        ("sensor_msgs/msg/NavSatFix", "ros2/east", m.NavSatFix(**fix, latitude=10.0, longitude=350.0)),
+        ("sensor_msgs/msg/NavSatFix", "ros2/pole", m.NavSatFix(**fix, latitude=91.0, longitude=0.0))])
+    assert close_to(columns["/ros2/east"]["GeoPoints:positions"], [[[10.0, -10.0]]])
+    assert errors == ["a fix at latitude 91.0: beyond a pole"]
+    assert not any(entity.startswith("/ros2/pole") for entity in columns)
+
+
+def test_a_pose_array_leaves_out_poses_with_nan(tmp_path):
+    poses = [m.Pose(), m.Pose(position=m.Point(math.nan, 0, 0)), m.Pose(orientation=m.Quaternion(0, 0, 0, math.inf))]
+    columns, errors = logged(tmp_path, [("geometry_msgs/msg/PoseArray", "ros2/particles",
+                                         m.PoseArray(header=m.Header(frame_id="map"), poses=poses))])
+    assert not errors
+    assert close_to(columns["/ros2/particles"]["Arrows3D:origins"], [[[0, 0, 0]]])
