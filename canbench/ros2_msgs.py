@@ -267,6 +267,54 @@ class PoseArray(IdlStruct, typename="geometry_msgs/msg/PoseArray"):
 
 
 @dataclass
+class TwistWithCovarianceStamped(IdlStruct, typename="geometry_msgs/msg/TwistWithCovarianceStamped"):
+    header: Header = field(default_factory=Header)
+    twist: TwistWithCovariance = field(default_factory=TwistWithCovariance)
+
+
+@dataclass
+class AccelWithCovariance(IdlStruct, typename="geometry_msgs/msg/AccelWithCovariance"):
+    accel: Accel = field(default_factory=Accel)
+    covariance: array[float64, 36] = _zeros(36)
+
+
+@dataclass
+class AccelWithCovarianceStamped(IdlStruct, typename="geometry_msgs/msg/AccelWithCovarianceStamped"):
+    header: Header = field(default_factory=Header)
+    accel: AccelWithCovariance = field(default_factory=AccelWithCovariance)
+
+
+@dataclass
+class Wrench(IdlStruct, typename="geometry_msgs/msg/Wrench"):
+    force: Vector3 = field(default_factory=Vector3)
+    torque: Vector3 = field(default_factory=Vector3)
+
+
+@dataclass
+class WrenchStamped(IdlStruct, typename="geometry_msgs/msg/WrenchStamped"):
+    header: Header = field(default_factory=Header)
+    wrench: Wrench = field(default_factory=Wrench)
+
+
+@dataclass
+class Point32(IdlStruct, typename="geometry_msgs/msg/Point32"):
+    x: float32 = 0.0
+    y: float32 = 0.0
+    z: float32 = 0.0
+
+
+@dataclass
+class Polygon(IdlStruct, typename="geometry_msgs/msg/Polygon"):
+    points: sequence[Point32] = _list()
+
+
+@dataclass
+class PolygonStamped(IdlStruct, typename="geometry_msgs/msg/PolygonStamped"):
+    header: Header = field(default_factory=Header)
+    polygon: Polygon = field(default_factory=Polygon)
+
+
+@dataclass
 class Transform(IdlStruct, typename="geometry_msgs/msg/Transform"):
     translation: Vector3 = field(default_factory=Vector3)
     rotation: Quaternion = field(default_factory=Quaternion)
@@ -323,6 +371,13 @@ class Illuminance(IdlStruct, typename="sensor_msgs/msg/Illuminance"):
     header: Header = field(default_factory=Header)
     illuminance: float64 = 0.0
     variance: float64 = 0.0
+
+
+@dataclass
+class MagneticField(IdlStruct, typename="sensor_msgs/msg/MagneticField"):
+    header: Header = field(default_factory=Header)
+    magnetic_field: Vector3 = field(default_factory=Vector3)  # tesla
+    magnetic_field_covariance: array[float64, 9] = _zeros(9)
 
 
 @dataclass
@@ -582,11 +637,13 @@ class CanFrame(IdlStruct, typename="can_msgs/msg/Frame"):
 
 ALL = (Time, Duration, Header, String, Float64, Bool, Int8, Int16, Int32, Int64, UInt8, UInt16, UInt32, UInt64,
        Float32, ColorRGBA, Vector3, Point, Quaternion, Pose, PoseStamped, PoseWithCovariance, Twist,
-       TwistWithCovariance, TwistStamped, Accel, AccelStamped, Vector3Stamped, PointStamped, PoseWithCovarianceStamped,
-       PoseArray, Transform, TransformStamped, TFMessage, Imu, Temperature, FluidPressure, RelativeHumidity,
-       Illuminance, NavSatStatus, NavSatFix, Range, JointState, BatteryState, Image, CompressedImage, PointField,
-       PointCloud2, LaserScan, RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate,
-       MeshFile, Marker, MarkerArray, KeyValue, DiagnosticStatus, DiagnosticArray, CanFrame)
+       TwistWithCovariance, TwistStamped, Accel, AccelStamped, Vector3Stamped, PointStamped,
+       PoseWithCovarianceStamped, PoseArray, TwistWithCovarianceStamped, AccelWithCovariance,
+       AccelWithCovarianceStamped, Wrench, WrenchStamped, Point32, Polygon, PolygonStamped, MagneticField, Transform,
+       TransformStamped, TFMessage, Imu, Temperature, FluidPressure, RelativeHumidity, Illuminance, NavSatStatus,
+       NavSatFix, Range, JointState, BatteryState, Image, CompressedImage, PointField, PointCloud2, LaserScan,
+       RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate, MeshFile, Marker,
+       MarkerArray, KeyValue, DiagnosticStatus, DiagnosticArray, CanFrame)
 MESSAGE_TYPES: dict[str, type[IdlStruct]] = {cls.__idl_typename__: cls for cls in ALL}  # type: ignore[attr-defined]
 # The types whose Humble definition is not Jazzy's (ros2_msgs' are Jazzy's): what a Humble node
 # sends (its rmw_zenoh keys say TypeHashNotSupported) or a Humble bag records is read with these

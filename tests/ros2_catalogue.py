@@ -416,6 +416,23 @@ CASES = [
     Case("/accel", "geometry_msgs/msg/AccelStamped", m.AccelStamped(
         header=header("base_link"), accel=m.Accel(linear=m.Vector3(0, 0, 9.81))),
          scalar_is("/ros2/accel/linear/z", 9.81)),
+    Case("/imu/mag", "sensor_msgs/msg/MagneticField", m.MagneticField(
+        header=header("imu"), magnetic_field=m.Vector3(2e-5, 0, -4e-5)),
+         scalar_is("/ros2/imu/mag/magnetic_field/z", -4e-5)),
+    Case("/wheel/twist", "geometry_msgs/msg/TwistWithCovarianceStamped", m.TwistWithCovarianceStamped(
+        header=header("base_link"), twist=m.TwistWithCovariance(twist=m.Twist(linear=m.Vector3(3.5, 0, 0)))),
+         scalar_is("/ros2/wheel/twist/linear/x", 3.5)),
+    Case("/accel/filtered", "geometry_msgs/msg/AccelWithCovarianceStamped", m.AccelWithCovarianceStamped(
+        header=header("base_link"), accel=m.AccelWithCovariance(accel=m.Accel(linear=m.Vector3(0.5, 0, 0)))),
+         scalar_is("/ros2/accel/filtered/linear/x", 0.5)),
+    Case("/hitch/wrench", "geometry_msgs/msg/WrenchStamped", m.WrenchStamped(
+        header=header("hitch"), wrench=m.Wrench(force=m.Vector3(0, 0, -1200.0))),
+         scalar_is("/ros2/hitch/wrench/force/z", -1200.0)),
+    Case("/footprint", "geometry_msgs/msg/PolygonStamped", m.PolygonStamped(
+        header=header("base_link"), polygon=m.Polygon(points=[m.Point32(1, 1, 0), m.Point32(-1, 1, 0),
+                                                              m.Point32(-1, -1, 0)])),
+         lambda c: close(last(c, "/ros2/footprint", "LineStrips3D:strips"),
+                         [[[1, 1, 0], [-1, 1, 0], [-1, -1, 0], [1, 1, 0]]]) or _fail(c, "footprint")),
     Case("/magnet", "geometry_msgs/msg/Vector3Stamped", m.Vector3Stamped(
         header=header("imu"), vector=m.Vector3(0.2, 0, 0)), scalar_is("/ros2/magnet/x", 0.2)),
     Case("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", m.DiagnosticArray(header=header(), status=[

@@ -74,6 +74,31 @@ def log_accel_stamped(ctx: Context, path: str, msg) -> None:
     vector_scalars(ctx, f"{path}/angular", msg.accel.angular)
 
 
+@logger("geometry_msgs/msg/TwistWithCovarianceStamped")
+def log_twist_with_covariance_stamped(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/linear", msg.twist.twist.linear)
+    vector_scalars(ctx, f"{path}/angular", msg.twist.twist.angular)
+
+
+@logger("geometry_msgs/msg/AccelWithCovarianceStamped")
+def log_accel_with_covariance_stamped(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/linear", msg.accel.accel.linear)
+    vector_scalars(ctx, f"{path}/angular", msg.accel.accel.angular)
+
+
+@logger("geometry_msgs/msg/WrenchStamped")
+def log_wrench_stamped(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/force", msg.wrench.force)
+    vector_scalars(ctx, f"{path}/torque", msg.wrench.torque)
+
+
+@logger("geometry_msgs/msg/PolygonStamped")
+def log_polygon_stamped(ctx: Context, path: str, msg) -> None:
+    """A closed line through its points (a robot's footprint, a zone) in its frame."""
+    loop = [[p.x, p.y, p.z] for p in msg.polygon.points]
+    ctx.log(path, rr.LineStrips3D([loop + loop[:1]] if loop else []), frame=msg.header.frame_id)
+
+
 @logger("geometry_msgs/msg/Vector3Stamped")
 def log_vector3_stamped(ctx: Context, path: str, msg) -> None:
     vector_scalars(ctx, path, msg.vector)

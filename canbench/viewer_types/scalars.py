@@ -40,6 +40,11 @@ def log_imu(ctx: Context, path: str, msg) -> None:
     ctx.pose(f"{path}/orientation", ZERO, msg.orientation, msg.header.frame_id)
 
 
+@logger("sensor_msgs/msg/MagneticField")
+def log_magnetic_field(ctx: Context, path: str, msg) -> None:
+    vector_scalars(ctx, f"{path}/magnetic_field", msg.magnetic_field)
+
+
 @logger("std_msgs/msg/Float64")
 def log_float64(ctx: Context, path: str, msg) -> None:
     ctx.scalar(path, msg.data)  # recording.mcap's decoded signals
