@@ -62,28 +62,24 @@ def log_pose_array(ctx: Context, path: str, msg) -> None:
     ctx.log(path, rr.Arrows3D(origins=origins[finite], vectors=vectors[finite]), frame=msg.header.frame_id)
 
 
-@logger("geometry_msgs/msg/TwistStamped")
-def log_twist_stamped(ctx: Context, path: str, msg) -> None:
-    vector_scalars(ctx, f"{path}/linear", msg.twist.linear)
-    vector_scalars(ctx, f"{path}/angular", msg.twist.angular)
+def motion_scalars(ctx: Context, path: str, motion) -> None:
+    """A Twist's or an Accel's parts as scalars <path>/linear/{x,y,z} and <path>/angular/{x,y,z}."""
+    vector_scalars(ctx, f"{path}/linear", motion.linear)
+    vector_scalars(ctx, f"{path}/angular", motion.angular)
 
 
-@logger("geometry_msgs/msg/AccelStamped")
-def log_accel_stamped(ctx: Context, path: str, msg) -> None:
-    vector_scalars(ctx, f"{path}/linear", msg.accel.linear)
-    vector_scalars(ctx, f"{path}/angular", msg.accel.angular)
+def _motion_logger(type_name: str, *fields: str) -> None:
+    @logger(type_name)
+    def log(ctx: Context, path: str, msg) -> None:
+        for name in fields:  # down to the Twist or Accel
+            msg = getattr(msg, name)
+        motion_scalars(ctx, path, msg)
 
 
-@logger("geometry_msgs/msg/TwistWithCovarianceStamped")
-def log_twist_with_covariance_stamped(ctx: Context, path: str, msg) -> None:
-    vector_scalars(ctx, f"{path}/linear", msg.twist.twist.linear)
-    vector_scalars(ctx, f"{path}/angular", msg.twist.twist.angular)
-
-
-@logger("geometry_msgs/msg/AccelWithCovarianceStamped")
-def log_accel_with_covariance_stamped(ctx: Context, path: str, msg) -> None:
-    vector_scalars(ctx, f"{path}/linear", msg.accel.accel.linear)
-    vector_scalars(ctx, f"{path}/angular", msg.accel.accel.angular)
+for _type, _fields in (("TwistStamped", ("twist",)), ("AccelStamped", ("accel",)),
+                       ("TwistWithCovarianceStamped", ("twist", "twist")),
+                       ("AccelWithCovarianceStamped", ("accel", "accel"))):
+    _motion_logger(f"geometry_msgs/msg/{_type}", *_fields)
 
 
 @logger("geometry_msgs/msg/WrenchStamped")
@@ -107,8 +103,7 @@ def log_vector3_stamped(ctx: Context, path: str, msg) -> None:
 @logger("nav_msgs/msg/Odometry")
 def log_odometry(ctx: Context, path: str, msg) -> None:
     ctx.pose(path, msg.pose.pose.position, msg.pose.pose.orientation, msg.header.frame_id)
-    vector_scalars(ctx, f"{path}/twist/linear", msg.twist.twist.linear)
-    vector_scalars(ctx, f"{path}/twist/angular", msg.twist.twist.angular)
+    motion_scalars(ctx, f"{path}/twist", msg.twist.twist)
 
 
 @logger("nav_msgs/msg/Path")

@@ -129,13 +129,13 @@ def test_a_same_named_type_of_another_definition_is_not_decoded():
         ours: True, "RIHS01_" + "ab" * 32: False, "TypeHashNotSupported": True}
 
 
-def viewed(tmp_path, samples: list[tuple[int, int, str, str, object]]):
-    """(receive ns, domain, topic, type, message) as samples of the live viewer's queue, logged by its
-    logger loop into an .rrd: the viewer and the file."""
+def viewed(tmp_path, samples: list[tuple]):
+    """(receive ns, domain, topic, type, message[, the key's type hash: ours]) as samples of the live
+    viewer's queue, logged by its logger loop into an .rrd: the viewer and the file."""
     from canbench.viewer import Sample, Viewer
     live = Viewer(None, [], True)  # type: ignore[arg-type]
-    for t_ns, domain, topic, type_name, msg in samples:
-        key = ros2.data_key(domain, topic, type_name, ros2.type_hash(type_name))
+    for t_ns, domain, topic, type_name, msg, *key_hash in samples:
+        key = ros2.data_key(domain, topic, type_name, key_hash[0] if key_hash else ros2.type_hash(type_name))
         live.samples.put(Sample(t_ns, key, msg.serialize(), type_name))  # type: ignore[attr-defined]
     live.samples.put(None)
     path = tmp_path / "live.rrd"
@@ -250,21 +250,10 @@ def test_a_humble_nodes_range_is_read_with_humbles_definition(tmp_path):
     """Humble's Range has no variance (Iron added it): what a Humble node sends (its rmw_zenoh keys
     say TypeHashNotSupported) is read with Humble's definition, a Jazzy node's with Jazzy's; read
     with Jazzy's, every Humble Range was malformed (4 bytes short)."""
-    from canbench.viewer import Sample, Viewer
     humble = m.RangeHumble(header=m.Header(frame_id="sonar"), min_range=0.2, max_range=4.0, range=1.25)
     jazzy = m.Range(header=m.Header(frame_id="sonar"), min_range=0.2, max_range=4.0, range=2.5, variance=0.01)
-    live = Viewer(None, [], True)  # type: ignore[arg-type]
-    for t_ns, msg, key_hash in ((1, humble, m.HUMBLE_HASH), (2, jazzy, ros2.type_hash("sensor_msgs/msg/Range"))):
-        key = ros2.data_key(0, "/sonar", "sensor_msgs/msg/Range", key_hash)
-        live.samples.put(Sample(t_ns, key, msg.serialize(), "sensor_msgs/msg/Range"))  # type: ignore[attr-defined]
-    live.samples.put(None)
-    path = tmp_path / "live.rrd"
-    rec = rr.RecordingStream("canbench-test-humble")
-    rec.save(str(path))
-    with rec:
-        live._log_loop()
-    rec.flush()
-    rec.disconnect()
+    live, path = viewed(tmp_path, [(1, 0, "/sonar", "sensor_msgs/msg/Range", humble, m.HUMBLE_HASH),
+                                   (2, 0, "/sonar", "sensor_msgs/msg/Range", jazzy)])
     assert not live.malformed
     assert read_rrd_columns(path)["/ros2/sonar/range"]["Scalars:scalars"] == [[1.25], [2.5]]
 
