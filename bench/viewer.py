@@ -1,7 +1,8 @@
 """Viewer throughput: `canbench view --save` under CAN frames at --rate frames/s (the
 bridge's 16-byte format, --batch frames per sample as its batching mode sends them)
-plus a 640x480 rgb8 sensor_msgs/Image at 10 Hz from an rmw_zenoh-style node, for
---seconds. Reports the rate the viewer logged at (frames published / time until it
+plus a 640x480 rgb8 sensor_msgs/Image at 10 Hz and a robot's /joint_states (30 joints,
+position, velocity and effort: 90 scalars a message) at --joints-hz from an
+rmw_zenoh-style node, for --seconds. Reports the rate the viewer logged at (frames published / time until it
 had logged them all), samples dropped (its queue is bounded: QUEUE_SAMPLES), its
 peak and final RSS, CPU, and the frames and images read back from the .rrd.
 
@@ -53,6 +54,15 @@ def image_msg() -> ros2_msgs.Image:
                            step=640 * 3, data=pixels.tobytes())
 
 
+JOINTS = [f"joint_{i}" for i in range(30)]
+
+
+def joint_state_msg(k: int) -> ros2_msgs.JointState:
+    """A 30-joint robot's /joint_states as ros2_control's joint_state_broadcaster publishes it."""
+    return ros2_msgs.JointState(header=ros2_msgs.Header(stamp=ros2_msgs.Time(1_700_000_000, k)), name=JOINTS,
+                                position=[k / 1000 + i for i in range(30)], velocity=[0.5] * 30, effort=[1.5] * 30)
+
+
 def batches(count: int, batch: int, db=None) -> list[bytes]:
     """Distinct ids (0x100 + i % 64) and data, as a busy bus would carry them; with a DBC
     (cantools database) its messages in turn, each with its length, so every frame decodes."""
@@ -79,6 +89,7 @@ def main() -> int:
     ap.add_argument("--rate", type=int, default=50_000, help="CAN frames/s")
     ap.add_argument("--batch", type=int, default=50, help="frames per Zenoh sample")
     ap.add_argument("--image-hz", type=float, default=10.0)
+    ap.add_argument("--joints-hz", type=float, default=200.0, help="/joint_states messages a second")
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--dbc", help="let the viewer decode signals too")
     ap.add_argument("--router", help="a zenohd endpoint for both sides instead of peer to peer")
@@ -112,13 +123,15 @@ def main() -> int:
         image_pub = node.publisher("/camera/image", "sensor_msgs/msg/Image")
         wait(lambda: image_pub.key in (stats(session) or {}).get("subscriptions", []), "the image subscription", 30)
         image = image_msg().serialize()
+        joints_pub = node.publisher("/joint_states", "sensor_msgs/msg/JointState")
+        wait(lambda: joints_pub.key in (stats(session) or {}).get("subscriptions", []), "the joints subscription", 30)
         samples_per_s = args.rate / args.batch
         db = load_dbc(Path(args.dbc)) if args.dbc else None
         payloads = batches(1000, args.batch, db)
         signals_per_payload = [signals_in(p, db) for p in payloads]
-        sent_samples = sent_frames = sent_signals = images = 0
+        sent_samples = sent_frames = sent_signals = images = joint_states = 0
         start = time.monotonic()
-        next_image = next_rss = start
+        next_image = next_rss = next_joints = start
         while (now := time.monotonic()) - start < args.seconds:
             due = int((now - start) * samples_per_s)
             while sent_samples < due:  # paced by the clock: a late loop catches up, never runs ahead
@@ -130,12 +143,16 @@ def main() -> int:
                 image_pub.put(image)
                 images += 1
                 next_image += 1 / args.image_hz
+            if now >= next_joints:
+                joints_pub.put(joint_state_msg(joint_states))
+                joint_states += 1
+                next_joints += 1 / args.joints_hz
             if now >= next_rss:
                 rss.append(rss_mib(viewer.pid))
                 next_rss += 0.5
             time.sleep(0.0005)
         published_s = time.monotonic() - start
-        total = sent_samples + images
+        total = sent_samples + images + joint_states
 
         def drained() -> bool:
             rss.append(rss_mib(viewer.pid))
@@ -158,9 +175,12 @@ def main() -> int:
     frames_in_rrd = sum(len(c.get("TextLog:text", [])) for e, c in columns.items() if e.startswith("/can/rx/"))
     signals_in_rrd = sum(len(c.get("Scalars:scalars", [])) for e, c in columns.items() if e.startswith("/can/rx/"))
     images_in_rrd = len(columns.get("/ros2/camera/image", {}).get("Image:buffer", []))
+    joint_values_in_rrd = sum(len(c.get("Scalars:scalars", [])) for e, c in columns.items()
+                              if e.startswith("/ros2/joint_states/"))
     result = {
         "run_id": run_id, "machine": machine_line(), "rate_target": args.rate, "batch": args.batch,
-        "image_hz": args.image_hz, "seconds": args.seconds, "dbc": bool(args.dbc),
+        "image_hz": args.image_hz, "joints_hz": args.joints_hz, "seconds": args.seconds, "dbc": bool(args.dbc),
+        "joint_states_sent": joint_states, "joint_values_in_rrd": joint_values_in_rrd,
         "frames_sent": sent_frames, "images_sent": images, "published_s": round(published_s, 2),
         "logged_s": round(logged_s, 2), "frames_per_s_logged": round(sent_frames / logged_s),
         "dropped_samples": final.get("dropped"), "malformed": final.get("malformed"),
@@ -174,10 +194,11 @@ def main() -> int:
     print(json.dumps(result, indent=2))
     rrd.unlink()
     ok = (result["dropped_samples"] == 0 and frames_in_rrd == sent_frames and images_in_rrd == images
-          and signals_in_rrd == sent_signals
+          and signals_in_rrd == sent_signals and joint_values_in_rrd == joint_states * 3 * len(JOINTS)
           and result["frames_per_s_logged"] >= args.rate * 0.95)
     print(f"bench.viewer: {'PASS' if ok else 'FAIL'}: {result['frames_per_s_logged']} frames/s logged "
           f"(target {args.rate}), {images_in_rrd}/{images} images, {signals_in_rrd}/{sent_signals} signal values, "
+          f"{joint_values_in_rrd}/{joint_states * 3 * len(JOINTS)} joint values, "
           f"{result['dropped_samples']} samples dropped, "
           f"RSS peak {result['rss_peak_mib']} MiB; {out / 'viewer.json'}")
     return 0 if ok else 1
