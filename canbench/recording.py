@@ -19,10 +19,13 @@ Signals are decoded with the bus's DBC (buses[].dbc, else the scenario's dbc).
 and loggers (view_mcap): the same entities as a live run."""
 from __future__ import annotations
 
+import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mcap.reader import make_reader
+from mcap.exceptions import EndOfFile
+from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import Writer
 
 from . import ros2, ros2_msgs, wire
@@ -96,55 +99,98 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
         w.writer.finish()
 
 
-FLUSH_EVERY = 1000  # messages of a recording whose scalars are sent together (one column per entity)
+def recorded_definition(schema) -> tuple[str | None, bool]:
+    """(how a recording's definition of a type differs from the viewer's, or None; whether it is
+    Humble's where that is not Jazzy's, ros2_msgs.HUMBLE_VARIANTS: read with that)."""
+    from .ros2 import definition_difference
+    text = schema.data.decode("utf-8", "replace")
+    difference = definition_difference(schema.name, text)
+    variant = ros2_msgs.HUMBLE_VARIANTS.get(schema.name)
+    if difference and variant and not definition_difference(schema.name, text, variant):
+        return None, True
+    return difference, False
 
 
-def view_mcap(path: Path, ctx: Context) -> tuple[int, int, int]:
-    """Every ROS 2 (CDR) channel of an MCAP file through the viewer's loggers, at the
-    topic's path (/can/vcan0 -> can/vcan0/<id>/raw); (messages logged, malformed, not decoded
-    because the recording's definition of their type is not the viewer's: an older distribution's,
-    a same-named custom type; each such channel said once under discovery/errors)."""
+@dataclass
+class Viewed:
+    """What `canbench view FILE.mcap` made of a recording."""
+    logged: int = 0
+    malformed: int = 0
+    other_definition: int = 0  # of a type whose recorded definition is not the viewer's
+    cut: str | None = None  # why the reading stopped early: a cut or damaged recording
+
+
+def recorded_messages(f):
+    """(schema, channel, message) of an MCAP file, in log-time order by its index; a file without
+    its end (a recording cut short: power lost, the recorder killed, a copy interrupted) record by
+    record up to the cut, where the iterator raises."""
+    try:
+        reader = make_reader(f)
+        reader.get_summary()  # at the file's end: raises where that end is missing
+        return reader.iter_messages()
+    except Exception:  # noqa: BLE001 - EndOfFile, InvalidMagic, ...: read what is there in order
+        f.seek(0)  # in the file's order (in log-time order it would hold every message back until the end)
+        return NonSeekingReader(f).iter_messages(log_time_order=False)
+
+
+def view_mcap(path: Path, ctx: Context) -> Viewed:
+    """Every ROS 2 (CDR) channel of an MCAP file through the viewer's loggers, at the topic's
+    path (/can/vcan0 -> can/vcan0/<id>/raw). A channel whose recorded definition of its type is
+    not the viewer's (an older distribution's, a same-named custom type) is not decoded, said once
+    under discovery/errors; a cut or damaged recording is shown up to the cut and said."""
     import rerun as rr
 
-    from .ros2 import definition_difference
     from .viewer_types import LOGGERS
+    from .viewer_types.can import CanColumns
     from .viewer_types.markers import expire
     from .viewer_types.registry import ScalarColumns, set_sample_time
-    count = malformed = other = 0
-    scalars = ctx.scalars = ScalarColumns()  # sent per entity every FLUSH_EVERY messages
-    differences: dict[int, str | None] = {}  # schema id -> how its definition differs from ours
-    told: set[int] = set()  # channels of such a schema already said
-    humble: set[int] = set()  # schemas of Humble's definition of a type (ros2_msgs.HUMBLE_VARIANTS)
-    with open(path, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages():
-            if schema is None or schema.encoding != "ros2msg" or schema.name not in LOGGERS:
-                continue
-            if schema.id not in differences:
-                text = schema.data.decode("utf-8", "replace")
-                differences[schema.id] = definition_difference(schema.name, text)
-                variant = ros2_msgs.HUMBLE_VARIANTS.get(schema.name)
-                if differences[schema.id] and variant and not definition_difference(schema.name, text, variant):
-                    differences[schema.id] = None
-                    humble.add(schema.id)  # recorded by Humble: read with its definition
-            if differences[schema.id]:
-                if channel.id not in told:
-                    told.add(channel.id)
-                    rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: recorded with another definition of "
-                                                          f"{schema.name} ({differences[schema.id]}): not decoded"))
-                other += 1
-                continue
-            ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
-            try:
-                msg = ros2_msgs.decode(schema.name, message.data, schema.id in humble)
-                ctx.stamp_ns = set_sample_time(message.log_time, msg)
-                LOGGERS[schema.name](ctx, channel.topic.strip("/"), msg)
-                count += 1
-                if count % FLUSH_EVERY == 0:
-                    scalars.flush()
-            except Exception as e:  # noqa: BLE001 - as live: a bad message is shown and counted, never fatal
-                set_sample_time(message.log_time, None)
-                rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
-                malformed += 1
-    scalars.flush()
+    viewed = Viewed()
+    scalars = ctx.scalars = ScalarColumns()  # sent per entity when due
+    can = ctx.can = CanColumns(ctx.dbc, ctx.bus_dbcs)  # can_msgs' frames, the same
+    definitions: dict[int, tuple[str | None, bool]] = {}  # schema id -> recorded_definition
+    told: set[int] = set()  # channels of another definition already said
+    try:
+        with open(path, "rb") as f:
+            messages = recorded_messages(f)
+            while True:
+                try:
+                    schema, channel, message = next(messages)
+                except StopIteration:
+                    break
+                except Exception as e:  # noqa: BLE001 - a cut or damaged chunk: what came before is shown
+                    cut = ("a record ends past the file's end" if isinstance(e, EndOfFile | struct.error)
+                           else f"{type(e).__name__}: {e}")
+                    viewed.cut = f"{cut}, after {viewed.logged} messages"
+                    rr.log("discovery/errors", rr.TextLog(f"{path}: the recording is cut or damaged "
+                                                          f"({viewed.cut}): shown up to there"))
+                    break
+                if schema is None or schema.encoding != "ros2msg" or schema.name not in LOGGERS:
+                    continue
+                if schema.id not in definitions:
+                    definitions[schema.id] = recorded_definition(schema)
+                difference, humble = definitions[schema.id]
+                if difference:
+                    if channel.id not in told:
+                        told.add(channel.id)
+                        rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: recorded with another definition "
+                                                              f"of {schema.name} ({difference}): not decoded"))
+                    viewed.other_definition += 1
+                    continue
+                ctx.t_ns, ctx.static = message.log_time, channel.topic == "/tf_static"
+                try:
+                    msg = ros2_msgs.decode(schema.name, message.data, humble)
+                    ctx.stamp_ns = set_sample_time(message.log_time, msg)
+                    LOGGERS[schema.name](ctx, channel.topic.strip("/"), msg)
+                    viewed.logged += 1
+                except Exception as e:  # noqa: BLE001 - as live: a bad message is shown and counted, never fatal
+                    set_sample_time(message.log_time, None)
+                    rr.log("discovery/errors", rr.TextLog(f"{channel.topic}: {e}"))
+                    viewed.malformed += 1
+                for columns in (can, scalars):
+                    if columns.due():
+                        columns.flush()
+    finally:  # what was read is sent, however the reading ended (Ctrl-C too)
+        can.flush()
+        scalars.flush()
     expire(ctx)  # markers whose lifetime ends after the last message
-    return count, malformed, other
+    return viewed

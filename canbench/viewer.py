@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import queue
 import signal
+import sys
 import threading
 import time
 from collections import Counter
@@ -92,7 +93,8 @@ class Viewer:
         self.session, self.auto, self.prefix, self.domain = session, auto_subscribe, prefix, domain
         self.topics = {normalise_topic(t) for t in topics}
         self.ctx = Context(dbc, bus_dbcs)  # a bus's own DBC, by the bus its keys name; else dbc
-        self.scalars = self.ctx.scalars = ScalarColumns()  # sent per entity after each batch
+        self.scalars = self.ctx.scalars = ScalarColumns()  # sent per entity when due
+        self.can = self.ctx.can = CanColumns(dbc, self.ctx.bus_dbcs)  # the bridge's frames and can_msgs' alike
         self.samples: queue.Queue[Sample | None] = queue.Queue(maxsize=QUEUE_SAMPLES)
         self.entities: dict[str, ros2.Entity] = {}
         self.bridges: set[str] = set()
@@ -268,7 +270,7 @@ class Viewer:
         self.stopping = False
         while not self.stopping:
             batch = self._batch()
-            can = CanColumns(self.ctx.dbc, self.ctx.bus_dbcs)
+            can = self.can
             for sample in batch:
                 if sample.type_name:
                     self._log_ros(sample)
@@ -281,8 +283,9 @@ class Viewer:
                         can.add(f"can/{parts[-1]}/{bus}", sample.t_ns, wire.decode_batch(sample.payload))
                     except ValueError as e:  # WireError
                         self._malformed(sample.key, e)
-            can.flush()
-            self.scalars.flush()
+            for columns in (can, self.scalars):
+                if columns.due() or self.stopping:
+                    columns.flush()
             # markers' lifetimes: up to the newest sample logged (older ones may still be queued)
             expire(self.ctx, batch[-1].t_ns if batch else time.time_ns())
             with self.lock:
@@ -341,9 +344,13 @@ def run(args) -> int:
     dbc = read_dbc(args.dbc) if args.dbc else None
     if args.source:
         from .recording import view_mcap
-        count, malformed, other = view_mcap(args.source, Context(dbc, bus_dbcs))
-        print(f"canbench view: {count} messages from {args.source}, {malformed} malformed, {other} not decoded "
-              "(recorded with another definition of their type: discovery/errors says which)")
+        viewed = view_mcap(args.source, Context(dbc, bus_dbcs))
+        print(f"canbench view: {viewed.logged} messages from {args.source}, {viewed.malformed} malformed, "
+              f"{viewed.other_definition} not decoded (recorded with another definition of their type: "
+              "discovery/errors says which)")
+        if viewed.cut:
+            print(f"canbench view: {args.source}: INCOMPLETE: the recording is cut or damaged ({viewed.cut}); "
+                  "shown up to there", file=sys.stderr)
         rr.disconnect()
         return 0
     # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete; SIGINT explicitly too,

@@ -5,6 +5,7 @@ output, recording.mcap) alike -> <base>/<id>/raw (candump text) and, with a DBC,
 per entity (send_columns): per-frame rr.log calls cost more than a busy bus allows."""
 from __future__ import annotations
 
+import time
 from collections import defaultdict
 
 import numpy as np
@@ -12,7 +13,7 @@ import rerun as rr
 
 from .. import wire
 from ..dbc import decode_signals
-from .registry import Context, logger
+from .registry import FLUSH_AFTER_S, FLUSH_VALUES, Context, logger
 
 
 def time_column(times_ns: list[int]) -> rr.TimeColumn:
@@ -21,17 +22,24 @@ def time_column(times_ns: list[int]) -> rr.TimeColumn:
 
 
 class CanColumns:
-    """Frames of one batch grouped by entity, sent with their receive times."""
+    """Frames grouped by entity, sent with their receive times when due (registry.FLUSH_AFTER_S,
+    FLUSH_VALUES: a column per sample would skip Rerun's batching at a bus's low rates)."""
 
     def __init__(self, dbc, bus_dbcs: dict | None = None):
         self.dbc = dbc
         self.bus_dbcs = bus_dbcs or {}  # bus -> its own DBC (a scenario's buses[].dbc)
         self.raw: dict[str, tuple[list[int], list[str]]] = defaultdict(lambda: ([], []))
         self.signals: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
+        self.frames = 0
+        self.since = time.monotonic()
+
+    def due(self) -> bool:
+        return self.frames >= FLUSH_VALUES or (self.frames > 0 and time.monotonic() - self.since >= FLUSH_AFTER_S)
 
     def add(self, base: str, t_ns: int, frames: list[wire.Frame]) -> None:
         bus = base.rsplit("/", 1)[-1]
         dbc = self.bus_dbcs.get(bus, self.dbc)
+        self.frames += len(frames)
         for f in frames:
             ident = wire.id_hex(f.can_id, f.extended)
             times, texts = self.raw[f"{base}/{ident}/raw"]
@@ -52,6 +60,7 @@ class CanColumns:
             rr.send_columns(path, indexes=[time_column(times)], columns=rr.Scalars.columns(scalars=values))
         self.raw.clear()
         self.signals.clear()
+        self.frames, self.since = 0, time.monotonic()
         return frames
 
 
@@ -64,6 +73,8 @@ def frame_of(msg) -> wire.Frame:
 
 @logger("can_msgs/msg/Frame")
 def log_frame(ctx: Context, path: str, msg) -> None:
-    columns = CanColumns(ctx.dbc, ctx.bus_dbcs)
+    """Into the viewer's columns (ctx.can) when it keeps them, else sent at once."""
+    columns = ctx.can or CanColumns(ctx.dbc, ctx.bus_dbcs)
     columns.add(path, ctx.t_ns, [frame_of(msg)])
-    columns.flush()
+    if ctx.can is None:
+        columns.flush()

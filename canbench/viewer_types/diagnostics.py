@@ -22,6 +22,7 @@ def status_text(status) -> str:
 
 
 MAX_STATUSES = 1000  # a message with more is refused: each status is an entity of its own
+TEXTS_KEPT = 10_000  # statuses whose last text is remembered (hashed), over all messages
 
 
 @logger("diagnostic_msgs/msg/DiagnosticArray")
@@ -32,7 +33,9 @@ def log_diagnostic_array(ctx: Context, path: str, msg) -> None:
     for status in msg.status:
         entity = f"{path}/{rr.escape_entity_path_part(status.name or '(unnamed)')}"
         text, level = status_text(status), LEVELS.get(status.level, f"LEVEL {status.level}")
-        if ctx.texts.get(entity) != (text, level):
-            ctx.texts[entity] = (text, level)
+        if ctx.texts.get(entity) != (said := hash((text, level))):
+            if len(ctx.texts) >= TEXTS_KEPT:
+                ctx.texts.clear()  # each status's text is logged once more, then known again
+            ctx.texts[entity] = said
             rr.log(entity, rr.TextLog(text, level=level))
         ctx.scalar(f"{entity}/level", status.level)

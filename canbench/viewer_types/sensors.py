@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import rerun as rr
 
 from .registry import Context, logger, require
@@ -17,6 +18,7 @@ def log_nav_sat_fix(ctx: Context, path: str, msg) -> None:
     without a fix (or NaN coordinates, as receivers send them then) places no point."""
     fixed = msg.status.status >= STATUS_FIX and math.isfinite(msg.latitude) and math.isfinite(msg.longitude)
     require(not fixed or -90 <= msg.latitude <= 90, f"a fix at latitude {msg.latitude}: beyond a pole")
+    require(not fixed or -180 <= msg.longitude <= 360, f"a fix at longitude {msg.longitude}: beyond -180..360")
     ctx.scalar(f"{path}/status", msg.status.status)
     if not fixed:
         return
@@ -28,12 +30,12 @@ def log_nav_sat_fix(ctx: Context, path: str, msg) -> None:
 
 def detected_range(msg) -> float | None:
     """The distance a Range reports, or None for no detection: a value within [min_range,
-    max_range]; for a fixed-distance ranger (min_range == max_range, an IR proximity switch)
-    -inf is a detection at that distance (Range.msg; RViz draws it there); +inf (nothing in
-    range), -inf of a ranging sensor (too close) and NaN are none."""
+    max_range]; -inf, a detection closer than min_range (REP 117; a fixed-distance ranger's,
+    min_range == max_range, at that distance, Range.msg), at min_range, as RViz draws it; +inf
+    (nothing in range) and NaN are none."""
     if msg.min_range <= msg.range <= msg.max_range:
         return msg.range
-    if msg.min_range == msg.max_range and msg.range == -math.inf:
+    if msg.range == -math.inf:
         return msg.min_range
     return None
 
@@ -41,10 +43,11 @@ def detected_range(msg) -> float | None:
 @logger("sensor_msgs/msg/Range")
 def log_range(ctx: Context, path: str, msg) -> None:
     """A detection as a scalar and a point on the sensor's x axis in its frame; no detection
-    clears the point (an obstacle gone from a parking sensor must not stay on screen)."""
+    logs no point (an obstacle gone from a parking sensor must not stay on screen; an empty
+    Points3D, not a Clear, which would also clear the entity's coordinate frame)."""
     detected = detected_range(msg)
     if detected is None:
-        ctx.log(f"{path}/detection", rr.Clear(recursive=False), frame=msg.header.frame_id)
+        ctx.log(f"{path}/detection", rr.Points3D(np.empty((0, 3))), frame=msg.header.frame_id)
         return
     ctx.scalar(f"{path}/range", detected)
     ctx.log(f"{path}/detection", rr.Points3D([[detected, 0.0, 0.0]]), frame=msg.header.frame_id)
@@ -60,14 +63,15 @@ def log_battery_state(ctx: Context, path: str, msg) -> None:
     """Its measurements, status and health codes (BatteryState.msg's constants), and each cell's
     voltage and temperature at <topic>/cell_voltage/<i>, <topic>/cell_temperature/<i> (from 0);
     a NaN value (not measured) left out."""
+    for series in ("cell_voltage", "cell_temperature"):
+        require(len(getattr(msg, series)) <= MAX_CELLS, f"{len(getattr(msg, series))} {series} values: more than "
+                                                         f"{MAX_CELLS}")
     for name in BATTERY_SCALARS:
         value = float(getattr(msg, name))
         if math.isfinite(value):
             ctx.scalar(f"{path}/{name}", value)
     for series in ("cell_voltage", "cell_temperature"):
-        values = getattr(msg, series)
-        require(len(values) <= MAX_CELLS, f"{len(values)} {series} values: more than {MAX_CELLS}")
-        for i, value in enumerate(values):
+        for i, value in enumerate(getattr(msg, series)):
             if math.isfinite(value):
                 ctx.scalar(f"{path}/{series}/{i}", value)
 
@@ -85,7 +89,7 @@ def log_joint_state(ctx: Context, path: str, msg) -> None:
         require(not values or len(values) == len(msg.name),
                 f"{len(values)} {quantity} values for {len(msg.name)} joint names")
     for i, name in enumerate(msg.name):
-        joint = f"{path}/{rr.escape_entity_path_part(name or '(unnamed)')}"
+        joint = f"{path}/{rr.escape_entity_path_part(name or f'(unnamed {i})')}"  # several may be
         for quantity in ("position", "velocity", "effort"):
             values = getattr(msg, quantity)
             if values:

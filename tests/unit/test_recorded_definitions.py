@@ -118,3 +118,78 @@ def test_the_viewer_decodes_the_channels_of_its_definition_only(tmp_path):
         "field 4 is 'float32 w' there, 'float64 w' here): not decoded"]]
     assert len(columns["/particlecloud"]["Arrows3D:vectors"]) == 3 and "/legacy" not in columns
     assert columns["/sonar/range"]["Scalars:scalars"] == [[1.25]]
+
+
+def float64_recording(path, count: int) -> None:
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=4096)  # chunks of about a hundred messages, as a recorder's are of many
+        w.start(profile="ros2", library="test")
+        schema = w.register_schema("std_msgs/msg/Float64", "ros2msg",
+                                   ros2.msg_definition("std_msgs/msg/Float64").encode())
+        channel = w.register_channel("/speed", "cdr", schema)
+        for i in range(count):
+            w.add_message(channel, log_time=1_700_000_000_000_000_000 + i * 10_000_000, publish_time=0, sequence=i,
+                          data=ros2_msgs.Float64(float(i)).serialize())
+        w.finish()
+
+
+def test_a_cut_recording_is_shown_up_to_the_cut_and_said(tmp_path):
+    """A recording without its end (power lost in the car, the recorder killed) had no index: the
+    viewer stopped with mcap's EndOfFile traceback and showed nothing."""
+    pytest.importorskip("rerun", reason="the viewer needs rerun-sdk")
+    path, rrd = tmp_path / "drive.mcap", tmp_path / "drive.rrd"
+    float64_recording(path, 5000)
+    with open(path, "r+b") as f:
+        f.truncate(path.stat().st_size * 2 // 3)
+    run = subprocess.run([sys.executable, "-m", "canbench.cli", "view", str(path), "--save", str(rrd)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "INCOMPLETE: the recording is cut or damaged (a record ends past the file's end, after" in run.stderr
+    from canbench.viewer import read_rrd_columns
+    columns = read_rrd_columns(rrd)
+    shown = sum(len(v) for v in columns["/speed"]["Scalars:scalars"])
+    assert 1000 < shown < 5000  # every message before the cut
+    assert "the recording is cut or damaged" in columns["/discovery/errors"]["TextLog:text"][-1][0]
+
+
+def test_what_was_read_is_sent_however_the_reading_ends(tmp_path, monkeypatch):
+    """Scalars wait to be sent together: an interrupted reading (Ctrl-C) still sends those read."""
+    rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk")
+    from canbench import recording
+    from canbench.viewer import read_rrd_columns
+    from canbench.viewer_types import Context, registry
+    path, rrd = tmp_path / "drive.mcap", tmp_path / "drive.rrd"
+    float64_recording(path, 50)
+    monkeypatch.setattr(registry, "FLUSH_AFTER_S", 3600.0)  # nothing is due while reading
+    real = recording.recorded_messages
+
+    def interrupted(f):
+        for i, item in enumerate(real(f)):
+            if i == 30:
+                raise KeyboardInterrupt
+            yield item
+    monkeypatch.setattr(recording, "recorded_messages", interrupted)
+    rec = rr.RecordingStream("canbench-test-interrupted")
+    rec.save(str(rrd))
+    with rec, pytest.raises(KeyboardInterrupt):
+        recording.view_mcap(path, Context())
+    rec.flush()
+    rec.disconnect()
+    assert sum(len(v) for v in read_rrd_columns(rrd)["/speed"]["Scalars:scalars"]) == 30
+
+
+def test_scalars_are_due_after_a_while_or_many_values(monkeypatch):
+    from canbench.viewer_types import registry
+    now = [100.0]
+    monkeypatch.setattr(registry.time, "monotonic", lambda: now[0])
+    columns = registry.ScalarColumns()
+    assert not columns.due()  # nothing to send
+    columns.add("/a", 1, None, 1.0)
+    assert not columns.due()  # a value per sample would be sent as a one-row column: worse than rr.log
+    now[0] += registry.FLUSH_AFTER_S * 1.01
+    assert columns.due()
+    columns.series.clear()
+    columns.values = 0
+    for i in range(registry.FLUSH_VALUES):
+        columns.add("/a", i, None, 1.0)
+    assert columns.due()

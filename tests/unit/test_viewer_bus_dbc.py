@@ -53,6 +53,7 @@ def test_each_bus_is_decoded_with_its_own_dbc(tmp_path):
         for bus in ("vcan0", "vcan1"):
             msg = SimpleNamespace(id=0x2F0, dlc=6, data=list(GEARBOX.data) + [0, 0], is_rtr=False, is_extended=False)
             LOGGERS["can_msgs/msg/Frame"](live.ctx, f"mcap/can/{bus}", msg)
+        live.can.flush()  # the viewer's columns: sent when due, here at once
     rec.flush()
     rec.disconnect()
     columns = read_rrd_columns(path)

@@ -285,19 +285,24 @@ def test_a_batchs_scalars_go_one_column_per_entity(tmp_path, monkeypatch):
         1_699_999_999_000_000_000 + k for k in range(1, 50, 2)]  # an unstamped message is not on that timeline
 
 
-def test_a_range_clears_its_detection_when_nothing_is_in_range_and_a_ranger_detects_at_its_distance(tmp_path):
+def test_a_range_shows_no_point_without_a_detection_and_one_closer_than_its_minimum_at_it(tmp_path):
+    """A gone obstacle leaves the screen (an empty point set, not a Clear: that would also clear the
+    entity's coordinate frame, and later points would be drawn in the world's); -inf, closer than
+    min_range (REP 117; a fixed-distance ranger's detection), is drawn at min_range as RViz does."""
     sonar = {"header": m.Header(frame_id="sonar"), "min_range": 0.2, "max_range": 4.0}
     ir = {"header": m.Header(frame_id="ir"), "min_range": 0.3, "max_range": 0.3}
     columns, errors = logged(tmp_path, [
         ("sensor_msgs/msg/Range", "ros2/park", m.Range(**sonar, range=1.5)),
         ("sensor_msgs/msg/Range", "ros2/park", m.Range(**sonar, range=math.inf)),  # the obstacle has gone
-        ("sensor_msgs/msg/Range", "ros2/ir", m.Range(**ir, range=-math.inf)),  # a fixed-distance detection
-        ("sensor_msgs/msg/Range", "ros2/ir", m.Range(**ir, range=math.inf))])
+        ("sensor_msgs/msg/Range", "ros2/park", m.Range(**sonar, range=-math.inf)),  # too close to measure
+        ("sensor_msgs/msg/Range", "ros2/ir", m.Range(**ir, range=-math.inf))])  # a fixed-distance detection
     assert not errors
-    assert columns["/ros2/park/detection"]["Clear:is_recursive"] == [[False]]
-    assert columns["/ros2/park/range"]["Scalars:scalars"] == [[1.5]]
-    assert columns["/ros2/ir/range"]["Scalars:scalars"] == [[pytest.approx(0.3)]]
-    assert close_to(columns["/ros2/ir/detection"]["Points3D:positions"], [[[0.3, 0, 0]]])
+    detection = columns["/ros2/park/detection"]
+    assert "Clear:is_recursive" not in detection and detection["CoordinateFrame:frame"] == [["sonar"]]
+    shown = sorted(round(p[0][0], 3) if len(p) else 0.0 for p in detection["Points3D:positions"])  # chunk order
+    assert shown == [0.0, 0.2, 1.5]  # one empty: the gone obstacle
+    assert sorted(round(v, 3) for [v] in columns["/ros2/park/range"]["Scalars:scalars"]) == [0.2, 1.5]
+    assert close_to(columns["/ros2/ir/range"]["Scalars:scalars"], [[0.3]])
 
 
 def close_to(a, b) -> bool:
