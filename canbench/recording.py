@@ -30,6 +30,7 @@ from mcap.writer import Writer
 
 from . import ros2, ros2_msgs, wire
 from .dbc import decode_signals, load_dbc
+from .errors import InputError
 
 if TYPE_CHECKING:  # the viewer's side needs rerun-sdk, writing a recording does not
     from .oracle import Observed
@@ -104,7 +105,10 @@ def recorded_definition(schema) -> tuple[str | None, bool]:
     Humble's where that is not Jazzy's, ros2_msgs.HUMBLE_VARIANTS: read with that)."""
     from .ros2 import definition_difference
     text = schema.data.decode("utf-8", "replace")
-    difference = definition_difference(schema.name, text)
+    try:
+        difference = definition_difference(schema.name, text)
+    except Exception as e:  # noqa: BLE001 - a damaged schema text is another definition, never a traceback
+        return f"its schema text cannot be read: {type(e).__name__}: {e}", False
     variant = ros2_msgs.HUMBLE_VARIANTS.get(schema.name)
     if difference and variant and not definition_difference(schema.name, text, variant):
         return None, True
@@ -120,17 +124,25 @@ class Viewed:
     cut: str | None = None  # why the reading stopped early: a cut or damaged recording
 
 
-def recorded_messages(f):
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def recorded_messages(f, path: Path):
     """(schema, channel, message) of an MCAP file, in log-time order by its index; a file without
     its end (a recording cut short: power lost, the recorder killed, a copy interrupted) record by
-    record up to the cut, where the iterator raises."""
+    record up to the cut. The iterator raises at a cut or a damaged chunk (CRCs are checked: a
+    flipped bit showed wrong values without a word); a file that is no MCAP is an InputError."""
+    if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+        raise InputError(str(path), None, "not an MCAP file (canbench view reads MCAP recordings; "
+                                          "a CAN trace goes through canbench summarise or a scenario)")
+    f.seek(0)
     try:
-        reader = make_reader(f)
+        reader = make_reader(f, validate_crcs=True)
         reader.get_summary()  # at the file's end: raises where that end is missing
         return reader.iter_messages()
-    except Exception:  # noqa: BLE001 - EndOfFile, InvalidMagic, ...: read what is there in order
+    except Exception:  # noqa: BLE001 - EndOfFile, a cut footer, ...: read what is there, in order
         f.seek(0)  # in the file's order (in log-time order it would hold every message back until the end)
-        return NonSeekingReader(f).iter_messages(log_time_order=False)
+        return NonSeekingReader(f, validate_crcs=True).iter_messages(log_time_order=False)
 
 
 def view_mcap(path: Path, ctx: Context) -> Viewed:
@@ -151,7 +163,7 @@ def view_mcap(path: Path, ctx: Context) -> Viewed:
     told: set[int] = set()  # channels of another definition already said
     try:
         with open(path, "rb") as f:
-            messages = recorded_messages(f)
+            messages = recorded_messages(f, path)
             while True:
                 try:
                     schema, channel, message = next(messages)
@@ -160,7 +172,7 @@ def view_mcap(path: Path, ctx: Context) -> Viewed:
                 except Exception as e:  # noqa: BLE001 - a cut or damaged chunk: what came before is shown
                     cut = ("a record ends past the file's end" if isinstance(e, EndOfFile | struct.error)
                            else f"{type(e).__name__}: {e}")
-                    viewed.cut = f"{cut}, after {viewed.logged} messages"
+                    viewed.cut = f"{cut}, after {viewed.logged + viewed.malformed + viewed.other_definition} messages"
                     rr.log("discovery/errors", rr.TextLog(f"{path}: the recording is cut or damaged "
                                                           f"({viewed.cut}): shown up to there"))
                     break

@@ -319,7 +319,8 @@ def msg_fields(type_name: str, text: str) -> dict[str, list[tuple[str, str]]]:
             continue
         written, _, rest = line.partition(" ")
         rest = rest.strip()
-        name = rest.split("=", 1)[0].split()[0] if rest else ""
+        words = rest.split("=", 1)[0].split()
+        name = words[0] if words else ""
         if not name or rest[len(name):].lstrip().startswith("="):
             continue  # a constant (TYPE NAME=VALUE) or a line that is no field
         sections.setdefault(current, []).append((_msg_type(written, current.split("/")[0]), name))

@@ -42,7 +42,7 @@ from .viewer_types.registry import ScalarColumns, set_sample_time
 
 QUEUE_SAMPLES = 100_000  # samples between the network callbacks and the logger thread
 QUEUE_BYTES = 512 << 20  # and their payloads' bytes: behind a camera's 6 MB frames the count alone held gigabytes
-BATCH_SAMPLES = 2_000    # the logger drains up to this many samples before sending CAN columns
+BATCH_SAMPLES = 2_000    # the logger drains up to this many samples at a time
 ERRORS_SHOWN = 10        # malformed samples described per topic; the rest are only counted
 IDLE_TICK_S = 0.5        # with no samples, the logger still clears markers whose lifetime ended
 
@@ -348,10 +348,11 @@ def run(args) -> int:
         print(f"canbench view: {viewed.logged} messages from {args.source}, {viewed.malformed} malformed, "
               f"{viewed.other_definition} not decoded (recorded with another definition of their type: "
               "discovery/errors says which)")
+        rr.disconnect()
         if viewed.cut:
             print(f"canbench view: {args.source}: INCOMPLETE: the recording is cut or damaged ({viewed.cut}); "
                   "shown up to there", file=sys.stderr)
-        rr.disconnect()
+            return 1  # shown, but a script must not take it for the whole recording
         return 0
     # docker stop / compose stop: end like Ctrl-C, so the .rrd is complete; SIGINT explicitly too,
     # because a viewer started from a background job inherits SIGINT ignored and would never stop

@@ -13,7 +13,8 @@ import rerun as rr
 
 from .. import wire
 from ..dbc import decode_signals
-from .registry import FLUSH_AFTER_S, FLUSH_VALUES, Context, logger
+from . import registry
+from .registry import Context, log_rows, logger
 
 
 def time_column(times_ns: list[int]) -> rr.TimeColumn:
@@ -23,7 +24,7 @@ def time_column(times_ns: list[int]) -> rr.TimeColumn:
 
 class CanColumns:
     """Frames grouped by entity, sent with their receive times when due (registry.FLUSH_AFTER_S,
-    FLUSH_VALUES: a column per sample would skip Rerun's batching at a bus's low rates)."""
+    or FLUSH_VALUES frames): one column per entity, a few rows through rr.log (registry.log_rows)."""
 
     def __init__(self, dbc, bus_dbcs: dict | None = None):
         self.dbc = dbc
@@ -34,7 +35,8 @@ class CanColumns:
         self.since = time.monotonic()
 
     def due(self) -> bool:
-        return self.frames >= FLUSH_VALUES or (self.frames > 0 and time.monotonic() - self.since >= FLUSH_AFTER_S)
+        return self.frames >= registry.FLUSH_VALUES or (
+            self.frames > 0 and time.monotonic() - self.since >= registry.FLUSH_AFTER_S)
 
     def add(self, base: str, t_ns: int, frames: list[wire.Frame]) -> None:
         bus = base.rsplit("/", 1)[-1]
@@ -54,10 +56,16 @@ class CanColumns:
     def flush(self) -> int:
         frames = 0
         for path, (times, texts) in self.raw.items():
-            rr.send_columns(path, indexes=[time_column(times)], columns=rr.TextLog.columns(text=texts))
+            if len(texts) < registry.FEW_ROWS:
+                log_rows(path, times, None, [rr.TextLog(t) for t in texts])
+            else:
+                rr.send_columns(path, indexes=[time_column(times)], columns=rr.TextLog.columns(text=texts))
             frames += len(texts)
         for path, (times, values) in self.signals.items():
-            rr.send_columns(path, indexes=[time_column(times)], columns=rr.Scalars.columns(scalars=values))
+            if len(values) < registry.FEW_ROWS:
+                log_rows(path, times, None, [rr.Scalars(v) for v in values])
+            else:
+                rr.send_columns(path, indexes=[time_column(times)], columns=rr.Scalars.columns(scalars=values))
         self.raw.clear()
         self.signals.clear()
         self.frames, self.since = 0, time.monotonic()

@@ -28,29 +28,32 @@ def log_nav_sat_fix(ctx: Context, path: str, msg) -> None:
         ctx.scalar(f"{path}/altitude", msg.altitude)
 
 
-def detected_range(msg) -> float | None:
-    """The distance a Range reports, or None for no detection: a value within [min_range,
-    max_range]; -inf, a detection closer than min_range (REP 117; a fixed-distance ranger's,
-    min_range == max_range, at that distance, Range.msg), at min_range, as RViz draws it; +inf
-    (nothing in range) and NaN are none."""
+def detected_range(msg) -> tuple[float, bool] | None:
+    """(where a Range's detection is, whether that is a measured distance), or None for none: a
+    value within [min_range, max_range], measured; a fixed-distance ranger's (min_range ==
+    max_range) -inf at that distance, measured (Range.msg; RViz draws it there); a ranging
+    sensor's -inf, closer than it can measure (REP 117), at min_range, not a measurement (a
+    parking sensor's closest obstacle must not vanish); +inf (nothing in range) and NaN none."""
     if msg.min_range <= msg.range <= msg.max_range:
-        return msg.range
+        return msg.range, True
     if msg.range == -math.inf:
-        return msg.min_range
+        return msg.min_range, msg.min_range == msg.max_range
     return None
 
 
 @logger("sensor_msgs/msg/Range")
 def log_range(ctx: Context, path: str, msg) -> None:
-    """A detection as a scalar and a point on the sensor's x axis in its frame; no detection
-    logs no point (an obstacle gone from a parking sensor must not stay on screen; an empty
-    Points3D, not a Clear, which would also clear the entity's coordinate frame)."""
+    """A detection as a point on the sensor's x axis in its frame and, measured, a scalar; no
+    detection logs no point (an obstacle gone from a parking sensor must not stay on screen; an
+    empty Points3D, not a Clear, which would also clear the entity's coordinate frame)."""
     detected = detected_range(msg)
     if detected is None:
         ctx.log(f"{path}/detection", rr.Points3D(np.empty((0, 3))), frame=msg.header.frame_id)
         return
-    ctx.scalar(f"{path}/range", detected)
-    ctx.log(f"{path}/detection", rr.Points3D([[detected, 0.0, 0.0]]), frame=msg.header.frame_id)
+    distance, measured = detected
+    if measured:
+        ctx.scalar(f"{path}/range", distance)
+    ctx.log(f"{path}/detection", rr.Points3D([[distance, 0.0, 0.0]]), frame=msg.header.frame_id)
 
 
 BATTERY_SCALARS = ("voltage", "current", "charge", "capacity", "percentage", "temperature",

@@ -9,7 +9,7 @@ import subprocess
 import sys
 
 import pytest
-from mcap.writer import Writer
+from mcap.writer import CompressionType, Writer
 
 from canbench import ros2, ros2_msgs
 
@@ -120,9 +120,9 @@ def test_the_viewer_decodes_the_channels_of_its_definition_only(tmp_path):
     assert columns["/sonar/range"]["Scalars:scalars"] == [[1.25]]
 
 
-def float64_recording(path, count: int) -> None:
+def float64_recording(path, count: int, compression: CompressionType = CompressionType.ZSTD) -> None:
     with open(path, "wb") as f:
-        w = Writer(f, chunk_size=4096)  # chunks of about a hundred messages, as a recorder's are of many
+        w = Writer(f, chunk_size=4096, compression=compression)  # chunks of about a hundred messages
         w.start(profile="ros2", library="test")
         schema = w.register_schema("std_msgs/msg/Float64", "ros2msg",
                                    ros2.msg_definition("std_msgs/msg/Float64").encode())
@@ -143,7 +143,7 @@ def test_a_cut_recording_is_shown_up_to_the_cut_and_said(tmp_path):
         f.truncate(path.stat().st_size * 2 // 3)
     run = subprocess.run([sys.executable, "-m", "canbench.cli", "view", str(path), "--save", str(rrd)],
                          capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.returncode == 1, run.stderr[-2000:]  # shown, but not the whole recording
     assert "INCOMPLETE: the recording is cut or damaged (a record ends past the file's end, after" in run.stderr
     from canbench.viewer import read_rrd_columns
     columns = read_rrd_columns(rrd)
@@ -163,8 +163,8 @@ def test_what_was_read_is_sent_however_the_reading_ends(tmp_path, monkeypatch):
     monkeypatch.setattr(registry, "FLUSH_AFTER_S", 3600.0)  # nothing is due while reading
     real = recording.recorded_messages
 
-    def interrupted(f):
-        for i, item in enumerate(real(f)):
+    def interrupted(f, path):
+        for i, item in enumerate(real(f, path)):
             if i == 30:
                 raise KeyboardInterrupt
             yield item
@@ -193,3 +193,35 @@ def test_scalars_are_due_after_a_while_or_many_values(monkeypatch):
     for i in range(registry.FLUSH_VALUES):
         columns.add("/a", i, None, 1.0)
     assert columns.due()
+
+
+def test_a_damaged_chunk_is_said_not_shown_with_wrong_values(tmp_path):
+    """A flipped bit in a message of an indexed recording (uncompressed: nothing but the chunk's
+    CRC can tell): the CRC is checked (mcap's default is not to), so the reading stops there and
+    says so, rather than show 1500.0 as another value."""
+    pytest.importorskip("rerun", reason="the viewer needs rerun-sdk")
+    path = tmp_path / "drive.mcap"
+    float64_recording(path, 3000, CompressionType.NONE)
+    data = bytearray(path.read_bytes())
+    at = data.index(ros2_msgs.Float64(1500.0).serialize()) + 6  # a byte of the value, not of a length
+    data[at] ^= 0x01
+    path.write_bytes(bytes(data))
+    run = subprocess.run([sys.executable, "-m", "canbench.cli", "view", str(path), "--save", str(tmp_path / "d.rrd")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 1 and "INCOMPLETE: the recording is cut or damaged" in run.stderr, run.stderr[-2000:]
+
+
+@pytest.mark.parametrize("content", [b"", b"\x89MCAP", b"(1700000000.000100) can0 123#01\n"])
+def test_a_file_that_is_no_mcap_is_refused_in_one_line(tmp_path, content):
+    path = tmp_path / "drive.mcap"
+    path.write_bytes(content)
+    run = subprocess.run([sys.executable, "-m", "canbench.cli", "view", str(path), "--save", str(tmp_path / "d.rrd")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and run.stderr.strip().endswith(
+        f"{path}: not an MCAP file (canbench view reads MCAP recordings; a CAN trace goes through canbench "
+        "summarise or a scenario)"), run.stderr[-2000:]
+
+
+def test_a_schema_text_that_cannot_be_read_is_another_definition():
+    assert ros2.definition_difference("std_msgs/msg/Float64", "float64 =1\n") == (
+        "std_msgs/Float64: 0 fields there, 1 here")

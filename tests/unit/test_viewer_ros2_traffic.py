@@ -288,7 +288,8 @@ def test_a_batchs_scalars_go_one_column_per_entity(tmp_path, monkeypatch):
 def test_a_range_shows_no_point_without_a_detection_and_one_closer_than_its_minimum_at_it(tmp_path):
     """A gone obstacle leaves the screen (an empty point set, not a Clear: that would also clear the
     entity's coordinate frame, and later points would be drawn in the world's); -inf, closer than
-    min_range (REP 117; a fixed-distance ranger's detection), is drawn at min_range as RViz does."""
+    min_range (REP 117), is drawn at min_range but is no measured distance, unless the sensor is a
+    fixed-distance ranger (min_range == max_range: Range.msg's detection at that distance)."""
     sonar = {"header": m.Header(frame_id="sonar"), "min_range": 0.2, "max_range": 4.0}
     ir = {"header": m.Header(frame_id="ir"), "min_range": 0.3, "max_range": 0.3}
     columns, errors = logged(tmp_path, [
@@ -301,7 +302,7 @@ def test_a_range_shows_no_point_without_a_detection_and_one_closer_than_its_mini
     assert "Clear:is_recursive" not in detection and detection["CoordinateFrame:frame"] == [["sonar"]]
     shown = sorted(round(p[0][0], 3) if len(p) else 0.0 for p in detection["Points3D:positions"])  # chunk order
     assert shown == [0.0, 0.2, 1.5]  # one empty: the gone obstacle
-    assert sorted(round(v, 3) for [v] in columns["/ros2/park/range"]["Scalars:scalars"]) == [0.2, 1.5]
+    assert columns["/ros2/park/range"]["Scalars:scalars"] == [[1.5]]  # too close is no measured distance
     assert close_to(columns["/ros2/ir/range"]["Scalars:scalars"], [[0.3]])
 
 
