@@ -9,6 +9,7 @@ neither without the .msg file. decode() is the one entry for untrusted
 payloads: it checks the encapsulation header before pycdr2 reads anything."""
 
 import typing
+from array import array as array_of  # (pycdr2's types name array)
 from dataclasses import dataclass, field
 
 from pycdr2 import IdlStruct
@@ -35,23 +36,24 @@ _write_primitive_sequence = PlainCdrV2SequenceOfPrimitiveMachine.serialize
 
 
 def _bytes_in_one_slice(self, buffer):
-    """A uint8 sequence (an image's, a cloud's data) as bytes, read as one slice: pycdr2 built a
-    list of ints, 0.27 s to decode and array a 1080p rgb8 frame (the viewer kept up with 4 a second).
-    A length past the payload is an error, as pycdr2's element-wise read made it."""
-    if self.code != "B":
+    """A uint8 sequence (an image's, a cloud's data) as bytes, an int8 one (a map's cells) as an
+    array('b'), read as one slice: pycdr2 built a list of ints, 0.27 s to decode and array a 1080p
+    rgb8 frame (the viewer kept up with 4 a second), about 2 s a 4000 x 4000 map. A length past the
+    payload is an error, as pycdr2's element-wise read made it."""
+    if self.code not in ("B", "b"):
         return _read_primitive_sequence(self, buffer)
     buffer.align(4)
     length = buffer.read("I", 4)
     data = buffer.read_bytes(length)
     if len(data) != length:
         raise ValueError(f"a sequence of {length} bytes ends past the payload")
-    return data
+    return data if self.code == "B" else array_of("b", data)
 
 
 def _bytes_written_whole(self, buffer, value, for_key=False):
-    """A uint8 sequence given as bytes or any buffer (a numpy array) written in one piece; its
-    length the buffer's bytes (a memoryview's len counts rows or wider items)."""
-    if self.code != "B" or isinstance(value, (list, tuple)):
+    """A uint8 or int8 sequence given as bytes or any buffer (a numpy array, an array('b')) written
+    in one piece; its length the buffer's bytes (a memoryview's len counts rows or wider items)."""
+    if self.code not in ("B", "b") or isinstance(value, (list, tuple)):
         return _write_primitive_sequence(self, buffer, value, for_key)
     data = value if isinstance(value, bytes) else memoryview(value).tobytes()
     if self.max_length is not None and len(data) > self.max_length:
@@ -80,6 +82,10 @@ def _list():
 
 def _bytes():  # a uint8 sequence decodes as bytes (_bytes_in_one_slice): its default is too
     return field(default_factory=bytes)
+
+
+def _signed_bytes():  # an int8 sequence decodes as an array('b'): its default is too
+    return field(default_factory=lambda: array_of("b"))
 
 
 # ---- builtin_interfaces, std_msgs ----
@@ -554,7 +560,7 @@ class MapMetaData(IdlStruct, typename="nav_msgs/msg/MapMetaData"):
 class OccupancyGrid(IdlStruct, typename="nav_msgs/msg/OccupancyGrid"):
     header: Header = field(default_factory=Header)
     info: MapMetaData = field(default_factory=MapMetaData)
-    data: sequence[int8] = _list()  # row-major from (0, 0); -1 unknown, 0..100 occupancy
+    data: sequence[int8] = _signed_bytes()  # row-major from (0, 0); -1 unknown, 0..100 occupancy
 
 
 # ---- visualization_msgs ----

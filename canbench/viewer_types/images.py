@@ -87,12 +87,16 @@ def log_camera_info(ctx: Context, path: str, msg) -> None:
 UNKNOWN_GREY = 205  # map_server's grey for unknown cells; no occupancy 0..100 maps to it
 
 
+# an occupancy's grey by its int8 value's byte (a table: a 4000 x 4000 map in milliseconds, not 0.6 s):
+# 0 (free) 254, 100 (occupied) 0, in between proportionally (map_server's scale); -1 and values
+# outside 0..100 unknown (205)
+GREY_OF_BYTE = np.full(256, UNKNOWN_GREY, dtype=np.uint8)
+GREY_OF_BYTE[:101] = np.rint(254 * (100 - np.arange(101)) / 100).astype(np.uint8)
+
+
 def occupancy_grey(values: np.ndarray) -> np.ndarray:
-    """0 (free) 254, 100 (occupied) 0, in between proportionally (map_server's scale); -1 and
-    values outside 0..100 are unknown (205)."""
-    grey = np.rint(254 * (100 - values.clip(0, 100).astype(np.float64)) / 100).astype(np.uint8)
-    grey[(values < 0) | (values > 100)] = UNKNOWN_GREY
-    return grey
+    """The grey of each cell of an int8 occupancy array (GREY_OF_BYTE)."""
+    return GREY_OF_BYTE[values.astype(np.int8).view(np.uint8)]
 
 
 @logger("nav_msgs/msg/OccupancyGrid")

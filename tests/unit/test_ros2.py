@@ -134,6 +134,9 @@ def test_byte_sequences_are_read_as_one_slice_and_checked_against_the_payload():
     for bad in (payload[:-1], payload[:-len(pixels) - 4] + (2**32 - 1).to_bytes(4, "little") + pixels):
         with pytest.raises(ros2_msgs.CdrError, match="ends past the payload"):
             ros2_msgs.decode("sensor_msgs/msg/Image", bad)
+    cells = [-1, 0, 100, 50, -128, 127]  # a map's int8 cells: one slice too, signed
+    grid = ros2_msgs.decode("nav_msgs/msg/OccupancyGrid", ros2_msgs.OccupancyGrid(data=cells).serialize())
+    assert list(grid.data) == cells and np.asarray(grid.data).dtype == np.int8
 
 @pytest.mark.parametrize("ros_type", sorted(ros2.MESSAGE_TYPES))
 def test_msg_definitions_decode_our_cdr(ros_type):
