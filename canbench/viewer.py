@@ -270,7 +270,6 @@ class Viewer:
         self.stopping = False
         while not self.stopping:
             batch = self._batch()
-            can = self.can
             for sample in batch:
                 if sample.type_name:
                     self._log_ros(sample)
@@ -280,10 +279,10 @@ class Viewer:
                         only = next(iter(self.buses)) if len(self.buses) == 1 else "bus"
                     bus = parts[0] if len(parts) == 2 else only
                     try:
-                        can.add(f"can/{parts[-1]}/{bus}", sample.t_ns, wire.decode_batch(sample.payload))
+                        self.can.add(f"can/{parts[-1]}/{bus}", sample.t_ns, wire.decode_batch(sample.payload))
                     except ValueError as e:  # WireError
                         self._malformed(sample.key, e)
-            for columns in (can, self.scalars):
+            for columns in (self.can, self.scalars):
                 if columns.due() or self.stopping:
                     columns.flush()
             # markers' lifetimes: up to the newest sample logged (older ones may still be queued)

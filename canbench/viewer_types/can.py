@@ -5,43 +5,33 @@ output, recording.mcap) alike -> <base>/<id>/raw (candump text) and, with a DBC,
 per entity (send_columns): per-frame rr.log calls cost more than a busy bus allows."""
 from __future__ import annotations
 
-import time
 from collections import defaultdict
 
-import numpy as np
 import rerun as rr
 
 from .. import wire
 from ..dbc import decode_signals
-from . import registry
-from .registry import Context, log_rows, logger
-
-
-def time_column(times_ns: list[int]) -> rr.TimeColumn:
-    # as datetime64[ns]: a list of float seconds costs Rerun's converter 20 times more per frame
-    return rr.TimeColumn("time", timestamp=np.asarray(times_ns, dtype="datetime64[ns]"))
+from .registry import Context, Pending, logger, send_entity
 
 
 class CanColumns:
-    """Frames grouped by entity, sent with their receive times when due (registry.FLUSH_AFTER_S,
-    or FLUSH_VALUES frames): one column per entity, a few rows through rr.log (registry.log_rows)."""
+    """Frames grouped by entity, sent with their receive times when due (registry.Pending): one
+    column per entity, a few rows through rr.log (registry.send_entity)."""
 
     def __init__(self, dbc, bus_dbcs: dict | None = None):
         self.dbc = dbc
         self.bus_dbcs = bus_dbcs or {}  # bus -> its own DBC (a scenario's buses[].dbc)
         self.raw: dict[str, tuple[list[int], list[str]]] = defaultdict(lambda: ([], []))
         self.signals: dict[str, tuple[list[int], list[float]]] = defaultdict(lambda: ([], []))
-        self.frames = 0
-        self.since = time.monotonic()
+        self.pending = Pending()  # frames
 
     def due(self) -> bool:
-        return self.frames >= registry.FLUSH_VALUES or (
-            self.frames > 0 and time.monotonic() - self.since >= registry.FLUSH_AFTER_S)
+        return self.pending.due()
 
     def add(self, base: str, t_ns: int, frames: list[wire.Frame]) -> None:
         bus = base.rsplit("/", 1)[-1]
         dbc = self.bus_dbcs.get(bus, self.dbc)
-        self.frames += len(frames)
+        self.pending.count += len(frames)
         for f in frames:
             ident = wire.id_hex(f.can_id, f.extended)
             times, texts = self.raw[f"{base}/{ident}/raw"]
@@ -54,21 +44,15 @@ class CanColumns:
                     values.append(value)
 
     def flush(self) -> int:
-        frames = 0
+        """Sends what waits; the number of frames sent."""
         for path, (times, texts) in self.raw.items():
-            if len(texts) < registry.FEW_ROWS:
-                log_rows(path, times, None, [rr.TextLog(t) for t in texts])
-            else:
-                rr.send_columns(path, indexes=[time_column(times)], columns=rr.TextLog.columns(text=texts))
-            frames += len(texts)
+            send_entity(path, rr.TextLog, "text", times, texts)
         for path, (times, values) in self.signals.items():
-            if len(values) < registry.FEW_ROWS:
-                log_rows(path, times, None, [rr.Scalars(v) for v in values])
-            else:
-                rr.send_columns(path, indexes=[time_column(times)], columns=rr.Scalars.columns(scalars=values))
+            send_entity(path, rr.Scalars, "scalars", times, values)
+        frames = sum(len(texts) for _, texts in self.raw.values())
         self.raw.clear()
         self.signals.clear()
-        self.frames, self.since = 0, time.monotonic()
+        self.pending.sent()
         return frames
 
 

@@ -3,7 +3,7 @@ docstring for how to add a type)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -87,7 +87,7 @@ FLUSH_VALUES = 100_000  # or how many
 FEW_ROWS = 4  # an entity's rows fewer than this go through rr.log, which Rerun batches (a 10 Hz signal)
 
 
-def log_rows(path: str, times: list[int], stamps: list[int | None] | None, archetypes: list) -> None:
+def log_rows(path: str, times: list[int], stamps: Sequence[int | None] | None, archetypes: list) -> None:
     """A few rows of one entity through rr.log at their own times: a one-row send_columns skips
     Rerun's batching (a CAN id's or a 1 Hz topic's values, one row per flush: a .rrd 20 times
     larger). Leaves the timelines at the last row's: what is logged next sets its own."""
@@ -101,45 +101,73 @@ def log_rows(path: str, times: list[int], stamps: list[int | None] | None, arche
         rr.log(path, archetype)
 
 
+class Pending:
+    """How many values wait to be sent and since when: due after FLUSH_VALUES of them or, with any
+    waiting, FLUSH_AFTER_S (a live plot lags by at most that)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.since = time.monotonic()
+
+    def due(self) -> bool:
+        return self.count >= FLUSH_VALUES or (self.count > 0 and time.monotonic() - self.since >= FLUSH_AFTER_S)
+
+    def sent(self) -> None:
+        self.count, self.since = 0, time.monotonic()
+
+
+def send_entity(path: str, archetype, field: str, times: list[int], values: list,
+                stamps: Sequence[int] | None = None) -> None:
+    """One entity's rows: a few through rr.log (log_rows), more as one column of the archetype's
+    `field` (send_columns) on `time` and, given stamps, `header_stamp`."""
+    if len(values) < FEW_ROWS:
+        log_rows(path, times, stamps, [archetype(v) for v in values])
+        return
+    indexes = [time_column(times)]
+    if stamps:
+        indexes.append(rr.TimeColumn("header_stamp", timestamp=np.asarray(stamps, "datetime64[ns]")))
+    rr.send_columns(path, indexes=indexes, columns=archetype.columns(**{field: values}))
+
+
+def time_column(times_ns: list[int]) -> rr.TimeColumn:
+    # as datetime64[ns]: a list of float seconds costs Rerun's converter 20 times more per row
+    return rr.TimeColumn("time", timestamp=np.asarray(times_ns, dtype="datetime64[ns]"))
+
+
 class ScalarColumns:
-    """Scalars of many messages, sent one column per entity (send_columns) every FLUSH_AFTER_S or
-    FLUSH_VALUES values (due()): an rr.log per value costs 25-35 µs, and a robot's /joint_states
-    (30 joints, 3 values each, at a controller's 100-500 Hz) needed more than the logger thread
-    has; a column per message would be worse (a one-row send_columns skips Rerun's batching:
-    twice the CPU of an rr.log and a .rrd nine times larger)."""
+    """Scalars of many messages, sent one column per entity (send_columns) when due (Pending): an
+    rr.log per value costs 25-35 µs, and a robot's /joint_states (30 joints, 3 values each, at a
+    controller's 100-500 Hz) needed more than the logger thread has; a column per message would be
+    worse (a one-row send_columns skips Rerun's batching: twice the CPU of an rr.log and a .rrd
+    nine times larger)."""
 
     def __init__(self) -> None:
         self.series: dict[str, tuple[list[int], list[int | None], list[float]]] = {}
-        self.values = 0
-        self.since = time.monotonic()
+        self.pending = Pending()
 
     def add(self, path: str, t_ns: int, stamp_ns: int | None, value: float) -> None:
         times, stamps, values = self.series.setdefault(path, ([], [], []))
         times.append(t_ns)
         stamps.append(stamp_ns)
         values.append(value)
-        self.values += 1
+        self.pending.count += 1
 
     def due(self) -> bool:
-        return self.values >= FLUSH_VALUES or (self.values > 0 and time.monotonic() - self.since >= FLUSH_AFTER_S)
+        return self.pending.due()
 
     def flush(self) -> None:
         for path, (times, stamps, values) in self.series.items():
-            if len(values) < FEW_ROWS:
-                log_rows(path, times, stamps, [rr.Scalars(v) for v in values])
-                continue
-            for stamped in (True, False):  # values on header_stamp too, and those of messages without one
-                rows = [i for i, s in enumerate(stamps) if (s is not None) == stamped]
-                if not rows:
-                    continue
-                indexes = [rr.TimeColumn("time", timestamp=np.asarray([times[i] for i in rows], "datetime64[ns]"))]
-                if stamped:
-                    indexes.append(rr.TimeColumn("header_stamp", timestamp=np.asarray(
-                        [stamps[i] for i in rows], "datetime64[ns]")))
-                rr.send_columns(path, indexes=indexes, columns=rr.Scalars.columns(scalars=[values[i] for i in rows]))
+            # values on header_stamp too, and those of messages without one on `time` alone
+            stamped = [i for i, s in enumerate(stamps) if s is not None]
+            unstamped = [i for i, s in enumerate(stamps) if s is None]
+            if stamped:
+                send_entity(path, rr.Scalars, "scalars", [times[i] for i in stamped], [values[i] for i in stamped],
+                            [s for s in stamps if s is not None])
+            if unstamped:
+                send_entity(path, rr.Scalars, "scalars", [times[i] for i in unstamped],
+                            [values[i] for i in unstamped])
         self.series.clear()
-        self.values = 0
-        self.since = time.monotonic()
+        self.pending.sent()
 
 
 def set_sample_time(t_ns: int, msg) -> int | None:

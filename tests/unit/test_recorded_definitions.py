@@ -189,7 +189,7 @@ def test_scalars_are_due_after_a_while_or_many_values(monkeypatch):
     now[0] += registry.FLUSH_AFTER_S * 1.01
     assert columns.due()
     columns.series.clear()
-    columns.values = 0
+    columns.pending.sent()
     for i in range(registry.FLUSH_VALUES):
         columns.add("/a", i, None, 1.0)
     assert columns.due()
