@@ -16,16 +16,21 @@ reports the kernel's share of the CPU time). Each Zenoh transport
 (--transports): on the universal one the put queues and Zenoh's transmit
 task writes; on the low-latency one the put writes the link itself.
 
-Writes callgrind.json and callgrind.md into --out; with --record appends one
-line per run to docs/callgrind-history.csv (commit, date, instructions per
-frame on the universal transport, the default), so the cost is tracked
-across commits. Loopback only, bounded."""
+Each transport is measured --runs times (default 3) and each stage counts with
+its median: the process's count varies by a few per cent between runs of the
+same build (how many frames the transmit task's wakeups find, Zenoh's timers),
+the C stages by a few instructions. callgrind.md gives the runs' range beside
+the medians. Writes callgrind.json and callgrind.md into --out; with --record
+appends one line per run to docs/callgrind-history.csv (commit, date, medians
+on the universal transport, the default), so the cost is tracked across
+commits. Loopback only, bounded."""
 from __future__ import annotations
 
 import argparse
 import json
 import os
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -155,6 +160,13 @@ def measure(args, low_latency: bool) -> dict[str, int]:
     return per_frame
 
 
+def measure_runs(args, low_latency: bool, runs: int) -> tuple[dict[str, int], dict[str, list[int]]]:
+    """Per stage: the median over `runs` measurements, and every run's count."""
+    each = [measure(args, low_latency) for _ in range(runs)]
+    counts = {stage: [m[stage] for m in each] for stage in each[0]}
+    return {stage: round(statistics.median(c)) for stage, c in counts.items()}, counts
+
+
 def git_commit() -> str:
     try:
         return subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
@@ -163,33 +175,46 @@ def git_commit() -> str:
         return "unknown"
 
 
+def spread(measured: tuple[dict[str, int], dict[str, list[int]]], stage: str) -> str:
+    medians, each = measured
+    low, high = min(each[stage]), max(each[stage])
+    return f"{medians[stage]}" + (f" [{low}-{high}]" if low != high else "")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     add_tool_arguments(ap)
     ap.add_argument("--record", action="store_true", help=f"append this run to {HISTORY.relative_to(REPO)}")
     ap.add_argument("--transports", default=",".join(TRANSPORTS),
                     help="Zenoh transports to measure (the history records the universal one)")
+    ap.add_argument("--runs", type=int, default=3, help="measurements per transport; each stage counts with "
+                    "their median (default 3)")
     args = ap.parse_args()
+    if args.runs < 1:
+        ap.error("--runs: at least 1")
     transports = args.transports.split(",")
     if set(transports) - set(TRANSPORTS) or TRANSPORTS[0] not in transports:
         ap.error(f"--transports: {TRANSPORTS[0]} and optionally {TRANSPORTS[1]}")
     run_id, out = run_id_and_output(args)
-    by_transport = {t: measure(args, t == "low-latency") for t in transports}
+    measured = {t: measure_runs(args, t == "low-latency", args.runs) for t in transports}
+    by_transport = {t: medians for t, (medians, _) in measured.items()}
     commit = os.environ.get("BENCH_COMMIT") or git_commit()
     ipf = by_transport[TRANSPORTS[0]]
-    result = {"frames": FRAMES, "rate": RATE, "instructions_per_frame": ipf, "by_transport": by_transport,
+    result = {"frames": FRAMES, "rate": RATE, "runs": args.runs, "instructions_per_frame": ipf,
+              "by_transport": by_transport, "runs_by_transport": {t: each for t, (_, each) in measured.items()},
               "run_id": run_id, "commit": commit}
     (out / "callgrind.json").write_text(json.dumps(result, indent=1))
-    md = ["| stage | what | " + " | ".join(f"instructions per frame ({t})" for t in transports) + " |",
-          "|---|---|" + "---|" * len(transports)]
+    md = ["| stage | what | " + " | ".join(f"instructions per frame ({t}): median [range]" for t in transports)
+          + " |", "|---|---|" + "---|" * len(transports)]
     what = {stage: fn for stage, (fn, _) in STAGES.items()}
     what.update(component_rx=f"self: {COMPONENT_DIR}*.c in the CAN -> Zenoh run",
                 component_tx=f"self: {COMPONENT_DIR}*.c in the Zenoh -> CAN run",
                 process_rx="whole process, CAN -> Zenoh run minus idle run",
                 process_tx="whole process, Zenoh -> CAN run minus idle run")
-    md += [f"| {stage} | {what[stage]} | " + " | ".join(str(by_transport[t][stage]) for t in transports) + " |"
+    md += [f"| {stage} | {what[stage]} | " + " | ".join(spread(measured[t], stage) for t in transports) + " |"
            for stage in ipf]
-    text = f"callgrind {run_id} at {commit}: {FRAMES} frames each way at {RATE} frames/s\n\n" + "\n".join(md)
+    text = (f"callgrind {run_id} at {commit}: {FRAMES} frames each way at {RATE} frames/s, medians of {args.runs} "
+            "runs\n\n" + "\n".join(md))
     (out / "callgrind.md").write_text(text + "\n")
     print(text)
     if args.record:

@@ -262,3 +262,15 @@ def test_bridge_table_says_where_a_lossy_run_lost_its_frames():
     assert "| no (hub_rx_drops 1651, tx_samples 144000, tx_frames 144000) |" in row
     assert bench_bridge.lossless_cell(dict(lossy, lossless=True)) == "yes"
     assert bench_bridge.lossless_cell(dict(lossy, accounts={})) == "no"
+
+
+def test_callgrind_stages_count_with_the_median_of_the_runs_and_show_their_range(monkeypatch):
+    """One run of the same build can be a few per cent off (the transmit task's wakeups): a
+    stage's count is the median over the runs, its range is said beside it."""
+    from bench import callgrind
+    process = iter([12_150, 11_848, 12_171])
+    monkeypatch.setattr(callgrind, "measure", lambda args, low_latency: {"put": 3631, "process_rx": next(process)})
+    measured = callgrind.measure_runs(None, False, 3)
+    assert measured[0] == {"put": 3631, "process_rx": 12_150}
+    assert callgrind.spread(measured, "process_rx") == "12150 [11848-12171]"
+    assert callgrind.spread(measured, "put") == "3631"  # the same in every run: no range
