@@ -628,6 +628,20 @@ class DiagnosticArray(IdlStruct, typename="diagnostic_msgs/msg/DiagnosticArray")
     status: sequence[DiagnosticStatus] = _list()
 
 
+# ---- nav2_msgs (amcl's particles) ----
+
+@dataclass
+class Particle(IdlStruct, typename="nav2_msgs/msg/Particle"):
+    pose: Pose = field(default_factory=Pose)
+    weight: float64 = 0.0
+
+
+@dataclass
+class ParticleCloud(IdlStruct, typename="nav2_msgs/msg/ParticleCloud"):
+    header: Header = field(default_factory=Header)
+    particles: sequence[Particle] = _list()
+
+
 # ---- can_msgs ----
 
 @dataclass
@@ -649,7 +663,7 @@ ALL = (Time, Duration, Header, String, Float64, Bool, Int8, Int16, Int32, Int64,
        TransformStamped, TFMessage, Imu, Temperature, FluidPressure, RelativeHumidity, Illuminance, NavSatStatus,
        NavSatFix, Range, JointState, BatteryState, Image, CompressedImage, PointField, PointCloud2, LaserScan,
        RegionOfInterest, CameraInfo, Odometry, Path, MapMetaData, OccupancyGrid, UVCoordinate, MeshFile, Marker,
-       MarkerArray, KeyValue, DiagnosticStatus, DiagnosticArray, CanFrame)
+       MarkerArray, KeyValue, DiagnosticStatus, DiagnosticArray, Particle, ParticleCloud, CanFrame)
 MESSAGE_TYPES: dict[str, type[IdlStruct]] = {cls.__idl_typename__: cls for cls in ALL}  # type: ignore[attr-defined]
 # The types whose Humble definition is not Jazzy's (ros2_msgs' are Jazzy's): what a Humble node
 # sends (its rmw_zenoh keys say TypeHashNotSupported) or a Humble bag records is read with these

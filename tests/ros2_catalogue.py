@@ -307,6 +307,11 @@ def check_pose_array(c: Columns) -> None:
     assert close(last(c, "/ros2/particles", "Arrows3D:vectors"), [[0.3, 0, 0], [0, 0.3, 0]])  # RViz's 0.3 m, 90°
 
 
+def check_particle_cloud(c: Columns) -> None:
+    assert close(last(c, "/ros2/particle_cloud", "Arrows3D:origins"), [[0, 0, 0], [1, 1, 0]])
+    assert close(last(c, "/ros2/particle_cloud", "Arrows3D:vectors"), [[0.02, 0, 0], [0, 0.3, 0]])  # by weight
+
+
 def check_twist_stamped(c: Columns) -> None:
     assert c["/ros2/cmd_vel/linear/x"]["Scalars:scalars"] == [[2.5]]
     assert c["/ros2/cmd_vel/angular/z"]["Scalars:scalars"] == [[0.2]]
@@ -410,6 +415,9 @@ CASES = [
         header=header("map"), pose=m.PoseWithCovariance(pose=m.Pose(position=m.Point(3, 4, 0)))), check_initial_pose),
     Case("/particles", "geometry_msgs/msg/PoseArray", m.PoseArray(header=header("map"), poses=[
         m.Pose(), m.Pose(position=m.Point(1, 1, 0), orientation=q_z(90))]), check_pose_array),
+    Case("/particle_cloud", "nav2_msgs/msg/ParticleCloud", m.ParticleCloud(header=header("map"), particles=[
+        m.Particle(m.Pose(), 0.0), m.Particle(m.Pose(position=m.Point(1, 1, 0), orientation=q_z(90)), 1.0)]),
+         check_particle_cloud),
     Case("/cmd_vel", "geometry_msgs/msg/TwistStamped", m.TwistStamped(
         header=header("base_link"), twist=m.Twist(linear=m.Vector3(2.5, 0, 0), angular=m.Vector3(0, 0, 0.2))),
          check_twist_stamped),

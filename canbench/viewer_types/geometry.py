@@ -1,5 +1,6 @@
 """Poses and frames: tf2_msgs/TFMessage (the TF tree), geometry_msgs' stamped types (poses,
-points, pose arrays, twists, accelerations, vectors), nav_msgs/Odometry, nav_msgs/Path."""
+points, pose arrays, twists, accelerations, vectors), nav_msgs/Odometry, nav_msgs/Path, nav2's
+particle clouds."""
 from __future__ import annotations
 
 import numpy as np
@@ -54,12 +55,34 @@ POSE_ARROW_M = 0.3  # RViz's PoseArray arrow length: a particle cloud of 1 m arr
 @logger("geometry_msgs/msg/PoseArray")
 def log_pose_array(ctx: Context, path: str, msg) -> None:
     """Each pose an arrow along its x axis; a pose with a NaN or infinite value is left out."""
-    origins = np.asarray([[p.position.x, p.position.y, p.position.z] for p in msg.poses],
-                         dtype=np.float64).reshape(-1, 3)
-    vectors = np.asarray([x_axis(p.orientation) for p in msg.poses], dtype=np.float64).reshape(-1, 3) * POSE_ARROW_M
+    pose_arrows(ctx, path, msg.poses, np.full(len(msg.poses), POSE_ARROW_M), msg.header.frame_id)
+
+
+# nav2_rviz_plugins' ParticleCloud display: a particle's arrow from 2 cm (weight 0) to 30 cm
+# (weight 1 and more), in its default colour
+PARTICLE_ARROW_M = (0.02, 0.3)
+PARTICLE_COLOUR = (255, 25, 0)
+
+
+@logger("nav2_msgs/msg/ParticleCloud")
+def log_particle_cloud(ctx: Context, path: str, msg) -> None:
+    """amcl's particles: each an arrow along its pose's x axis, as long as its weight says
+    (PARTICLE_ARROW_M); one with a NaN or infinite value is left out."""
+    shortest, longest = PARTICLE_ARROW_M
+    weights = np.asarray([p.weight for p in msg.particles], dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        lengths = np.clip(weights * (longest - shortest) + shortest, shortest, longest)
+        lengths[~np.isfinite(weights)] = np.nan
+    pose_arrows(ctx, path, [p.pose for p in msg.particles], lengths, msg.header.frame_id, PARTICLE_COLOUR)
+
+
+def pose_arrows(ctx: Context, path: str, poses, lengths: np.ndarray, frame: str, colour=None) -> None:
+    """Each pose an arrow of its length along its x axis; one with a NaN or infinite value is left out."""
+    origins = np.asarray([[p.position.x, p.position.y, p.position.z] for p in poses], dtype=np.float64).reshape(-1, 3)
+    vectors = np.asarray([x_axis(p.orientation) for p in poses], dtype=np.float64).reshape(-1, 3) * lengths[:, None]
     with np.errstate(invalid="ignore", over="ignore"):
         finite = np.isfinite(origins).all(axis=1) & np.isfinite(vectors).all(axis=1)
-    ctx.log(path, rr.Arrows3D(origins=origins[finite], vectors=vectors[finite]), frame=msg.header.frame_id)
+    ctx.log(path, rr.Arrows3D(origins=origins[finite], vectors=vectors[finite], colors=colour), frame=frame)
 
 
 def motion_scalars(ctx: Context, path: str, motion) -> None:

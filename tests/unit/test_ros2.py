@@ -86,11 +86,30 @@ def test_every_type_is_ros2_jazzys_definition():
     every type the viewer decodes (can_msgs is not a core package: the bridge's own)."""
     from rosbags.typesys import Stores, get_typestore
     jazzy = get_typestore(Stores.ROS2_JAZZY)
-    ours = sorted(set(ros2.MESSAGE_TYPES) - {"can_msgs/msg/Frame"})
+    ours = sorted(t for t in ros2.MESSAGE_TYPES if not t.startswith(("can_msgs/", "nav2_msgs/")))
     assert [t for t in ours if t not in jazzy.fielddefs] == []
     for ros_type in ours:
         assert [f["name"] for f in ros2.fields(ros_type)] == [name for name, _ in jazzy.fielddefs[ros_type][1]]
         assert ros2.type_hash(ros_type) == jazzy.hash_rihs01(ros_type), ros_type
+
+
+# nav2_msgs' definitions (ros-navigation/navigation2, nav2_msgs/msg/*.msg; comments left out)
+NAV2_MSGS = {"nav2_msgs/msg/Particle": "geometry_msgs/Pose pose\nfloat64 weight\n",
+             "nav2_msgs/msg/ParticleCloud": "std_msgs/Header header\nParticle[] particles\n"}
+
+
+def test_every_nav2_type_is_nav2s_definition():
+    """nav2_msgs is no core package: its .msg files, registered beside Jazzy's, give the fields and
+    the RIHS01 hash that amcl's rmw_zenoh keys carry."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for name, text in NAV2_MSGS.items():
+        store.register(get_types_from_msg(text, name))
+    ours = sorted(t for t in ros2.MESSAGE_TYPES if t.startswith("nav2_msgs/"))
+    assert ours == sorted(NAV2_MSGS)
+    for ros_type in ours:
+        assert [f["name"] for f in ros2.fields(ros_type)] == [name for name, _ in store.fielddefs[ros_type][1]]
+        assert ros2.type_hash(ros_type) == store.hash_rihs01(ros_type), ros_type
 
 
 def test_cdr_known_bytes_and_round_trips():

@@ -327,3 +327,19 @@ def test_a_pose_array_leaves_out_poses_with_nan(tmp_path):
                                          m.PoseArray(header=m.Header(frame_id="map"), poses=poses))])
     assert not errors
     assert close_to(columns["/ros2/particles"]["Arrows3D:origins"], [[[0, 0, 0]]])
+
+
+def test_a_particle_is_an_arrow_as_long_as_its_weight_says_and_one_with_nan_is_left_out(tmp_path):
+    """nav2's ParticleCloud display: 2 cm at weight 0 up to 30 cm at weight 1 (and beyond), along
+    the pose's x axis; a NaN weight or pose leaves that particle out, not the cloud."""
+    turned = m.Quaternion(0, 0, math.sqrt(0.5), math.sqrt(0.5))  # 90 degrees about z: along y
+    particles = [m.Particle(m.Pose(position=m.Point(1, 2, 0)), 0.0), m.Particle(m.Pose(orientation=turned), 0.5),
+                 m.Particle(m.Pose(), 7.0), m.Particle(m.Pose(), math.nan),
+                 m.Particle(m.Pose(position=m.Point(math.inf, 0, 0)), 0.1)]
+    columns, errors = logged(tmp_path, [("nav2_msgs/msg/ParticleCloud", "ros2/particle_cloud",
+                                         m.ParticleCloud(header=m.Header(frame_id="map"), particles=particles))])
+    assert not errors
+    cloud = columns["/ros2/particle_cloud"]
+    assert close_to(cloud["Arrows3D:origins"], [[[1, 2, 0], [0, 0, 0], [0, 0, 0]]])
+    assert close_to(cloud["Arrows3D:vectors"], [[[0.02, 0, 0], [0, 0.16, 0], [0.3, 0, 0]]])
+    assert cloud["CoordinateFrame:frame"] == [["map"]]
