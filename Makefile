@@ -63,7 +63,7 @@ FW_RUST_DEP    := $(RUST_PORT_DIR)/libzn_port_zenoh.a
 endif
 
 .PHONY: setup venv summarise scaffold validate open bench help ucan ucan-asan firmware firmware-asan zenohd check check-ucan check-bus check-firmware \
-        check-firmware-cross check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-hub-proof fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-dbc bench-host bench-tools zn-flood test clean preflight base images \
+        check-firmware-cross check-port-rust check-python check-bridge check-faults check-compose check-kernel fuzz fuzz-ucan fuzz-hub-proof fuzz-firmware bench-bus bench-bridge bench-capture bench-paths bench-callgrind bench-qos bench-dbc bench-host bench-tools zn-flood test clean preflight base images \
         shell logs soak
 
 help:
@@ -146,6 +146,16 @@ check-firmware: check-firmware-cross
 	cmake -S firmware -B $(FW_UNIT_BUILD)-asan $(CMAKE_GEN) -DCMAKE_BUILD_TYPE=Debug -DZN_SANITIZE=ON -DZN_BUILD_BRIDGE=OFF >/dev/null
 	ninja -C $(FW_UNIT_BUILD)-asan
 	$(ASAN_ENV) ctest --test-dir $(FW_UNIT_BUILD)-asan --output-on-failure
+
+# The Zenoh port's Rust unit tests (firmware/ports/linux/zenoh_rust/src/lib.rs), in the builder
+# image with its sources and lock. Not part of check: a test build ignores the release profile's
+# panic = "abort", so zenoh and its dependencies compile once more (about 7 minutes on 2 cores).
+check-port-rust: images
+	docker run --rm --network none -v $(CURDIR)/firmware/ports/linux/zenoh_rust:/mnt/port:ro \
+	  -v $(CURDIR)/images/builder/rust/Cargo.lock:/mnt/Cargo.lock:ro canbench/builder:$(BENCH_TAG) sh -c \
+	  'cp -r /mnt/port/. /src/rust/zn_port_zenoh/ && cp /mnt/Cargo.lock /src/rust/Cargo.lock && \
+	   CARGO_TARGET_DIR=/build/rust cargo test -q --release --locked --offline --workspace --no-default-features --lib \
+	   --manifest-path /src/rust/Cargo.toml'
 
 check-python:
 	$(PYTHON) -m ruff check canbench tests bench
