@@ -17,7 +17,7 @@ reports the kernel's share of the CPU time). Each Zenoh transport
 task writes; on the low-latency one the put writes the link itself.
 
 Each transport is measured --runs times (default 3) and each stage counts with
-its median: the process's count varies by a few per cent between runs of the
+its median: the process's count varies by up to ~4 % between runs of the
 same build (how many frames the transmit task's wakeups find, Zenoh's timers),
 the C stages by a few instructions. callgrind.md gives the runs' range beside
 the medians. Writes callgrind.json and callgrind.md into --out; with --record

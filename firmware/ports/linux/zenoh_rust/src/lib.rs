@@ -324,7 +324,9 @@ pub extern "C" fn zn_declare_publisher(
 // another one is taken, so no held bytes are ever written.
 const PAYLOAD: usize = 0;
 const ATTACHMENT: usize = 1;
-const REUSED_MAX: usize = 64 * 1024; // a larger sample's buffer is not kept (a ROS 2 message, once)
+// The bridge's largest put is a full batch (16 KiB of frames, ~8 KiB of stamps); a larger buffer
+// (another caller of the port) is used once and not kept, so a thread never holds more than this.
+const REUSED_MAX: usize = 64 * 1024;
 
 thread_local! {
     static PUT_BUFFERS: RefCell<[Option<Arc<Vec<u8>>>; 2]> = const { RefCell::new([None, None]) };
