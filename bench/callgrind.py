@@ -16,7 +16,7 @@ reports the kernel's share of the CPU time). Each Zenoh transport
 (--transports): on the universal one the put queues and Zenoh's transmit
 task writes; on the low-latency one the put writes the link itself.
 
-Each transport is measured --runs times (default 3) and each stage counts with
+Each transport is measured --runs times (default 5) and each stage counts with
 its median: the process's count varies by up to ~4 % between runs of the
 same build (how many frames the transmit task's wakeups find, Zenoh's timers),
 the C stages by a few instructions. callgrind.md gives the runs' range beside
@@ -187,7 +187,7 @@ def main() -> int:
     ap.add_argument("--record", action="store_true", help=f"append this run to {HISTORY.relative_to(REPO)}")
     ap.add_argument("--transports", default=",".join(TRANSPORTS),
                     help="Zenoh transports to measure (the history records the universal one)")
-    ap.add_argument("--runs", type=int, default=3, help="measurements per transport; each stage counts with "
+    ap.add_argument("--runs", type=int, default=5, help="measurements per transport; each stage counts with "
                     "their median (default 3)")
     args = ap.parse_args()
     if args.runs < 1:

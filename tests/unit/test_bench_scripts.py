@@ -254,6 +254,32 @@ def test_paired_added_latency_is_judged_on_the_median_of_the_pairs():
     assert rows[("| zenoh-to-can", "zenoh-node")].endswith("| not met |")  # 60 at 10 %
 
 
+def test_paired_can_to_zenoh_cell_splits_at_the_can_stamp(monkeypatch):
+    """A CAN -> Zenoh cell gives the bus's hop and the share from the bridge's CAN stamp on, as
+    medians over the pairs; a Zenoh -> CAN cell (no stamp) gives neither."""
+    raws = iter([100.0, 120.0, 110.0] * 2)
+    hops = iter([10.0, 30.0, 20.0])
+
+    def fake_measure(args, path, system, mode, rate, seconds):
+        if path == "zenoh":
+            return {"p50_us": next(raws)}
+        if path == "can-to-zenoh":
+            hop = next(hops)
+            return {"p50_us": 200.0, "to_bridge_socket_p50_us": hop, "bridge_socket_to_capture_p50_us": 200.0 - hop}
+        return {"p50_us": 150.0}
+    monkeypatch.setattr(bench_paths, "measure", fake_measure)
+    monkeypatch.setattr(bench_paths, "PAIRED_PATHS", ("can-to-zenoh", "zenoh-to-can"))
+    monkeypatch.setattr(bench_paths, "PAIRED_SYSTEMS", ("zenoh-node",))
+    c2z, z2c = bench_paths.paired_added(None, {"90%": 8100}, 3)
+    assert c2z["added_us"] == [100.0, 80.0, 90.0] and c2z["median_added_us"] == 90.0
+    assert c2z["median_bus_us"] == 20.0
+    assert c2z["median_from_can_stamp_us"] == 70.0  # 90, 50, 70: (200 - hop) - raw per pair
+    assert "median_bus_us" not in z2c
+    table = bench_paths.paired_table([c2z, z2c])
+    assert "+90.0 (+100.0, +80.0, +90.0; bus 20.0, from the stamp +70.0)" in table
+    assert "| zenoh-to-can | zenoh-node | +40.0 (+50.0, +30.0, +40.0) |" in table
+
+
 def test_bridge_table_says_where_a_lossy_run_lost_its_frames():
     node = "zenoh-node"
     lossy = dict(result(node, 8, False, 4), direction="zenoh-to-can",
