@@ -158,6 +158,12 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		zn_log("E", "cannot declare the stats queryable %s", zn_node.stats_key);
 		return ESP_FAIL;
 	}
+	/* ROS 2's tokens (and the gid its samples carry) before any frame is published and before
+	 * the bridge's token: a client that waited for the bridge's token sees the ROS 2 topics too */
+	char zid[64] = "";
+	zn_session_id(zn_node.session, zid, sizeof(zid));
+	if (cfg->ros2_topic[0] && zn_ros2_declare_tokens(zid) != ESP_OK)
+		return ESP_FAIL;
 	zn_node.running = 1;
 	for (size_t i = 0; i < cfg->bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
@@ -175,10 +181,6 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		}
 		zn_log("I", "bridging %s: CAN -> %s, %s -> CAN (token %s)", b->name, b->rx_key, b->tx_key, b->token_key);
 	}
-	char zid[64] = "";
-	zn_session_id(zn_node.session, zid, sizeof(zid));
-	if (cfg->ros2_topic[0] && zn_ros2_declare_tokens(zid) != ESP_OK)
-		return ESP_FAIL;
 	zn_log("I", "ready: zid %s, mode %s, publish period %" PRIu32 " ms, stats on %s", zid, zn_mode_names[cfg->mode],
 	       cfg->publish_period_ms, zn_node.stats_key);
 	return ESP_OK;
