@@ -158,8 +158,8 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		zn_log("E", "cannot declare the stats queryable %s", zn_node.stats_key);
 		return ESP_FAIL;
 	}
-	/* ROS 2's tokens (and the gid its samples carry) before any frame is published and before
-	 * the bridge's token: a client that waited for the bridge's token sees the ROS 2 topics too */
+	/* ROS 2's tokens and the gid its samples carry: before the threads that publish start, and
+	 * before the bridge's token (other clients may still see tokens in another order) */
 	char zid[64] = "";
 	zn_session_id(zn_node.session, zid, sizeof(zid));
 	if (cfg->ros2_topic[0] && zn_ros2_declare_tokens(zid) != ESP_OK)
