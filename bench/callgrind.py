@@ -188,7 +188,7 @@ def main() -> int:
     ap.add_argument("--transports", default=",".join(TRANSPORTS),
                     help="Zenoh transports to measure (the history records the universal one)")
     ap.add_argument("--runs", type=int, default=5, help="measurements per transport; each stage counts with "
-                    "their median (default 3)")
+                    "their median (default 5)")
     args = ap.parse_args()
     if args.runs < 1:
         ap.error("--runs: at least 1")

@@ -44,4 +44,3 @@ def test_humble_subscribers_receive_the_frames(bus, bridge, router, session):
     finally:
         sub.undeclare()
     assert (frame.id, frame.dlc, bytes(frame.data[:4])) == (0x123, 4, bytes.fromhex("DEADBEEF"))
-
