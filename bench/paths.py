@@ -218,6 +218,14 @@ def throughput(args, path: str, system: str) -> list[dict]:
     return results
 
 
+def stamp_split(r: dict, zenoh_p50_us: float) -> tuple[float, float] | None:
+    """zenoh-node's CAN -> Zenoh p50 split at its CAN receive stamp: the bus's hop to its socket,
+    and what it adds over raw Zenoh from the stamp on; None where a result has no stamp."""
+    if r.get("bridge_socket_to_capture_p50_us") is None:
+        return None
+    return r["to_bridge_socket_p50_us"], round(r["bridge_socket_to_capture_p50_us"] - zenoh_p50_us, 1)
+
+
 def added_latency(latency: list[dict]) -> list[dict]:
     """p50 latency each bridge adds CAN -> Zenoh (client mode) over raw Zenoh at the same load (the
     issue's target), and where the bridge stamps its CAN receive time (zenoh-node) the same from that
@@ -229,9 +237,9 @@ def added_latency(latency: list[dict]) -> list[dict]:
         if r["mode"] != "client" or r["path"] != "can-to-zenoh" or None in (zenoh, r.get("p50_us")):
             continue
         a = {"system": r["system"], "rate": r["rate"], "over_zenoh_us": round(r["p50_us"] - zenoh, 1)}
-        if r.get("bridge_socket_to_capture_p50_us") is not None:
-            a["bus_p50_us"] = r["to_bridge_socket_p50_us"]
-            a["from_can_stamp_over_zenoh_us"] = round(r["bridge_socket_to_capture_p50_us"] - zenoh, 1)
+        split = stamp_split(r, zenoh)
+        if split:
+            a["bus_p50_us"], a["from_can_stamp_over_zenoh_us"] = split
         added.append(a)
     return added
 
@@ -252,9 +260,10 @@ def paired_added(args, loads: dict[str, int], pairs: int) -> list[dict]:
                     if raw.get("p50_us") is None or bridge.get("p50_us") is None:
                         continue
                     added.append(round(bridge["p50_us"] - raw["p50_us"], 1))
-                    if bridge.get("bridge_socket_to_capture_p50_us") is not None:
-                        bus.append(bridge["to_bridge_socket_p50_us"])
-                        from_stamp.append(round(bridge["bridge_socket_to_capture_p50_us"] - raw["p50_us"], 1))
+                    split = stamp_split(bridge, raw["p50_us"])
+                    if split:
+                        bus.append(split[0])
+                        from_stamp.append(split[1])
                 cell = {"path": path, "system": system, "rate": rate, "added_us": added,
                         "median_added_us": round(statistics.median(added), 1) if added else None}
                 if from_stamp:  # CAN -> Zenoh: the bus's hop and the bridge's own share, split at its CAN stamp
