@@ -67,6 +67,7 @@ static struct turns {
 	int64_t due;	  /* the port's next drain (monotonic ns); 0: no stretch, the port is waited on */
 	int64_t flush_at, last_drain, hold; /* the period's end (0: none); the last drain; how long the port may keep frames now */
 	size_t period_frames;
+	int flush_owed;	     /* a period ended during a put: its putter publishes all of the queue */
 	int64_t sleeping[2]; /* a sleeping thread's wakeup (INT64_MAX: until signalled); 0: awake */
 	int64_t put_since;   /* the putter's current put started then */
 	uint64_t puts, stall_seen; /* puts so far; the one last counted as stalled */
@@ -531,7 +532,9 @@ void zn_rx_reader_thread(void *arg)
  * bound the next sleep to half the capacity's worth of frames; a stretch starts
  * with a 1 ms sleep, each next one at most twice the last, so a rate is known
  * before a sleep is long). Each drain goes to the queue; at a period's end (or
- * with a full batch queued) the thread that drained publishes the queue itself.
+ * with a full batch queued) the thread that drained publishes the queue itself;
+ * a period that ends while the other thread puts is owed (flush_owed), and that
+ * thread publishes all of the queue once its put returns.
  * A period without frames ends the stretch, and a thread then blocks on the port
  * until the next frame.
  *
@@ -607,7 +610,7 @@ static void publish_queue(struct bus *b, struct turns *t, int me, struct rx_entr
 {
 	size_t batch_max = zn_node.cfg.batch_max_frames;
 	t->putter = me;
-	while (b->queued && (all || b->queued >= batch_max)) {
+	while (b->queued && (all || t->flush_owed || b->queued >= batch_max)) {
 		for (size_t c = 0; c < b->qos.class_count; c++) {
 			size_t n = take(b, c, taken, batch_max);
 			if (!n)
@@ -619,6 +622,8 @@ static void publish_queue(struct bus *b, struct turns *t, int me, struct rx_entr
 			zn_mutex_lock(b->lock);
 		}
 	}
+	if (!b->queued)
+		t->flush_owed = 0;
 	t->putter = NOBODY;
 }
 
@@ -662,6 +667,8 @@ static void drain_turn(struct bus *b, struct turns *t, int me, zn_can_rx_t *rx, 
 		zn_cond_signal(b->nonempty);
 	if (t->putter == NOBODY && (ended || b->queued >= zn_node.cfg.batch_max_frames))
 		publish_queue(b, t, me, taken, ended);
+	else if (ended && t->putter == other)
+		t->flush_owed = 1; /* a full batch's put may be running: the period's rest must not wait for the next frame */
 }
 
 /* When this thread wakes next (b->lock held): for the drain due if it is its turn (or the other
