@@ -142,6 +142,18 @@ static long long counter(const char *name)
 	return at ? atoll(at + strlen(key)) : -1;
 }
 
+/* Whether a counter of the stats reaches value within WAIT_MS (the puts seen by the mock have
+ * not necessarily returned to the bridge yet). */
+static int counter_reaches(const char *name, long long value)
+{
+	for (int waited_ms = 0; waited_ms < WAIT_MS; waited_ms++) {
+		if (counter(name) == value)
+			return 1;
+		mock_zenoh_wait_puts(MOCK_MAX_PUTS, 1); /* a bounded 1 ms poll */
+	}
+	return 0;
+}
+
 /* ---- tests ---- */
 
 /* A frame a millisecond, 10 a period: once the stretch's first short sleeps are over, a
@@ -201,8 +213,13 @@ static void test_stalled_put_keeps_reading(void)
 	zn_node_config_t cfg = batching();
 	CHECK(zn_node_init(&cfg) == ESP_OK);
 	size_t frames = load_around_a_held_put(50, 300, 5000);
+	/* the stats say a put is stuck and what waits behind it (300 ms of load since it was held) */
+	CHECK(counter("put_running_ms") >= 250);
+	CHECK(counter("rx_queued") >= 250);
 	gate(0);
 	check_published_frames(frames, 5000, 1, WAIT_MS);
+	CHECK(counter_reaches("put_running_ms", 0));
+	CHECK(counter_reaches("rx_queued", 0));
 	CHECK(mock_can_rx_drops("vcan0") == 0);
 	if (mock_can_rx_drops("vcan0"))
 		fprintf(stderr, "the port dropped %zu frames while a put stalled\n", mock_can_rx_drops("vcan0"));
@@ -272,8 +289,29 @@ static void test_rest_after_a_held_put(void)
 	zn_node_stop();
 }
 
+/* Immediate mode: the reader's own put held, the stats say how long it has run; once it
+ * returns, no put runs. */
+static void test_immediate_put_running_in_stats(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = batching();
+	cfg.publish_period_ms = 0;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	CHECK(counter("put_running_ms") == 0);
+	gate(1);
+	inject(0, 2000);
+	CHECK(wait_held() == 1);
+	pace_ms(60); /* the put held this long at least */
+	CHECK(counter("put_running_ms") >= 50);
+	gate(0);
+	check_published_frames(1, 2000, 1, WAIT_MS);
+	CHECK(counter_reaches("put_running_ms", 0));
+	zn_node_stop();
+}
+
 int main(void)
 {
+	test_immediate_put_running_in_stats();
 	test_rest_after_a_held_put();
 	test_one_wakeup_per_period();
 	test_stalled_put_keeps_reading();

@@ -90,7 +90,7 @@ struct bus {
 	 * CAN port meanwhile, reader_back: the reader returned and waits on handback */
 	int direct, publishing, degraded, watching, rescuing, reader_back;
 	int long_stall_said; /* a put stalled 1 s was logged (once) */
-	int64_t direct_since;
+	int64_t direct_since, publish_since; /* ... and the publisher's current round started then */
 	uint64_t direct_puts;
 	zn_cond_t *handback;
 	zn_qos_table_t qos; /* cfg.rx_qos_table over cfg.rx_qos */
@@ -154,6 +154,8 @@ esp_err_t zn_rx_queue_init(struct bus *b);
 int zn_rx_declare(struct bus *b);
 void zn_rx_undeclare(struct bus *b);
 void zn_rx_queue_free(struct bus *b);
+/* For the stats: frames queued now, and how long the put running now has run (ms, 0: none). */
+void zn_rx_gauges(struct bus *b, uint32_t *queued, int64_t *put_running_ms);
 
 /* zn_tx.c: the subscriber callback of one bus's tx key, writing a command
  * itself when the bus is free or queueing it whole for the transmitter thread. zn_tx_close undeclares the subscriber and

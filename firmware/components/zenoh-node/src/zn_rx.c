@@ -122,6 +122,23 @@ void zn_rx_queue_free(struct bus *b)
 	}
 }
 
+void zn_rx_gauges(struct bus *b, uint32_t *queued, int64_t *put_running_ms)
+{
+	int64_t since = 0;
+	*queued = 0;
+	if (b->lock) { /* NULL: the bus was never set up */
+		zn_mutex_lock(b->lock);
+		const struct turns *t = &turns[b->index];
+		if (zn_node.cfg.publish_period_ms)
+			since = t->putter != NOBODY ? t->put_since : 0;
+		else
+			since = b->direct ? b->direct_since : b->publishing ? b->publish_since : 0;
+		*queued = b->queued;
+		zn_mutex_unlock(b->lock);
+	}
+	*put_running_ms = since ? (zn_monotonic_ns() - since) / 1000000 : 0;
+}
+
 /* Counts a received frame and says whether it goes to a queue (invalid and filtered ones are counted). */
 static esp_err_t admit(struct bus *b, const can_message_t *msg)
 {
@@ -270,7 +287,7 @@ static void rescue(struct bus *b, zn_can_rx_t *rx)
 		if (!b->long_stall_said && zn_monotonic_ns() - since >= STALL_LONG_NS) {
 			b->long_stall_said = 1;
 			zn_log("W", "%s: a put has been stalled for 1 s (the router or the link takes no samples); the "
-				    "publisher keeps reading the bus for it", b->name);
+				    "publisher keeps reading the bus for it (stats: put_running_ms)", b->name);
 		}
 	}
 	if (!b->reader_back) /* stopping: said, so a stop during a stall can be told from one after it */
@@ -333,6 +350,7 @@ void zn_rx_publisher_thread(void *arg)
 		 * frames (a higher one may have some by now) */
 		size_t round = 0;
 		int64_t round_start = zn_monotonic_ns();
+		b->publish_since = round_start;
 		for (size_t c = 0; c < b->qos.class_count; c++) {
 			if (c)
 				zn_mutex_lock(b->lock);
@@ -638,6 +656,11 @@ static void drain_turn(struct bus *b, struct turns *t, int me, zn_can_rx_t *rx, 
 		if (COUNT(b->n.direct_stalls) == 0)
 			zn_log("W", "%s: a put stalled (Zenoh session blocked): the other thread reads the bus meanwhile "
 				    "(direct_stalls counts these)", b->name);
+	}
+	if (t->putter == other && !b->long_stall_said && now - t->put_since >= STALL_LONG_NS) {
+		b->long_stall_said = 1;
+		zn_log("W", "%s: a put has been stalled for 1 s (the router or the link takes no samples); the other "
+			    "thread keeps reading the bus for it (stats: put_running_ms)", b->name);
 	}
 	t->port = me;
 	t->idle_read = idle;
