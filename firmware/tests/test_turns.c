@@ -255,7 +255,6 @@ static void test_stop_during_stalled_put(void)
 	check_published_frames(frames, 9000, 1, WAIT_MS);
 }
 
-
 /* A put held while the load ends and its stretch runs out: once it returns, everything
  * queued meanwhile goes out, whether the held put was a period's end (all of the queue) or an
  * early full batch (the stretch's end, which would publish the rest, came during the put).
