@@ -38,6 +38,7 @@ struct zn_can {
 	 * call only the entries it filled are reset (a call costs what it returns, not 64) */
 	size_t rx_used;
 	int rx_emptied; /* the last call returned less than it asked: nothing was left queued */
+	int rcvtimeo_ms; /* the socket's SO_RCVTIMEO as last set (0: none) */
 	struct mmsghdr mm[ZN_CAN_BURST_MAX];
 	struct iovec iov[ZN_CAN_BURST_MAX];
 	struct can_frame frames[ZN_CAN_BURST_MAX];
@@ -197,6 +198,21 @@ esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns,
 	}
 }
 
+/* Sets the socket's receive timeout for the blocking read that follows (0: none, just a
+ * flag on the socket; only changed when it differs from the last one set). */
+static int set_receive_timeout(zn_can_t *can, int timeout_ms)
+{
+	if (timeout_ms < 0)
+		timeout_ms = 0; /* SO_RCVTIMEO's "for ever" */
+	if (timeout_ms == can->rcvtimeo_ms)
+		return 0;
+	struct timeval tv = { .tv_sec = timeout_ms / 1000, .tv_usec = (timeout_ms % 1000) * 1000 };
+	if (setsockopt(can->fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv)) < 0)
+		return -1;
+	can->rcvtimeo_ms = timeout_ms;
+	return 0;
+}
+
 esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size_t *count, int timeout_ms)
 {
 	*count = 0;
@@ -204,27 +220,32 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		return ESP_ERR_INVALID_ARG;
 	if (max > ZN_CAN_BURST_MAX)
 		max = ZN_CAN_BURST_MAX;
-	/* read first under load (a burst costs one syscall); after a call that emptied the
-	 * socket, wait first: a read now would most likely find nothing */
-	int polled = timeout_ms == 0; /* a call without a timeout never waits */
-	if (can->rx_emptied && !polled) {
-		esp_err_t err = wait_readable(can->fd, timeout_ms);
-		if (err != ESP_OK)
-			return err;
-		polled = 1;
-	}
+	/* Under load a burst costs one non-blocking read. After a call that emptied the socket a
+	 * read now would most likely find nothing: wait in the read itself (MSG_WAITFORONE with
+	 * SO_RCVTIMEO: blocks for the first frame, then takes what else is there), one syscall a
+	 * wakeup where a poll and a read were two. One wait per call: a wait that brought only
+	 * error frames ends the call as a timeout does, so a call never waits much beyond
+	 * timeout_ms. A signal ends the wait as a timeout does (a socket with a receive timeout
+	 * is never restarted): the caller comes back. */
+	int wait = can->rx_emptied && timeout_ms != 0, waited = 0;
 	for (;;) {
 		for (size_t i = 0; i < can->rx_used; i++) /* what the last call's messages changed */
 			can->mm[i].msg_hdr.msg_controllen = sizeof(can->control[i]);
 		can->rx_used = 0;
-		int n = recvmmsg(can->fd, can->mm, (unsigned)max, MSG_DONTWAIT, NULL);
+		if (wait && set_receive_timeout(can, timeout_ms) < 0)
+			return ESP_FAIL;
+		int n = recvmmsg(can->fd, can->mm, (unsigned)max, wait ? MSG_WAITFORONE : MSG_DONTWAIT, NULL);
+		waited |= wait;
+		wait = 0;
 		if (n > 0)
 			can->rx_used = (size_t)n;
 		can->rx_emptied = n < (int)max;
 		if (n < 0) {
-			esp_err_t err = wait_after_empty_read(can->fd, timeout_ms, &polled);
-			if (err != ESP_OK)
-				return err;
+			if (errno != EAGAIN && errno != EINTR)
+				return ESP_FAIL;
+			if (waited || timeout_ms == 0)
+				return ESP_ERR_TIMEOUT;
+			wait = 1;
 			continue;
 		}
 		int64_t now = 0;
@@ -242,6 +263,8 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		}
 		if (*count)
 			return ESP_OK;
+		if (waited && n < (int)max)
+			return ESP_ERR_TIMEOUT; /* the wait brought only error frames, and nothing else is queued */
 	}
 }
 
