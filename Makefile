@@ -236,7 +236,7 @@ check: setup
 # -- host set-up: make check installs what it needs (scripts/host-deps: apt-get as root or with
 # passwordless sudo, else it names the command), Python packages into $(VENV)/ --------------
 HOST_APT_CHECK := gcc libc6-dev python3 python3-venv can-utils cmake ninja-build clang libclang-rt-14-dev \
-                  iproute2 util-linux qemu-system-x86 busybox-static cpio kmod \
+                  iproute2 util-linux qemu-system-x86 busybox-static cpio kmod gdb \
                   gcc-riscv64-unknown-elf picolibc-riscv64-unknown-elf
 setup:
 	@scripts/host-deps "make check" $(HOST_APT_CHECK)

@@ -240,6 +240,51 @@ def session(router):
     s.close()
 
 
+THREAD_DUMP_TIMEOUT_S = 60.0
+THREAD_DUMP_MAX_CHARS = 60_000
+
+
+def thread_dump(pid: int) -> str:
+    """Every thread of a live process: name, state and the syscall it sleeps in (/proc), then each
+    stack (gdb, where installed). What a failing bridge test records before teardown stops the
+    bridge: a hang that happens once in a hundred CI runs is then read, not guessed."""
+    lines = []
+    for task in sorted(Path(f"/proc/{pid}/task").glob("*"), key=lambda t: int(t.name)):
+        try:
+            name = (task / "comm").read_text().strip()
+            state = next(ln.split(None, 1)[1] for ln in (task / "status").read_text().splitlines()
+                         if ln.startswith("State:"))
+            syscall = (task / "syscall").read_text().split()[0]
+            wchan = (task / "wchan").read_text().strip()
+        except (OSError, StopIteration):  # a thread that ended meanwhile
+            continue
+        lines.append(f"{task.name} {name}: {state}, syscall {syscall}, wchan {wchan or '-'}")
+    gdb = shutil.which("gdb")
+    if not gdb:
+        lines.append("(gdb not installed: no stacks)")
+    else:
+        try:
+            run = subprocess.run([gdb, "-p", str(pid), "-batch", "-nx", "-ex", "set pagination off",
+                                  "-ex", "thread apply all bt"], capture_output=True, text=True,
+                                 timeout=THREAD_DUMP_TIMEOUT_S)
+            lines.append(run.stdout[-THREAD_DUMP_MAX_CHARS:] or run.stderr[-2000:])
+        except subprocess.TimeoutExpired:
+            lines.append(f"(gdb took over {THREAD_DUMP_TIMEOUT_S:.0f} s: no stacks)")
+    return "\n".join(lines)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A test that failed while its bridge still runs gets the bridge's thread dump in its report."""
+    outcome = yield
+    report = outcome.get_result()
+    if call.when != "call" or not report.failed:
+        return
+    proc = getattr(getattr(item, "funcargs", {}).get("bridge"), "proc", None)
+    if proc is not None and proc.poll() is None:
+        report.sections.append(("the bridge's threads when the test failed", thread_dump(proc.pid)))
+
+
 @pytest.fixture
 def bridge(bus, router):
     b = Bridge(bus, router)
