@@ -244,32 +244,41 @@ THREAD_DUMP_TIMEOUT_S = 60.0
 THREAD_DUMP_MAX_CHARS = 60_000
 
 
+def read_field(task: Path, name: str, pick=lambda text: text.strip()) -> str:
+    """One /proc file of a thread, '?' where it cannot be read (ended meanwhile, or not ours to trace)."""
+    try:
+        return pick((task / name).read_text()) or "-"
+    except (OSError, StopIteration, IndexError):
+        return "?"
+
+
 def thread_dump(pid: int) -> str:
     """Every thread of a live process: name, state and the syscall it sleeps in (/proc), then each
-    stack (gdb, where installed). What a failing bridge test records before teardown stops the
-    bridge: a hang that happens once in a hundred CI runs is then read, not guessed."""
+    stack (gdb, where installed and allowed to attach). What a failing bridge test records before
+    teardown stops the bridge: a hang that happens once in a hundred CI runs is then read, not guessed."""
     lines = []
     for task in sorted(Path(f"/proc/{pid}/task").glob("*"), key=lambda t: int(t.name)):
-        try:
-            name = (task / "comm").read_text().strip()
-            state = next(ln.split(None, 1)[1] for ln in (task / "status").read_text().splitlines()
-                         if ln.startswith("State:"))
-            syscall = (task / "syscall").read_text().split()[0]
-            wchan = (task / "wchan").read_text().strip()
-        except (OSError, StopIteration):  # a thread that ended meanwhile
-            continue
-        lines.append(f"{task.name} {name}: {state}, syscall {syscall}, wchan {wchan or '-'}")
+        state = read_field(task, "status", lambda t: next(ln.split(None, 1)[1] for ln in t.splitlines()
+                                                          if ln.startswith("State:")))
+        syscall = read_field(task, "syscall", lambda t: t.split()[0])
+        lines.append(f"{task.name} {read_field(task, 'comm')}: {state}, syscall {syscall}, "
+                     f"wchan {read_field(task, 'wchan')}")
     gdb = shutil.which("gdb")
     if not gdb:
         lines.append("(gdb not installed: no stacks)")
-    else:
-        try:
-            run = subprocess.run([gdb, "-p", str(pid), "-batch", "-nx", "-ex", "set pagination off",
-                                  "-ex", "thread apply all bt"], capture_output=True, text=True,
-                                 timeout=THREAD_DUMP_TIMEOUT_S)
-            lines.append(run.stdout[-THREAD_DUMP_MAX_CHARS:] or run.stderr[-2000:])
-        except subprocess.TimeoutExpired:
-            lines.append(f"(gdb took over {THREAD_DUMP_TIMEOUT_S:.0f} s: no stacks)")
+        return "\n".join(lines)
+    try:
+        run = subprocess.run([gdb, "-p", str(pid), "-batch", "-nx", "-ex", "set pagination off",
+                              "-ex", "set debuginfod enabled off", "-ex", "thread apply all bt"],
+                             capture_output=True, text=True, errors="replace", timeout=THREAD_DUMP_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        lines.append(f"(gdb took over {THREAD_DUMP_TIMEOUT_S:.0f} s: no stacks)")
+        return "\n".join(lines)
+    if "Thread " in run.stdout:
+        lines.append(run.stdout[-THREAD_DUMP_MAX_CHARS:])
+    else:  # e.g. Yama's ptrace_scope 1: gdb is the process's sibling, not its parent
+        why = [ln for ln in run.stderr.splitlines() if ln.strip()][-1:] or ["no output"]
+        lines.append(f"(gdb could not attach: {why[0]})")
     return "\n".join(lines)
 
 
@@ -282,7 +291,11 @@ def pytest_runtest_makereport(item, call):
         return
     proc = getattr(getattr(item, "funcargs", {}).get("bridge"), "proc", None)
     if proc is not None and proc.poll() is None:
-        report.sections.append(("the bridge's threads when the test failed", thread_dump(proc.pid)))
+        try:
+            dump = thread_dump(proc.pid)
+        except Exception as e:  # noqa: BLE001 - a diagnostic must never turn a failure into an internal error
+            dump = f"(no thread dump: {e!r})"
+        report.sections.append(("the bridge's threads when the test failed", dump))
 
 
 @pytest.fixture
