@@ -135,31 +135,6 @@ static int64_t stamp_of(struct msghdr *mh, int64_t fallback)
 	return fallback;
 }
 
-/* Waits up to timeout_ms for something to read: ESP_OK, ESP_ERR_TIMEOUT (a signal ends the
- * wait as a timeout does: the caller comes back), ESP_FAIL. */
-static esp_err_t wait_readable(int fd, int timeout_ms)
-{
-	struct pollfd pfd = { .fd = fd, .events = POLLIN };
-	int rc = poll(&pfd, 1, timeout_ms);
-	if (rc == 0)
-		return ESP_ERR_TIMEOUT;
-	if (rc < 0)
-		return errno == EINTR ? ESP_ERR_TIMEOUT : ESP_FAIL;
-	return ESP_OK;
-}
-
-/* After a read that found nothing: ESP_OK once a wait (one per call: *waited) says there is
- * something to read, else what the call returns (ESP_ERR_TIMEOUT; ESP_FAIL on a socket error). */
-static esp_err_t wait_after_empty_read(int fd, int timeout_ms, int *waited)
-{
-	if (errno != EAGAIN && errno != EINTR)
-		return ESP_FAIL;
-	if (*waited)
-		return ESP_ERR_TIMEOUT;
-	*waited = 1;
-	return wait_readable(fd, timeout_ms);
-}
-
 /* The tx queue is full: waits for room until deadline (monotonic ns); 0 once it has passed. */
 static int wait_writable(int fd, int64_t deadline)
 {
@@ -169,33 +144,6 @@ static int wait_writable(int fd, int64_t deadline)
 	struct pollfd pfd = { .fd = fd, .events = POLLOUT };
 	poll(&pfd, 1, left_ms);
 	return 1;
-}
-
-esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
-{
-	struct can_frame frame;
-	char control[CMSG_SPACE(sizeof(struct timespec))];
-	struct iovec iov = { .iov_base = &frame, .iov_len = sizeof(frame) };
-	struct msghdr mh = { .msg_iov = &iov, .msg_iovlen = 1, .msg_control = control };
-
-	for (int polled = 0;;) {
-		/* read first, poll only when nothing is queued: under load a frame costs one syscall */
-		mh.msg_controllen = sizeof(control);
-		ssize_t n = recvmsg(can->fd, &mh, MSG_DONTWAIT);
-		if (n < 0) {
-			esp_err_t err = wait_after_empty_read(can->fd, timeout_ms, &polled);
-			if (err != ESP_OK)
-				return err;
-			continue;
-		}
-		if (n == 0)
-			return ESP_FAIL; /* end of file: not a CAN socket any more */
-		if (n != sizeof(frame) || (frame.can_id & CAN_ERR_FLAG))
-			continue; /* error frames and anything unexpected are not bridged */
-		*rx_time_ns = stamp_of(&mh, zn_realtime_ns());
-		from_frame(&frame, msg);
-		return ESP_OK;
-	}
 }
 
 /* Sets the socket's receive timeout for the blocking read that follows (0: none, just a
@@ -266,6 +214,19 @@ esp_err_t zn_can_receive_burst(zn_can_t *can, zn_can_rx_t *out, size_t max, size
 		if (waited && n < (int)max)
 			return ESP_ERR_TIMEOUT; /* the wait brought only error frames, and nothing else is queued */
 	}
+}
+
+/* One frame: a burst of one, so both calls wait the same way. */
+esp_err_t zn_can_receive(zn_can_t *can, can_message_t *msg, int64_t *rx_time_ns, int timeout_ms)
+{
+	zn_can_rx_t rx;
+	size_t n = 0;
+	esp_err_t err = zn_can_receive_burst(can, &rx, 1, &n, timeout_ms);
+	if (err == ESP_OK) {
+		*msg = rx.msg;
+		*rx_time_ns = rx.rx_time_ns;
+	}
+	return err;
 }
 
 size_t zn_can_rx_capacity(zn_can_t *can)
