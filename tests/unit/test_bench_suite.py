@@ -53,6 +53,9 @@ s=$1 name=$(basename "$1" .yaml)
 echo "start $name $(date +%s%N)" >>"$FAKE_LOG"
 code=$(sed -n 's/^# exit: //p' "$s")
 sleep 0.5 # the run's work
+if [ -n "${FAKE_UNTIL:-}" ]; then # a longer run: until the suite's output shows FAKE_UNTIL (30 s at most)
+	for _ in $(seq 300); do grep -qF "$FAKE_UNTIL" "$FAKE_OUT" && break; sleep 0.1; done
+fi
 echo "stop $name $(date +%s%N)" >>"$FAKE_LOG"
 printf '%s\\t%s\\t%s\\t%s\\n' "$s" "run-$name" "${code:-0}" 1 >>"$BENCH_SUITE_DIR/runs.tsv"
 exit "${code:-0}"
@@ -77,8 +80,15 @@ def bench(tmp_path):
     env = {**os.environ, "PATH": f"{bins}:{os.environ['PATH']}", "FAKE_LOG": str(tmp_path / "log")}
 
     def run(names: list[str], **extra: str) -> subprocess.CompletedProcess:
-        return subprocess.run([str(root / "scripts" / "bench-suite"), *[f"sc/{n}.yaml" for n in names]],
-                              cwd=root, env={**env, **extra}, capture_output=True, text=True, timeout=120)
+        """bench-suite on names; with OUT_FILE its stdout goes there as it is written (a run can wait on it)."""
+        cmd = [str(root / "scripts" / "bench-suite"), *[f"sc/{n}.yaml" for n in names]]
+        if "OUT_FILE" not in extra:
+            return subprocess.run(cmd, cwd=root, env={**env, **extra}, capture_output=True, text=True, timeout=120)
+        with open(extra["OUT_FILE"], "w") as out:
+            proc = subprocess.run(cmd, cwd=root, env={**env, **extra}, stdout=out, stderr=subprocess.PIPE,
+                                  text=True, timeout=120)
+        proc.stdout = Path(extra["OUT_FILE"]).read_text()
+        return proc
 
     def add(name: str, duration: int = 10, code: int = 0, text: str | None = None) -> None:
         body = text if text is not None else SCENARIO.format(name=name, duration=duration)
@@ -123,6 +133,19 @@ def test_jobs_run_concurrently_and_the_summary_covers_all(bench):
     assert sorted((r["scenario"], r["exit_code"]) for r in summary["runs"]) == [
         ("sc/s0.yaml", 0), ("sc/s1.yaml", 0), ("sc/s2.yaml", 1), ("sc/s3.yaml", 0)]
     assert summary["jobs"] == 2 and (root / "reports" / "latest-suite" / "index.html").exists()
+
+
+def test_progress_before_the_first_run_ends(bench, tmp_path):
+    """The progress line counts 0 finished runs while the first still runs, and says nothing else
+    (it once printed the shell's "runs.tsv: No such file or directory" first)."""
+    run, add, events, root = bench
+    add("long")
+    out = tmp_path / "suite.out"
+    proc = run(["long"], PROGRESS_S="0.2", FAKE_UNTIL="suite: 0 of 1 done; running: long", FAKE_OUT=str(out),
+               OUT_FILE=str(out))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "suite: 0 of 1 done; running: long (" in out.read_text()
+    assert "runs.tsv" not in proc.stderr and "No such file" not in proc.stderr, proc.stderr
 
 
 def test_serial_is_one_at_a_time(bench):
