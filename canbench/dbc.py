@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 from functools import lru_cache
 from pathlib import Path
 
@@ -113,6 +114,43 @@ def name_problem(signal, value: str, in_yaml: bool = True) -> str | None:
         return f"YAML reads {value!r} as text, not a number for {signal.name}: write {form}"
     return (f"{value!r} is not in {signal.name}'s value table {names}" if names
             else f"{signal.name} has no value table: give a number")
+
+
+def as_raw(signal, value: float) -> int | float:
+    """The raw value a frame carries for a physical value: an integer signal's nearest raw integer
+    (exact for 64-bit values: Python ints), a float signal's value at its width (a 32-bit float
+    rounded as the frame stores it). Values are compared raw, so a gate is exactly as strict as
+    the signal's own resolution."""
+    raw = signal.conversion.numeric_scaled_to_raw(value)
+    if signal.is_float:
+        raw = float(raw)
+        if signal.length == 32 and math.isfinite(raw) and abs(raw) <= 3.4028234663852886e38:
+            raw = struct.unpack("<f", struct.pack("<f", raw))[0]
+    return raw
+
+
+def raws_of(signal, value) -> tuple[int | float, ...]:
+    """Every raw value a scenario's value stands for: a value-table name each raw value the table
+    gives that name (tables may name several values alike: 1 'off' 0 'off'), a number its raw."""
+    if isinstance(value, str):
+        return tuple(raw for raw, name in (signal.choices or {}).items() if str(name) == value)
+    return (as_raw(signal, value),)
+
+
+def grid_problem(signal, value: float) -> str | None:
+    """Why a number is between two values an integer signal can carry (None if it is one of them):
+    an equality gate on it could never be met. Float signals carry any number (at their width)."""
+    if signal.is_float or isinstance(value, bool):
+        return None
+    raw = as_raw(signal, value)
+    carried = signal.conversion.raw_to_scaled(raw, decode_choices=False)
+    scale = abs(signal.conversion.scale) or 1
+    if carried == value or math.isclose(carried, value, rel_tol=1e-9, abs_tol=scale * 1e-6):
+        return None
+    lo, hi = sorted((carried, signal.conversion.raw_to_scaled(raw + (1 if value > carried else -1),
+                                                               decode_choices=False)))
+    return (f"{value:g} is not a value {signal.name} carries (steps of {signal.conversion.scale:g} from "
+            f"{signal.conversion.offset:g}): {lo:.10g} or {hi:.10g}")
 
 
 def value_range(signal) -> tuple[float, float, str]:

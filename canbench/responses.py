@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .dbc import name_problem, range_problem, value_range
+from .dbc import grid_problem, name_problem, range_problem, raws_of, value_range
 from .stats import latency_stats
 
 if TYPE_CHECKING:
@@ -34,15 +34,18 @@ CONDITIONS = ("equals", "range", "one_of")
 
 @dataclass(frozen=True)
 class Condition:
-    """A condition on one signal's physical value (value-table names already numbers)."""
-    equals: float | None = None
+    """A condition on one signal's physical value (value-table names already numbers: equals a name
+    several values share is any of them). Values stay exact (a 64-bit integer is a Python int) and
+    a float signal's are at its width, so the default tolerance (half a step; none for floats) is
+    as strict as the signal."""
+    equals: tuple[float, ...] | None = None
     tolerance: float = 0.0
     range: tuple[float, float] | None = None
     one_of: tuple[float, ...] | None = None
     text: str = ""
 
     def met(self, value: float) -> bool:
-        if self.equals is not None and abs(value - self.equals) > self.tolerance:
+        if self.equals is not None and not any(abs(value - v) <= self.tolerance for v in self.equals):
             return False
         if self.range is not None and not self.range[0] <= value <= self.range[1]:
             return False
@@ -51,10 +54,9 @@ class Condition:
         return True
 
 
-def _number(signal, value) -> float:
-    if isinstance(value, str):
-        return float(signal.choice_to_number(value))
-    return float(value)
+def _numbers(signal, value) -> tuple[float, ...]:
+    """The physical values a condition's value stands for, as frames carry them (dbc.raws_of)."""
+    return tuple(signal.conversion.raw_to_scaled(raw, decode_choices=False) for raw in raws_of(signal, value))
 
 
 def value_problem(signal, value) -> str | None:
@@ -63,7 +65,7 @@ def value_problem(signal, value) -> str | None:
     if isinstance(value, str):
         return name_problem(signal, value)
     if isinstance(value, int | float) and not isinstance(value, bool):
-        return range_problem(signal, value)
+        return range_problem(signal, value) or grid_problem(signal, value)
     return None  # the schema's
 
 
@@ -97,13 +99,13 @@ def condition(signal, spec: dict) -> Condition:
     parts = []
     equals = rng = one_of = None
     if "equals" in spec:
-        equals = _number(signal, spec["equals"])
+        equals = _numbers(signal, spec["equals"])
         parts.append(f"== {spec['equals']}" + (f" +-{spec['tolerance']}" if "tolerance" in spec else ""))
     if "range" in spec:
         rng = (float(spec["range"][0]), float(spec["range"][1]))
         parts.append(f"in [{rng[0]:g}, {rng[1]:g}]")
     if "one_of" in spec:
-        one_of = tuple(_number(signal, v) for v in spec["one_of"])
+        one_of = tuple(n for v in spec["one_of"] for n in _numbers(signal, v))
         parts.append(f"one of {list(spec['one_of'])}")
     return Condition(equals, tol, rng, one_of, " and ".join(parts) or "present")
 
@@ -118,7 +120,7 @@ class Rule:
     then: Condition
     side: str = "zenoh"
     command: Any = None     # cantools Message of a command stimulus
-    command_signals: tuple = ()  # ((signal, value, tolerance), ...)
+    command_signals: tuple = ()  # ((signal, the values it stands for, tolerance), ...)
     stimulus_message: Any = None  # cantools Message of a bus-signal stimulus
     stimulus_signal: str = ""
     when: Condition | None = None
@@ -127,7 +129,7 @@ class Rule:
 
     def stimulus_text(self) -> str:
         if self.command is not None:
-            carried = ", ".join(f"{s} = {v:g}" for s, v, _ in self.command_signals)
+            carried = ", ".join(f"{s} = {' or '.join(f'{v:g}' for v in vs)}" for s, vs, _ in self.command_signals)
             return f"{self.command.name}" + (f" {{{carried}}}" if carried else "") + " put"
         assert self.when is not None
         return f"{self.stimulus_message.name}.{self.stimulus_signal} {self.when.text} on the bus"
@@ -202,7 +204,7 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
                     fail([*where, "when", "signals", name], problem)
                     bad = True
                     continue
-                carried.append((name, _number(s, value), s.scale / 2 if not s.is_float else 0.0))
+                carried.append((name, _numbers(s, value), s.scale / 2 if not s.is_float else 0.0))
             if not bad:
                 out.append(Rule(**rule, command=command, command_signals=tuple(carried)))
         else:
@@ -229,7 +231,7 @@ def _values(message, signal: str, frames: list[oracle.Observed]) -> list[tuple[o
         except Exception:  # noqa: BLE001 - a frame the DBC cannot decode is no value
             continue
         if isinstance(value, int | float) and math.isfinite(value):
-            out.append((o, float(value)))
+            out.append((o, value))  # exact: a 64-bit integer keeps its last bit
     return out
 
 
@@ -244,7 +246,7 @@ def stimuli(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracle
                 decoded = rule.command.decode(f.data, decode_choices=False)
             except Exception:  # noqa: BLE001
                 continue
-            if all(abs(float(decoded[s]) - v) <= tol for s, v, tol in rule.command_signals):
+            if all(any(abs(decoded[s] - v) <= tol for v in vs) for s, vs, tol in rule.command_signals):
                 out.append(o)
         return out
     assert rule.when is not None

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import wire
-from .dbc import load_dbc, message_of, range_problem, value_range
+from .dbc import grid_problem, load_dbc, message_of, range_problem, raws_of, value_range
 from .scenario import text_number
 
 if TYPE_CHECKING:
@@ -48,15 +48,20 @@ class Gate:
     buses: tuple[str, ...]        # the buses it is judged on
     unit: str = ""
     range: tuple[float, float] | None = None
-    equals: float | None = None
-    one_of: tuple[float, ...] | None = None
+    equals: float | None = None               # as given (shown, plotted)
+    one_of: tuple[float, ...] | None = None   # every value asked for, a name's values all
     max_rate: float | None = None  # unit per second
     present: int | None = None
     names: dict[float, str] = field(default_factory=dict)  # value-table names of the values above
+    # equals and one_of as the raw values a frame carries (dbc.raws_of): judged exactly, so a 64-bit
+    # integer or a 32-bit float is as strict as its bits, and a name stands for every value it names
+    equals_raw: frozenset = frozenset()
+    one_of_raw: frozenset = frozenset()
 
-    def show(self, value: float) -> str:
-        """A value as a user reads it: the number, its unit, and its value-table name."""
-        text = f"{_num(value)}{' ' + self.unit if self.unit else ''}"
+    def show(self, value: float, number: str | None = None) -> str:
+        """A value as a user reads it: the number (as given, else 6 digits), its unit, and its
+        value-table name."""
+        text = f"{number or _num(value)}{' ' + self.unit if self.unit else ''}"
         name = self._name(value)
         return f"{text} ({name})" if name else text
 
@@ -70,7 +75,7 @@ class Gate:
         if self.equals is not None:
             parts.append(f"= {self._name(self.equals) or _num(self.equals)}")
         if self.one_of is not None:
-            parts.append("one of [" + ", ".join(self._name(v) or _num(v) for v in self.one_of) + "]")
+            parts.append("one of [" + ", ".join(dict.fromkeys(self._name(v) or _num(v) for v in self.one_of)) + "]")
         if self.max_rate is not None:
             parts.append(f"rate <= {_num(self.max_rate)}{' ' + self.unit if self.unit else ''}/s")
         if self.present is not None:
@@ -79,11 +84,18 @@ class Gate:
 
 
 def _num(v: float) -> str:
-    return f"{v:.6g}"
+    return str(v) if isinstance(v, int) else f"{v:.6g}"
 
 
-def _close(a: float, b: float) -> bool:
-    return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9)
+def _apart(a: float, b: float) -> tuple[str, str]:
+    """Two values shown with as many digits as it takes to tell them apart (a 32-bit float's 1.1
+    and 1.1 asked for are 1.10000002 and 1.1)."""
+    for digits in (6, 9, 12, 17):
+        x = str(a) if isinstance(a, int) else f"{a:.{digits}g}"
+        y = str(b) if isinstance(b, int) else f"{b:.{digits}g}"
+        if x != y:
+            return x, y
+    return _num(a), _num(b)
 
 
 # ---- validation: the scenario's expect.signals against the buses' DBCs ----
@@ -176,10 +188,11 @@ def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where
     names: dict[float, str] = {}
     ok = True
 
-    def value(v, at: list) -> float | None:
+    def value(v, at: list) -> list[tuple[float, int | float]]:
+        """(physical, raw) of each value v stands for (a name: every value it names)."""
         nonlocal ok
         if isinstance(v, bool) or not isinstance(v, int | float | str):
-            return None  # the schema refused it
+            return []  # the schema refused it
         if isinstance(v, str):
             if v not in choices:
                 form = text_number(v)  # a value-table name first, even one that looks like a number
@@ -187,23 +200,27 @@ def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where
                 fail(at, f"YAML reads {v!r} as text, not a number for {key}: write {form}" if form
                      else f"{v!r} is not in {key}'s value table{listed}")
                 ok = False
-                return None
-            scaled = float(signal.conversion.raw_to_scaled(choices[v], decode_choices=False))
-            names[scaled] = v
-            return scaled
-        problem = range_problem(signal, v)  # a value no frame can carry: the gate could only fail
+                return []
+            pairs = [(signal.conversion.raw_to_scaled(raw, decode_choices=False), raw) for raw in raws_of(signal, v)]
+            for scaled, _ in pairs:
+                names[float(scaled)] = v
+            return pairs
+        problem = range_problem(signal, v) or grid_problem(signal, v)  # no frame carries it: could only fail
         if problem:
             fail(at, problem)
             ok = False
-            return None
-        return float(v)
+            return []
+        return [(v, raws_of(signal, v)[0])]
 
     rng = spec.get("range")
-    equals = value(spec["equals"], [*where, "equals"]) if "equals" in spec else None
-    one_of = None
+    equals, equals_raw = None, frozenset[int | float]()
+    if "equals" in spec:
+        pairs = value(spec["equals"], [*where, "equals"])
+        equals, equals_raw = (pairs[0][0] if pairs else None), frozenset(raw for _, raw in pairs)
+    one_of, one_of_raw = None, frozenset[int | float]()
     if isinstance(spec.get("one_of"), list):
-        values = [value(v, [*where, "one_of", i]) for i, v in enumerate(spec["one_of"])]
-        one_of = tuple(v for v in values if v is not None)
+        pairs = [p for i, v in enumerate(spec["one_of"]) for p in value(v, [*where, "one_of", i])]
+        one_of, one_of_raw = tuple(scaled for scaled, _ in pairs), frozenset(raw for _, raw in pairs)
     if isinstance(rng, list) and len(rng) == 2 and all(isinstance(x, int | float) for x in rng) and rng[0] > rng[1]:
         fail([*where, "range"], f"min {rng[0]} is above max {rng[1]}")
         ok = False
@@ -221,7 +238,7 @@ def _gate(key: str, message: str, signal, on: tuple[str, ...], spec: dict, where
     return Gate(key, message, signal.name, on, signal.unit or "",
                 (float(rng[0]), float(rng[1])) if isinstance(rng, list) and len(rng) == 2 else None,
                 equals, one_of, float(spec["max_rate"]) if "max_rate" in spec else None,
-                int(spec["present"]) if "present" in spec else None, names)
+                int(spec["present"]) if "present" in spec else None, names, equals_raw, one_of_raw)
 
 
 # ---- evaluation: one streaming pass per side and bus ----
@@ -262,11 +279,15 @@ class Series:
             self.marks.append((t_s, value))
 
     def add(self, t_ns: int, t0_ns: int, value: float, where: str | Callable[[], str],
-            rate_t_ns: int | None = None) -> None:
+            rate_t_ns: int | None = None, raw: int | float | None = None, exact: float | None = None) -> None:
         """One decoded value; where names its frame (a function giving that is called only for a
         violation, so good values build no strings); rate_t_ns: the time its rate is judged at
-        (default t_ns; on Zenoh the bus stamp of the frame it was, as a batch arrives at once)."""
+        (default t_ns; on Zenoh the bus stamp of the frame it was, as a batch arrives at once);
+        raw: what the frame carries, for equals and one_of (default: value); exact: the physical
+        value before it became a float (a 64-bit integer's every digit), for the messages."""
         g = self.gate
+        raw = value if raw is None else raw
+        exact = value if exact is None else exact
         rate_t = t_ns if rate_t_ns is None else rate_t_ns
         t_s = (t_ns - t0_ns) / 1e9
 
@@ -275,11 +296,14 @@ class Series:
         if g.range and not g.range[0] <= value <= g.range[1]:
             self.violate(f"{g.key} = {g.show(value)} outside [{_num(g.range[0])}, {_num(g.range[1])}] {at()}",
                          t_s, value)
-        if g.equals is not None and not _close(value, g.equals):
-            self.violate(f"{g.key} = {g.show(value)}, expected {g.show(g.equals)} {at()}", t_s, value)
-        if g.one_of is not None and not any(_close(value, v) for v in g.one_of):
-            self.violate(f"{g.key} = {g.show(value)} not one of [{', '.join(g._name(v) or _num(v) for v in g.one_of)}]"
-                         f" {at()}", t_s, value)
+        if g.equals is not None and raw not in g.equals_raw:
+            seen, asked = _apart(exact, g.equals)
+            expected = (g.show(g.equals, asked) if len(g.equals_raw) <= 1
+                        else f"{g._name(g.equals)} (each of the {len(g.equals_raw)} values it names)")
+            self.violate(f"{g.key} = {g.show(value, seen)}, expected {expected} {at()}", t_s, value)
+        if g.one_of is not None and raw not in g.one_of_raw:
+            listed = list(dict.fromkeys(g._name(v) or _num(v) for v in g.one_of))
+            self.violate(f"{g.key} = {g.show(value, _num(exact))} not one of [{', '.join(listed)}] {at()}", t_s, value)
         if g.max_rate is not None and self.last_t_ns is not None and self.last_value is not None:
             dt = (rate_t - self.last_t_ns) / 1e9
             change = abs(value - self.last_value)
@@ -321,6 +345,13 @@ class Evaluator:
                 self.series[g.key] = s
                 self.by_message.setdefault(g.message, []).append(s)
         self._messages: dict[tuple[int, bool], Any] = {}
+        self._conversions: dict[tuple[str, str], Any] = {}
+
+    def _conversion(self, message, signal: str):
+        k = (message.name, signal)
+        if k not in self._conversions:
+            self._conversions[k] = message.get_signal_by_name(signal).conversion
+        return self._conversions[k]
 
     def _message(self, frame: wire.Frame):
         k = (frame.can_id, frame.extended)
@@ -339,8 +370,8 @@ class Evaluator:
         if message is None:
             return
         series = self.by_message[message.name]
-        try:
-            decoded = message.decode(frame.data, decode_choices=False)
+        try:  # raw values: equals and one_of are judged on what the frame carries
+            decoded = message.decode(frame.data, decode_choices=False, scaling=False)
         except Exception as e:  # noqa: BLE001 - cantools' errors name what does not fit
             t_s = (t_ns - self.t0_ns) / 1e9
             for s in series:
@@ -349,9 +380,10 @@ class Evaluator:
                           f"{where() if callable(where) else where}", t_s, None)
             return
         for s in series:
-            value = decoded.get(s.gate.signal)
-            if isinstance(value, int | float):  # else a multiplexed signal not selected in this frame
-                s.add(t_ns, self.t0_ns, float(value), where, rate_t_ns)
+            raw = decoded.get(s.gate.signal)
+            if isinstance(raw, int | float):  # else a multiplexed signal not selected in this frame
+                exact = self._conversion(message, s.gate.signal).raw_to_scaled(raw, decode_choices=False)
+                s.add(t_ns, self.t0_ns, float(exact), where, rate_t_ns, raw, exact)
 
     def finish(self) -> list[Series]:
         side_name = "on the bus" if self.side == "can" else "on Zenoh"
@@ -370,13 +402,33 @@ class SignalRun:
         return [s for s in self.series if s.side == side]
 
     def problems(self, side: str) -> list[str]:
-        out = []
+        out = self._judged_nothing(side)
         for s in self.of(side):
             if s.violation_count:
                 shown = "; ".join(s.violations)
                 out.append(f"{s.bus} {s.gate.key}: {s.violation_count} violation"
                            f"{'s' if s.violation_count > 1 else ''}: {shown}"
                            + (f"; ... ({s.more} more)" if s.more else ""))
+        return out
+
+    def _judged_nothing(self, side: str) -> list[str]:
+        """A gate with no value on any of its buses judged nothing, and passing it would say the
+        signal was right: a problem on the bus (the message never sent, its multiplexer page never
+        selected, an address the DBC's id does not have); on Zenoh only where the bus had values."""
+        counts: dict[str, dict[str, int]] = {}
+        for s in self.series:
+            counts.setdefault(s.gate.key, {}).setdefault(s.side, 0)
+            counts[s.gate.key][s.side] += s.count + s.violation_count  # an undecodable frame was judged
+        out = []
+        for s in self.of(side):
+            key = s.gate.key
+            if key in counts and counts[key].get(side) == 0 and (side == "can" or counts[key].get("can", 0) > 0):
+                buses = sorted({x.bus for x in self.of(side) if x.gate.key == key})
+                where = "on the bus" if side == "can" else "on Zenoh"
+                out.append(f"{', '.join(buses)} {key}: no value {where}, so the gate judged nothing "
+                           f"({s.gate.message} never {'sent' if side == 'can' else 'arrived'}, or never with "
+                           "this signal's multiplexer page)")
+                del counts[key]
         return out
 
     def summary(self) -> dict:
