@@ -266,7 +266,37 @@ def _values_over(doc: Any, limit: int, each_once: bool = False) -> bool:
 MAX_SAID = 300  # characters of a schema message (it holds the value: a long list would be a page)
 
 
+def _key_problems(path: Path, doc: Any) -> list[ScenarioError]:
+    """Mapping keys YAML read as something other than text (an id written 440 or 0x647 is a number
+    to it, yes a boolean): every key of a scenario is a name or an id, so each is a problem at its
+    line, said before the schema (whose patterns cannot look at a number) is asked."""
+    problems: list[ScenarioError] = []
+    stack: list[tuple[Any, list]] = [(doc, [])]
+    while stack:
+        node, at = stack.pop()
+        items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+        for key, value in items:
+            if isinstance(node, dict) and not isinstance(key, str):
+                where = ".".join(str(p) for p in at) or "(top level)"
+                problems.append(ScenarioError(str(path), _line_of(doc, [*at, key]), (
+                    f"{where}: YAML reads the key as {_yaml_kind(key)}, not text: quote it as "
+                    "written (an id such as 440 or 0x647 is a number to YAML unquoted: '440', '0x647')")))
+            stack.append((value, [*at, key]))
+    return sorted(problems, key=lambda e: e.line or 0)
+
+
+def _yaml_kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return f"the boolean {str(value).lower()}"
+    if isinstance(value, int | float):
+        return f"the number {value:g}" if isinstance(value, float) else f"the number {value}"
+    return "nothing (null)" if value is None else f"a {type(value).__name__}"
+
+
 def schema_problems(path: Path, doc: Any) -> list[ScenarioError]:
+    keys = _key_problems(path, doc)
+    if keys:
+        return keys
     problems = []
     for error in jsonschema.Draft202012Validator(schema()).iter_errors(doc):
         where = ".".join(str(p) for p in error.absolute_path) or "(top level)"

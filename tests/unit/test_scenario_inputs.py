@@ -55,3 +55,15 @@ def test_an_id_remap_beyond_the_bus_is_a_problem(tmp_path):
     found = problems(tmp_path, BASE + ecus + "expect: {integrity: true}\n")
     assert found == ["4: ecus.0.id_remap.12345678: FFFFFFFF is above 1FFFFFFF, the largest CAN id",
                      "5: ecus.1.id_remap.123: the 11-bit frames of 123 (trace.log:1) would get id 800, above 7FF"]
+
+
+def test_an_unquoted_id_key_is_a_problem_at_its_line_not_a_traceback(tmp_path):
+    """An id written as a mapping key without quotes is a number to YAML (jsonschema's key patterns
+    raised TypeError on it): said at its line, every one of them."""
+    found = problems(tmp_path, BASE + "ecus: [{name: e, bus: vcan0, trace: trace.log,\n"
+                                      "        id_remap: {316: '317'}}]\n"
+                                      "expect:\n  cycle_time:\n    ids: {440: 10, 0x647: 20}\n")
+    hint = "not text: quote it as written (an id such as 440 or 0x647 is a number to YAML unquoted: '440', '0x647')"
+    assert found == [f"5: ecus.0.id_remap: YAML reads the key as the number 316, {hint}",
+                     f"8: expect.cycle_time.ids: YAML reads the key as the number 440, {hint}",
+                     f"8: expect.cycle_time.ids: YAML reads the key as the number 1607, {hint}"]
