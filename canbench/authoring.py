@@ -367,6 +367,23 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
     return paths, {iface: round((t_ns - start) / 1e9, 6) for iface, t_ns in first.items()}
 
 
+def _dbc_cycles_off(s: TraceSummary, signal_summary: SignalSummary,
+                    tolerance_pct: float) -> dict[str, tuple[float, float]]:
+    """id -> (the trace's median cycle, the DBC's) for the DBC's cyclic messages the trace sends
+    at another cycle (beyond tolerance_pct; the median over its interfaces)."""
+    seen: dict[str, list[float]] = {}
+    for i in s.ids:
+        if i.cycle_ms:
+            seen.setdefault(i.ident, []).append(i.cycle_ms)
+    out = {}
+    for m in signal_summary.messages:
+        if m.cycle_ms and m.ident in seen:
+            median = statistics.median(seen[m.ident])
+            if abs(median - m.cycle_ms) > m.cycle_ms * tolerance_pct / 100:
+                out[m.ident] = (round(median, 3), m.cycle_ms)
+    return out
+
+
 def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
     """cycle_time.ids from the trace: each id periodic (>= 5 frames, PERIODIC_STEADY_PCT of its
     gaps steady) on every interface where it has 5 frames or more, with one cycle (within
@@ -454,11 +471,21 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
         from_dbc = {m.ident for m in signal_summary.messages if m.cycle_ms}
         if from_dbc:  # the database's cycles; ids: keeps only the periodic ids it has no cycle for
             expect: dict = doc["expect"]  # type: ignore[assignment]
+            tolerance = expect["cycle_time"]["tolerance_pct"]
             ids = {k: v for k, v in expect["cycle_time"]["ids"].items() if k not in from_dbc}
-            expect["cycle_time"] = {"from_dbc": True, "tolerance_pct": expect["cycle_time"]["tolerance_pct"]} \
-                | ({"ids": ids} if ids else {})
+            # where the recorded car sends a message at another cycle than its DBC says (another
+            # variant, an event-periodic message's events), the trace's cycle: the gate judges the
+            # bridge against the bus, and the car is what the bus replays
+            overridden = _dbc_cycles_off(s, signal_summary, tolerance)
+            ids |= {ident: trace_cycle for ident, (trace_cycle, _) in overridden.items()}
+            expect["cycle_time"] = {"from_dbc": True, "tolerance_pct": tolerance} | ({"ids": ids} if ids else {})
             header += (f"# cycle_time.from_dbc: the DBC's GenMsgCycleTime for its {len(from_dbc)} cyclic messages in "
                        "the trace (REVIEW: the trace's own cycles are in `canbench summarise`).\n")
+            if overridden:
+                shown = [f"{ident} every {trace_cycle:g} ms (the DBC: {dbc_cycle:g})"
+                         for ident, (trace_cycle, dbc_cycle) in sorted(overridden.items())]
+                header += (f"# REVIEW: the trace's cycle in cycle_time.ids where it is not the DBC's +-{tolerance}%: "
+                           f"{', '.join(shown[:10])}{', ...' if len(shown) > 10 else ''}.\n")
         return header + yaml.safe_dump(doc, sort_keys=False) + _signals_yaml(signal_summary)
     return header + yaml.safe_dump(doc, sort_keys=False)
 

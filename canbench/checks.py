@@ -218,8 +218,10 @@ def cycle_time(result: RunResult) -> list[str] | None:
                 name = f" ({message})" if message else ""
                 if tolerance is not None and can["cycle_p50_ms"] is not None and \
                         abs(can["cycle_p50_ms"] - expected) > expected * tolerance / 100:
+                    said = "cycle_time.ids says" if int(ident, 16) in explicit else "the DBC says"
                     problems.append(f"{b.bus} id {ident}{name}: median cycle {can['cycle_p50_ms']:.2f} ms on the bus, "
-                                    f"the DBC says {expected:.2f} ms +-{tolerance}%")
+                                    f"{said} {expected:.2f} ms +-{tolerance}%")
+                    expected = can["cycle_p50_ms"]  # the sender's fault, said once: Zenoh is judged against the bus
             else:
                 expected = explicit.get(int(ident, 16), can["cycle_p50_ms"])
             if not zen:

@@ -132,6 +132,20 @@ def test_present_counts_per_side(tmp_path):
     assert checks.signals_can(run_of(gates, frames, zenoh=frames[:2])) == []
 
 
+def test_a_gate_that_judged_nothing_fails_where_the_values_went_missing(tmp_path):
+    """A range on a message the bus never carried passed with no value judged; now the bus side
+    says so, and Zenoh only when the bus had the values."""
+    gates = gates_of(tmp_path, "    Chassis.LongAccel: {range: [-2, 2]}\n")
+    other = [(0, frame("EngineData", Counter=1))]
+    nothing = "vcan0 Chassis.LongAccel: no value on the bus, so the gate judged nothing (Chassis never sent"
+    assert checks.signals_can(run_of(gates, other))[0].startswith(nothing)
+    assert checks.signals_zenoh(run_of(gates, other)) == []  # the sender's, said once
+    sent = [(0, frame("Chassis", LongAccel=1.0))]
+    assert checks.signals_can(run_of(gates, sent, zenoh=other)) == []
+    assert checks.signals_zenoh(run_of(gates, sent, zenoh=other))[0].startswith(
+        "vcan0 Chassis.LongAccel: no value on Zenoh, so the gate judged nothing (Chassis never arrived")
+
+
 def test_signed_and_float_signals_on_an_extended_id(tmp_path):
     gates = gates_of(tmp_path, "    Chassis.LongAccel: {range: [-2, 2]}\n    Chassis.YawRate: {range: [-10.5, 10.5]}\n")
     ok = [(0, frame("Chassis", LongAccel=-1.5, YawRate=-10.25)), (100, frame("Chassis", LongAccel=1.99, YawRate=10.5))]
@@ -324,10 +338,13 @@ def test_cycle_time_from_dbc_judges_cyclic_messages_on_both_sides():
     sides = {"0C0": (10.1, 10.2), "2F0": (80.0, 80.0), "18FEF100": (100.0, 130.0), "500": (3.0, 7.0),
              "123": (1.0, 900.0)}
     problems = checks.cycle_time(cycle_result({"from_dbc": True, "tolerance_pct": 20}, sides))
-    assert problems == [
+    assert problems == [  # the sender's wrong cycle said once, on the bus: the bridge kept it
         "vcan0 id 2F0 (GearboxState): median cycle 80.00 ms on the bus, the DBC says 50.00 ms +-20%",
-        "vcan0 id 2F0: median cycle 80.00 ms on Zenoh, expected 50.00 ms +-20%",
         "vcan0 id 18FEF100: median cycle 130.00 ms on Zenoh, expected 100.00 ms +-20%"]
+    # ... and a bridge that also changes it is judged against the bus's cycle
+    assert checks.cycle_time(cycle_result({"from_dbc": True, "tolerance_pct": 20}, {"2F0": (80.0, 110.0)})) == [
+        "vcan0 id 2F0 (GearboxState): median cycle 80.00 ms on the bus, the DBC says 50.00 ms +-20%",
+        "vcan0 id 2F0: median cycle 110.00 ms on Zenoh, expected 80.00 ms +-20%"]
     # ids: still override the database; without from_dbc the bus median is the reference, as before
     assert checks.cycle_time(cycle_result({"from_dbc": True, "tolerance_pct": 20, "ids": {"2F0": 80}},
                                           {"2F0": (80.0, 80.0)})) == []

@@ -68,7 +68,10 @@ def test_scaffold_with_a_dbc_proposes_gates_the_trace_passes(tmp_path):
     assert "# PROPOSED, REVIEW EACH" in text and text.count("# review: ") >= 8
     sc = scenario.load(out)
     assert sc.dbc == (tmp_path / "scenarios" / "dbc" / "signals.dbc").resolve()
-    assert sc.expect["cycle_time"] == {"from_dbc": True, "tolerance_pct": 20}
+    # Diag goes every 100 ms in the recording, its DBC says 200: the recording's cycle, said for review
+    assert sc.expect["cycle_time"] == {"from_dbc": True, "tolerance_pct": 20, "ids": {"400": 100.0}}
+    assert "# REVIEW: the trace's cycle in cycle_time.ids where it is not the DBC's +-20%: 400 every 100 ms " \
+           "(the DBC: 200)." in text
     gates = {g.key: g for g in sc.signal_gates}
     assert gates["GearboxState.Gear"].one_of == (3.0, 0.0)  # the names seen: D, P
     low, high = gates["EngineData.EngineSpeed"].range
