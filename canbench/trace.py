@@ -530,13 +530,16 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     said = "frame" if by_number else "line"
 
     def went_back(line: int, t_ns: int, iface: str | None) -> str | None:
+        # each frame against the one before it (not the latest stamp so far): a clock that jumped
+        # back once is one problem, not one per frame after it
         before = last.get(iface)
-        last[iface] = (t_ns, line) if before is None or t_ns >= before[0] else before
+        last[iface] = (t_ns, line)
         if before is None or t_ns >= before[0]:
             return None
+        stamps = f" ({t_ns / 1e9:.6f} s after {before[0] / 1e9:.6f} s)"
         if len(last) == 1:
-            return f"timestamp earlier than the {said} before"
-        return f"timestamp earlier than {said} {before[1]}'s, the frame before on {iface}"
+            return f"timestamp earlier than the {said} before{stamps}"
+        return f"timestamp earlier than {said} {before[1]}'s, the frame before on {iface}{stamps}"
 
     if path.suffix.lower() in CANDUMP_SUFFIXES:
         for lineno, t_ns, iface, frame in iter_candump(path, drops=drops, strict=True, on_error=on_problem,

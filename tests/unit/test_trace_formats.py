@@ -103,8 +103,11 @@ def test_python_can_formats_going_back_in_time_are_refused(tmp_path):
     path = tmp_path / "back.csv"
     path.write_text("timestamp,arbitration_id,extended,remote,error,dlc,data\n"
                     "1700000000.0,0x123,0,0,0,1,AQ==\n1700000000.01,0x123,0,0,0,1,AQ==\n"
-                    "1699999999.0,0x123,0,0,0,1,AQ==\n")
-    assert problems(path) == [f"{path}:4: timestamp earlier than the line before"]
+                    "1699999999.0,0x123,0,0,0,1,AQ==\n1699999999.1,0x123,0,0,0,1,AQ==\n")
+    # the jump back is one problem with its stamps; the lines after it go on from it (a PCAN clock
+    # that wrapped once was one problem per line after it)
+    assert problems(path) == [f"{path}:4: timestamp earlier than the line before "
+                              "(1699999999.000000 s after 1700000000.010000 s)"]
 
 
 GOOD = "(1700000000.000000) can0 123#11\n(1700000000.010000) can0 123#22\n"

@@ -200,7 +200,8 @@ def test_candump_of_several_interfaces_is_in_order_per_interface_only(tmp_path):
                     "(1700000000.000250) can0 123#03\n")
     assert [(line, iface) for line, _, iface, _ in iter_trace(path, on_problem=lambda e: None)] == [
         (1, "can0"), (2, "can0"), (3, "can1"), (4, "can1"), (5, "can0")]
-    assert problems(path) == [f"{path}:5: timestamp earlier than line 2's, the frame before on can0"]
+    assert problems(path) == [f"{path}:5: timestamp earlier than line 2's, the frame before on can0 "
+                              "(1700000000.000250 s after 1700000000.000300 s)"]
 
 
 @pytest.mark.parametrize("line", ["  vcan0  123   [4]  DE AD BE EF",

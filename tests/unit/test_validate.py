@@ -52,7 +52,7 @@ def test_every_problem_with_file_line_as_the_user_wrote_it(bad, capsys):
         "sc/s.yaml:14: expect: Additional properties are not allowed ('colour' was unexpected)",
         "sc/traces/t.log:2: not a candump -L frame: '(1700000000.001000) vcan0 16G#D032'",
         "sc/traces/t.log:4: 9 data bytes: classic CAN carries at most 8",
-        "sc/traces/t.log:5: timestamp earlier than the line before",
+        "sc/traces/t.log:5: timestamp earlier than the line before (1699999999.000000 s after 1700000000.002000 s)",
     ], err
     assert err[-1] == "canbench validate: 7 problems in 1 of 1 scenario file"
 
