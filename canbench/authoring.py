@@ -120,10 +120,12 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         state.dlc = max(state.dlc, frame.dlc)
         state.remote += frame.remote
         bits[iface] += frame_bits_worst(frame.dlc, frame.extended, frame.remote)
+        # the span and gaps of the merged timeline: a log of several interfaces is in time order
+        # per interface only, so its first and last lines need not be its first and last frames
         if last_ns is not None and t_ns - last_ns > gap_ns:
             gap_ns, gap_line = t_ns - last_ns, line
-        first_ns = t_ns if first_ns is None else first_ns
-        last_ns = t_ns
+        first_ns = t_ns if first_ns is None else min(first_ns, t_ns)
+        last_ns = t_ns if last_ns is None else max(last_ns, t_ns)
     if first_ns is None or last_ns is None:
         raise TraceError(str(path), None, "no frames in trace")
     span = (last_ns - first_ns) / 1e9

@@ -24,6 +24,16 @@ def test_summary_infers_cycle_times_and_load(tmp_path):
     assert 4 < s.load_pct < 7  # ~190 frames/s of ~8 bytes at 500 kbit/s
 
 
+def test_summary_spans_a_log_whose_second_interface_starts_earlier(tmp_path):
+    """candump of several interfaces is in time order per interface only: the span is from the
+    earliest frame to the latest, not from the first line to the last (it was -0.5 s here)."""
+    trace = tmp_path / "two.log"
+    trace.write_text("(1700000000.500000) can0 123#11\n(1700000000.000000) can1 456#22\n"
+                     "(1700000001.000000) can1 456#22\n(1700000000.600000) can0 123#11\n")
+    s = authoring.summarise(trace, 500_000)
+    assert s.frames == 4 and s.span_s == pytest.approx(1.0)
+
+
 def test_scaffold_copies_the_trace_and_validates(tmp_path):
     trace = tmp_path / "recorded" / "drive.log"
     tracegen.write(trace, tracegen.generate(1.0))
