@@ -83,10 +83,16 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
 CANDUMP_DEFAULT = re.compile(r"^\s*(\([^)]*\)\s+)?[A-Za-z0-9_.-]+\s+[0-9A-Fa-f]{3,8}\s+\[\d+\]")
 
 
+# candump -8 (len8_dlc): 8 data bytes with the raw DLC code 9..F that carried them, '123#...._9'
+CANDUMP_LEN8_DLC = re.compile(r"#[0-9A-Fa-f]{16}_[9A-Fa-f]\s*$")
+
+
 def not_candump_l(line: str) -> str:
     """Why a line is no candump -L frame, saying so when it is candump's other output."""
     hint = (" (candump's default output: record with candump -L, the log format canplayer reads)"
-            if CANDUMP_DEFAULT.match(line) else "")
+            if CANDUMP_DEFAULT.match(line) else
+            " (candump -8's raw DLC code 9..F for 8 bytes: the bench sends classic frames of DLC 0..8; "
+            "record without -8, or drop the '_<code>')" if CANDUMP_LEN8_DLC.search(line) else "")
     return f"not a candump -L frame: {line.strip()[:80]!r}{hint}"
 
 

@@ -215,6 +215,15 @@ def test_candumps_other_output_is_said_to_be_it(tmp_path, line):
         frames(path)
 
 
+def test_candump_len8_dlc_is_said_to_be_it(tmp_path):
+    """candump -8 writes 8 bytes sent with DLC code 9..F as '..._9': named, not a bare refusal."""
+    path = tmp_path / "drive.log"
+    path.write_text("(1700000000.000000) can0 123#1122334455667788_9\n")
+    with pytest.raises(TraceError, match=r"drive.log:1: not a candump -L frame: .*\(candump -8's raw DLC code 9..F "
+                                         r"for 8 bytes"):
+        frames(path)
+
+
 @pytest.mark.parametrize("name", ["drive.log", "drive.asc"])
 def test_a_utf16_trace_is_said_to_be_one(tmp_path, name):
     path = tmp_path / name
