@@ -11,7 +11,7 @@ from functools import wraps
 from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult, bus_stats
 from .commands import explained_refusals, stale_at_put, stamp_ages_ns
-from .dbc import cycle_time_ms, load_dbc
+from .dbc import cycle_time_ms, load_dbc, send_type_at_most
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import FAULT_LEAD_NS, FAULT_SETTLE_NS, describe
 
@@ -213,10 +213,16 @@ def cycle_time(result: RunResult) -> list[str] | None:
             if from_dbc is not None:  # the database's cycle, judged on the bus too (a wrong sender)
                 if int(ident, 16) not in explicit and ident not in from_dbc:
                     continue  # not a cyclic message of the DBC: no cycle to expect
-                cycle, message = from_dbc.get(ident, (None, ""))
+                cycle, message, at_most = from_dbc.get(ident, (None, "", False))
                 expected = explicit.get(int(ident, 16), cycle)
                 name = f" ({message})" if message else ""
-                if tolerance is not None and can["cycle_p50_ms"] is not None and \
+                if at_most and int(ident, 16) not in explicit:  # a cycle plus events: the longest gap
+                    if tolerance is not None and can["cycle_max_ms"] > expected * (1 + tolerance / 100):
+                        problems.append(f"{b.bus} id {ident}{name}: longest gap {can['cycle_max_ms']:.2f} ms on the "
+                                        f"bus, the DBC's cycle of an event-periodic message (the most it may be) "
+                                        f"{expected:.2f} ms +-{tolerance}%")
+                    expected = can["cycle_p50_ms"]  # Zenoh keeps the bus's rhythm, events and all
+                elif tolerance is not None and can["cycle_p50_ms"] is not None and \
                         abs(can["cycle_p50_ms"] - expected) > expected * tolerance / 100:
                     said = "cycle_time.ids says" if int(ident, 16) in explicit else "the DBC says"
                     problems.append(f"{b.bus} id {ident}{name}: median cycle {can['cycle_p50_ms']:.2f} ms on the bus, "
@@ -242,13 +248,14 @@ def cycle_time(result: RunResult) -> list[str] | None:
 
 
 def _dbc_cycles(result: RunResult, bus: str) -> dict:
-    """id -> (GenMsgCycleTime in ms, message name) of the bus's DBC's cyclic messages."""
+    """id -> (GenMsgCycleTime in ms, message name, whether events come in between: the cycle is
+    then the longest gap) of the bus's DBC's cyclic messages."""
     path = result.scenario.bus_dbcs.get(bus)
-    out: dict[str, tuple[float, str]] = {}
+    out: dict[str, tuple[float, str, bool]] = {}
     for m in (load_dbc(path).messages if path else []):
         cycle = cycle_time_ms(m)
         if cycle is not None:
-            out[wire.id_hex(m.frame_id, m.is_extended_frame)] = (cycle, m.name)
+            out[wire.id_hex(m.frame_id, m.is_extended_frame)] = (cycle, m.name, send_type_at_most(m.send_type))
     return out
 
 

@@ -233,6 +233,14 @@ def _cycle_number(message) -> float | None:
         return None
 
 
+def send_type_at_most(send_type) -> bool:
+    """Whether a cyclic GenMsgSendType also sends on events (EventPeriodic, CyclicAndSpontan,
+    CyclicIfActiveAndSpontan, ...): its cycle is then the longest a sender waits, not its rhythm,
+    since events come in between."""
+    said = "".join(ch for ch in str(send_type or "").lower() if ch.isalnum())
+    return send_type_cyclic(send_type) and any(w in said for w in ("event", "spontan", "onchange", "onwrite"))
+
+
 def send_type_cyclic(send_type) -> bool:
     """Whether a GenMsgSendType leaves a message cyclic: Cyclic, CyclicIfActive, FixedPeriodic,
     EventPeriodic, ... are; NonCyclic, Event, OnChange, IfActive, Spontaneous, ... are not; none

@@ -351,6 +351,31 @@ def test_cycle_time_from_dbc_judges_cyclic_messages_on_both_sides():
     assert checks.cycle_time(cycle_result({"tolerance_pct": 20}, {"2F0": (80.0, 80.0)})) == []
 
 
+def test_an_event_periodic_cycle_is_the_longest_gap_not_the_rhythm(tmp_path):
+    """EventPeriodic (a cycle plus events in between): its median is the events', so the DBC's
+    cycle is judged as the longest gap on the bus; Zenoh keeps the bus's rhythm."""
+    dbc_file = tmp_path / "ev.dbc"
+    dbc_file.write_text('VERSION ""\nBU_: GW\nBO_ 118 Brake: 8 GW\n SG_ B : 0|8@1+ (1,0) [0|0] "" GW\n'
+                        'BA_DEF_ BO_ "GenMsgCycleTime" INT 0 65535;\n'
+                        'BA_DEF_ BO_ "GenMsgSendType" ENUM "Cyclic","EventPeriodic";\n'
+                        'BA_DEF_DEF_ "GenMsgCycleTime" 0;\nBA_DEF_DEF_ "GenMsgSendType" "Cyclic";\n'
+                        'BA_ "GenMsgCycleTime" BO_ 118 500;\nBA_ "GenMsgSendType" BO_ 118 1;\n')
+
+    def result(can_p50, can_max, zen_p50):
+        def stats(p50, top):
+            return {"count": 50, "cycle_p50_ms": p50, "cycle_min_ms": p50, "cycle_max_ms": top}
+        times = {"076": {"can": stats(can_p50, can_max), "zenoh": stats(zen_p50, can_max)}}
+        return SimpleNamespace(scenario=SimpleNamespace(expect={"cycle_time": {"from_dbc": True, "tolerance_pct": 20}},
+                                                        bus_dbcs={"vcan0": dbc_file}),
+                               buses=[SimpleNamespace(bus="vcan0", cycle_times=times)], metrics={})
+    assert checks.cycle_time(result(20.0, 480.0, 20.0)) == []  # events every 20 ms, never a gap over 500
+    assert checks.cycle_time(result(20.0, 700.0, 20.0)) == [
+        "vcan0 id 076 (Brake): longest gap 700.00 ms on the bus, the DBC's cycle of an event-periodic message "
+        "(the most it may be) 500.00 ms +-20%"]
+    assert checks.cycle_time(result(20.0, 480.0, 40.0)) == [
+        "vcan0 id 076: median cycle 40.00 ms on Zenoh, expected 20.00 ms +-20%"]
+
+
 def test_from_dbc_needs_a_dbc(tmp_path):
     with pytest.raises(ScenarioError, match=r"sc.yaml:11: expect.cycle_time.from_dbc: needs a DBC"):
         scenario.load(write_scenario(tmp_path, "  cycle_time:\n    from_dbc: true\n", top_dbc=False))
