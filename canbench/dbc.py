@@ -237,8 +237,13 @@ def send_type_at_most(send_type) -> bool:
     """Whether a cyclic GenMsgSendType also sends on events (EventPeriodic, CyclicAndSpontan,
     CyclicIfActiveAndSpontan, ...): its cycle is then the longest a sender waits, not its rhythm,
     since events come in between."""
-    said = "".join(ch for ch in str(send_type or "").lower() if ch.isalnum())
+    said = _said(send_type)
     return send_type_cyclic(send_type) and any(w in said for w in ("event", "spontan", "onchange", "onwrite"))
+
+
+def _said(send_type) -> str:
+    """A send type as compared: lower case, letters and digits only (Cyclic_If_Active: cyclicifactive)."""
+    return "".join(ch for ch in str(send_type or "").lower() if ch.isalnum())
 
 
 def send_type_cyclic(send_type) -> bool:
@@ -247,7 +252,7 @@ def send_type_cyclic(send_type) -> bool:
     or one that says nothing (NoMsgSendType, NotUsed) leaves it to the cycle time."""
     if send_type is None or isinstance(send_type, int):
         return True
-    said = "".join(ch for ch in str(send_type).lower() if ch.isalnum())
+    said = _said(send_type)
     if said in SEND_TYPES_UNSAID:
         return True
     if said.startswith(("non", "no")):
