@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -24,9 +25,21 @@ SLEEPER = [sys.executable, "-c", "import threading, time\n"
 def sleeper():
     proc = subprocess.Popen(SLEEPER, stdout=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready"  # both threads started
+    # the main thread prints before it sleeps: on a loaded machine it may not be asleep yet
+    deadline = time.monotonic() + 10
+    while not all(_asleep(task) for task in Path(f"/proc/{proc.pid}/task").iterdir()):
+        assert time.monotonic() < deadline, "the sleeper's threads never slept"
+        time.sleep(0.01)
     yield proc
     proc.kill()
     proc.wait()
+
+
+def _asleep(task: Path) -> bool:
+    try:
+        return (task / "stat").read_text().rsplit(")", 1)[1].split()[0] == "S"
+    except OSError:
+        return False
 
 
 def test_every_thread_is_listed_with_its_syscall_and_stack(sleeper):
