@@ -214,12 +214,12 @@ class SignalSummary:
         return "\n".join(lines)
 
 
-def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
+def summarise_signals(path: Path, dbc_path: Path, lenient: bool = False) -> SignalSummary:
     """Per message of the DBC seen in the trace: frames, and per signal count, min, max, mean
     (physical values, as cantools decodes them) and the value-table names seen. One pass, state
-    per signal only."""
-    from .dbc import cycle_time_ms, message_of, read_dbc
-    db = read_dbc(dbc_path)
+    per signal only. lenient: a DBC cantools' strict mode refuses is read as written."""
+    from .dbc import cycle_time_ms, decode, message_of, read_dbc
+    db = read_dbc(dbc_path, lenient)
     stats: dict[str, MessageStats] = {}
     unknown: dict[str, int] = defaultdict(int)
     interfaces: set[str] = set()
@@ -240,7 +240,7 @@ def summarise_signals(path: Path, dbc_path: Path) -> SignalSummary:
                          for s in message.signals})
         ms.frames += 1
         try:
-            values = message.decode(frame.data, decode_choices=False)
+            values = decode(message, frame.data)
         except Exception:  # noqa: BLE001 - counted: a frame the DBC does not describe
             ms.undecodable += 1
             continue
@@ -262,8 +262,8 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list],
     min/max widened by SIGNAL_MARGIN_PCT of the span (of the value when constant), within the
     signal's DBC limits. Not usable: a range wholly outside what the DBC lets the signal carry
     (the scenario would refuse it; the DBC, or its decoding of this trace, is wrong)."""
-    from .dbc import read_dbc, value_range
-    db = read_dbc(summary.dbc)
+    from .dbc import load_dbc, value_range
+    db = load_dbc(summary.dbc)  # read (and accepted) by summarise_signals
     out: list[tuple[str, dict[str, list], str, bool]] = []
     for m in summary.messages:
         message = db.get_message_by_name(m.name)
@@ -408,11 +408,13 @@ def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
     return cycles, disagree
 
 
-def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000, dbc: Path | None = None) -> str:
+def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000, dbc: Path | None = None,
+             dbc_lenient: bool = False) -> str:
     """A scenario replaying the trace, with gates a first run should pass; YAML text.
     The bench mounts only the scenario's directory into its containers, so a trace from
     elsewhere is copied to <scenario dir>/traces/ (and a DBC to <scenario dir>/dbc/). With a
-    DBC: cycle times from it (from_dbc) and proposed signal ranges, marked for review."""
+    DBC: cycle times from it (from_dbc) and proposed signal ranges, marked for review;
+    dbc_lenient: a DBC cantools' strict mode refuses is read as written (dbc_strict: false)."""
     s = summarise(trace, bitrate)
     limit = scenario.schema()["properties"]["duration_s"]["maximum"]
     if s.span_s + DURATION_MARGIN_S > limit:
@@ -423,7 +425,7 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
     if len(buses) > bus_limit:
         raise TraceError(str(trace), None, f"{len(buses)} interfaces ({', '.join(s.interfaces)}): a scenario has at "
                          f"most {bus_limit} buses; split the trace")
-    signal_summary = summarise_signals(trace, dbc) if dbc is not None else None
+    signal_summary = summarise_signals(trace, dbc, dbc_lenient) if dbc is not None else None
     home = scenario_path.resolve().parent
     if dbc is not None and not dbc.resolve().is_relative_to(home):
         dbc = copy_in(dbc, home / "dbc" / dbc.name)
@@ -467,9 +469,14 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
               f"# Periodic ids (cycle inferred from the trace, >= {PERIODIC_STEADY_PCT}% of the gaps within "
               f"+-{STEADY_PCT}% of it) are gated in cycle_time.ids.\n")
     if dbc is not None and signal_summary is not None:
+        from .dbc import load_dbc, strict_problem
+        as_written = strict_problem(load_dbc(dbc))
+        given = [("dbc", os.path.relpath(dbc.resolve(), home))] + ([("dbc_strict", False)] if as_written else [])
         doc = {k: v for key, value in doc.items()
-               for k, v in ([(key, value), ("dbc", os.path.relpath(dbc.resolve(), home))]
-                            if key == "duration_s" else [(key, value)])}
+               for k, v in ([(key, value), *given] if key == "duration_s" else [(key, value)])}
+        if as_written:
+            header += (f"# REVIEW: dbc_strict: false, as --dbc-lenient asked: the DBC has {as_written}. Each such "
+                       "message is read signal by signal; the bench does not send it.\n")
         from_dbc = {m.ident for m in signal_summary.messages if m.cycle_ms}
         if from_dbc:  # the database's cycles; ids: keeps only the periodic ids it has no cycle for
             expect: dict = doc["expect"]  # type: ignore[assignment]

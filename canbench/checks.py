@@ -11,7 +11,7 @@ from functools import wraps
 from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult, bus_stats
 from .commands import explained_refusals, stale_at_put, stamp_ages_ns
-from .dbc import cycle_time_ms, load_dbc, send_type_at_most
+from .dbc import cycle_time_ms, load_dbc, message_of, send_type_at_most
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import FAULT_LEAD_NS, FAULT_SETTLE_NS, describe
 
@@ -205,7 +205,7 @@ def cycle_time(result: RunResult) -> list[str] | None:
     explicit = {int(k, 16): v for k, v in gate.get("ids", {}).items()}
     problems = []
     for b in result.buses:
-        from_dbc = _dbc_cycles(result, b.bus) if gate.get("from_dbc") else None
+        from_dbc = _dbc_cycles(result, b.bus, b.cycle_times) if gate.get("from_dbc") else None
         for ident, sides in b.cycle_times.items():
             can, zen = sides["can"], sides["zenoh"]
             if can["count"] < gate.get("min_frames", 5):
@@ -247,15 +247,20 @@ def cycle_time(result: RunResult) -> list[str] | None:
     return problems
 
 
-def _dbc_cycles(result: RunResult, bus: str) -> dict:
+def _dbc_cycles(result: RunResult, bus: str, idents) -> dict:
     """id -> (GenMsgCycleTime in ms, message name, whether events come in between: the cycle is
-    then the longest gap) of the bus's DBC's cyclic messages."""
+    then the longest gap) of the ids seen (idents, as id_hex writes them) that are a cyclic
+    message of the bus's DBC: its own id, or a J1939 group's from another source (dbc.message_of)."""
     path = result.scenario.bus_dbcs.get(bus)
+    if not path:
+        return {}
+    db = load_dbc(path)
     out: dict[str, tuple[float, str, bool]] = {}
-    for m in (load_dbc(path).messages if path else []):
-        cycle = cycle_time_ms(m)
+    for ident in idents:
+        m = message_of(db, wire.Frame(int(ident, 16), 0, b"", extended=len(ident) == 8))
+        cycle = cycle_time_ms(m) if m is not None else None
         if cycle is not None:
-            out[wire.id_hex(m.frame_id, m.is_extended_frame)] = (cycle, m.name, send_type_at_most(m.send_type))
+            out[ident] = (cycle, m.name, send_type_at_most(m.send_type))
     return out
 
 

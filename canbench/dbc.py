@@ -1,16 +1,32 @@
 """DBC files (cantools): loading one (cached per file and mtime, so a scenario's buses and its
 checks share one database), a frame's signals as numbers (the recording's /signals channels,
 the viewer, the signal expectations), a message's database cycle time and send type, and why a
-scenario's value cannot be a signal's."""
+scenario's value cannot be a signal's.
+
+A DBC is read as written (cantools' strict=False) and then held to cantools' strict rules
+where it is used: a scenario refuses one whose signals overlap or pass their message's end
+unless it says `dbc_strict: false`, a command line unless given --dbc-lenient. Such a message
+cantools cannot decode whole (its codec needs the bits in one piece), so it is decoded signal by
+signal, each from its own bits as the DBC places them (_one_signal_messages), and it is not encoded:
+what the bench sends must carry every signal's value, and overlapping signals cannot."""
 from __future__ import annotations
 
 import logging
 import math
 import struct
+import weakref
 from functools import lru_cache
 from pathlib import Path
 
 import cantools
+from cantools import j1939
+from cantools.database.can import Message
+
+# per message that cantools' strict mode refuses: why (its words), and the one-signal messages it
+# is decoded by; filled when the DBC is loaded, so a database in use is never changed
+_AS_WRITTEN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_J1939: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # per database, its J1939 messages by group
 
 
 @lru_cache(maxsize=16)
@@ -19,11 +35,97 @@ def _load(path: str, mtime_ns: int):
     level = cantools_log.level
     cantools_log.setLevel(logging.ERROR)  # its warning of an overwritten duplicate: refused below, named
     try:
-        db = cantools.database.load_file(path)
+        db = cantools.database.load_file(path, strict=False)
     finally:
         cantools_log.setLevel(level)
     _refuse_duplicates(db)
+    _hold_to_strict(db)
     return db
+
+
+def _hold_to_strict(db) -> None:
+    """Note each message cantools' strict mode refuses, with why, and the parts it is decoded by."""
+    for message in db.messages:
+        try:
+            message.refresh(strict=True)  # raises only once its state is rebuilt as it was
+        except cantools.database.Error as e:
+            _AS_WRITTEN[message] = str(e).rstrip(".")
+            _PARTS[message] = _one_signal_messages(message)
+
+
+def _one_signal_messages(message) -> tuple:
+    """A message per signal (with the multiplexers that select it, so a page's signal is read
+    only on its pages), each as long as its signal needs: a signal past the DBC's length is read
+    from the frames that carry its bytes."""
+    by_name = {s.name: s for s in message.signals}
+    out = []
+    for signal in message.signals:
+        chain, at = [signal], signal
+        while at.multiplexer_signal is not None and at.multiplexer_signal in by_name:
+            at = by_name[at.multiplexer_signal]
+            chain.insert(0, at)
+        if any(a is not b and _bits(a) & _bits(b) for a in chain for b in chain):
+            continue  # overlaps its own multiplexer: no value can be read apart from the page it selects
+        length = max(message.length, *(_end_byte(s) for s in chain))
+        out.append(Message(message.frame_id, message.name, length, chain, strict=False,
+                           is_extended_frame=message.is_extended_frame))
+    return tuple(out)
+
+
+def _bits(signal) -> set[int]:
+    """The frame's bits a signal takes, numbered as in a little-endian start bit (byte * 8 + bit)."""
+    if signal.byte_order == "little_endian":
+        return set(range(signal.start, signal.start + signal.length))
+    out, at = set(), signal.start  # Motorola: from its most significant bit, down each byte, then the next byte
+    for _ in range(signal.length):
+        out.add(at)
+        at = at - 1 if at % 8 else at + 15
+    return out
+
+
+def _end_byte(signal) -> int:
+    return max(_bits(signal)) // 8 + 1
+
+
+def as_written_problem(message) -> str | None:
+    """Why cantools' strict mode refuses a message (None if it does not): signals that overlap or
+    pass its end."""
+    return _AS_WRITTEN.get(message)
+
+
+def strict_problem(db) -> str | None:
+    """Why cantools' strict mode refuses a DBC (None if it does not), naming every message."""
+    said = [f"{m.name} ({_AS_WRITTEN[m]})" for m in db.messages if m in _AS_WRITTEN]
+    if not said:
+        return None
+    return (f"{len(said)} message{'s' if len(said) > 1 else ''} with signals that overlap or pass the message's "
+            f"end: {'; '.join(said[:5])}{'; ...' if len(said) > 5 else ''}")
+
+
+def decode(message, data: bytes, scaling: bool = True) -> dict:
+    """A frame's signals (numbers, not value-table names), as cantools decodes the message: a
+    frame shorter than the message is an error, as for cantools. A message strict mode refuses
+    is decoded signal by signal (_one_signal_messages); a signal past the DBC's length is left out
+    of a frame too short for it."""
+    parts = _PARTS.get(message)
+    if parts is None:
+        return message.decode(data, decode_choices=False, scaling=scaling)
+    if len(data) < message.length:
+        raise cantools.database.DecodeError(f"wrong data size: {len(data)} instead of {message.length} bytes")
+    out: dict = {}
+    for part in parts:
+        try:
+            out.update(part.decode(data, decode_choices=False, scaling=scaling))
+        except cantools.database.DecodeError:  # a page its multiplexer does not select, a signal past its bytes
+            continue
+    return out
+
+
+def encode_problem(message) -> str | None:
+    """Why the bench cannot encode a message (None if it can): signals that overlap or pass its
+    end leave no frame that carries each signal's value."""
+    why = as_written_problem(message)
+    return None if why is None else f"the bench cannot encode {message.name}: {why} in the DBC"
 
 
 class DbcError(ValueError):
@@ -52,16 +154,21 @@ def load_dbc(path: Path | None):
     return _load(str(path), Path(path).stat().st_mtime_ns) if path else None
 
 
-def read_dbc(path: Path):
+def read_dbc(path: Path, lenient: bool = False):
     """load_dbc for a file a user named on the command line: an InputError naming it when it is
-    missing or cannot be used."""
+    missing or cannot be used, or when cantools' strict mode refuses it and lenient is not set
+    (--dbc-lenient)."""
     from .errors import InputError
     if not Path(path).is_file():
         raise InputError(str(path), None, "no such DBC file")
     try:
-        return load_dbc(path)
+        db = load_dbc(path)
     except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
         raise InputError(str(path), None, load_error_text(e)) from None
+    if not lenient and (why := strict_problem(db)):
+        raise InputError(str(path), None, f"cantools' strict mode refuses it: {why}; to read it as written, "
+                                          "give --dbc-lenient")
+    return db
 
 
 def load_error_text(error: Exception, name: str = "it") -> str:
@@ -75,12 +182,32 @@ def load_error_text(error: Exception, name: str = "it") -> str:
 def message_of(dbc, frame):
     """The DBC's message of a frame (id and 11/29-bit as the DBC has them), else None: a 29-bit
     frame is looked up among the 29-bit messages whatever its id, as cantools only does for ids
-    above 7FF unless told."""
+    above 7FF unless told. A 29-bit frame of no message's id is a J1939 message's when the DBC
+    marks one of its parameter group (VFrameFormat J1939PG) and only one: the DBC's id names the
+    usual sender and priority, and a J1939 network sends a group from any source address, at
+    any priority (to any destination, for a PDU1 group)."""
     try:
         message = dbc.get_message_by_frame_id(frame.can_id, force_extended_id=frame.extended)
     except KeyError:
-        return None
-    return message if message.is_extended_frame == frame.extended else None
+        message = None
+    if message is not None and message.is_extended_frame == frame.extended:
+        return message
+    if frame.extended:
+        same = _j1939_groups(dbc).get(j1939.pgn_from_frame_id(frame.can_id), ())
+        return same[0] if len(same) == 1 else None  # several senders in the DBC, none this one: whose?
+    return None
+
+
+def _j1939_groups(db) -> dict[int, tuple]:
+    """The DBC's J1939 messages by parameter group number."""
+    groups = _J1939.get(db)
+    if groups is None:
+        found: dict[int, list] = {}
+        for m in db.messages:
+            if m.protocol == "j1939" and m.is_extended_frame:
+                found.setdefault(j1939.pgn_from_frame_id(m.frame_id), []).append(m)
+        groups = _J1939[db] = {pgn: tuple(ms) for pgn, ms in found.items()}
+    return groups
 
 
 def too_long_for_can_20(message) -> bool:
@@ -95,7 +222,7 @@ def decode_signals(dbc, frame) -> tuple[str, dict] | None:
     if message is None:
         return None
     try:
-        decoded = message.decode(frame.data, decode_choices=False)
+        decoded = decode(message, frame.data)
     except Exception:  # a frame the DBC does not describe correctly is still recorded raw
         return None
     return message.name, {k: float(v) for k, v in decoded.items() if isinstance(v, int | float)}

@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .dbc import grid_problem, name_problem, range_problem, raws_of, value_range
+from .dbc import decode, grid_problem, message_of, name_problem, range_problem, raws_of, value_range
 from .stats import latency_stats
 
 if TYPE_CHECKING:
@@ -126,6 +126,7 @@ class Rule:
     when: Condition | None = None
     count: int | None = None
     once: bool = False
+    db: Any = None          # the bus's DBC: which frames are a message's (dbc.message_of)
 
     def stimulus_text(self) -> str:
         if self.command is not None:
@@ -177,7 +178,7 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
             continue
         bad = condition_problems(signal, then, [*where, "then"], fail)  # the stimulus is checked too
         then_cond = None if bad else condition(signal, then)
-        rule = dict(name=spec.get("name", f"response{i}"), bus=bus, within_ms=float(spec["within_ms"]),
+        rule = dict(name=spec.get("name", f"response{i}"), bus=bus, within_ms=float(spec["within_ms"]), db=db,
                     response_message=message, response_signal=signal.name, then=then_cond,
                     side=then.get("side", "zenoh"), count=spec.get("count"), once=bool(spec.get("once", False)))
         if "command" in when:
@@ -219,15 +220,15 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
     return tuple(out)
 
 
-def _values(message, signal: str, frames: list[oracle.Observed]) -> list[tuple[oracle.Observed, float]]:
+def _values(db, message, signal: str, frames: list[oracle.Observed]) -> list[tuple[oracle.Observed, float]]:
     """(frame, the signal's physical value) of every frame of the message (undecodable ones left out)."""
     out = []
     for o in frames:
         f = o.frame
-        if f.can_id != message.frame_id or f.extended != message.is_extended_frame or f.remote:
+        if f.remote or message_of(db, f) is not message:
             continue
         try:
-            value = message.decode(f.data, decode_choices=False).get(signal)
+            value = decode(message, f.data).get(signal)
         except Exception:  # noqa: BLE001 - a frame the DBC cannot decode is no value
             continue
         if isinstance(value, int | float) and math.isfinite(value):
@@ -243,7 +244,7 @@ def stimuli(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracle
             if f.can_id != rule.command.frame_id or f.extended != rule.command.is_extended_frame:
                 continue
             try:
-                decoded = rule.command.decode(f.data, decode_choices=False)
+                decoded = decode(rule.command, f.data)
             except Exception:  # noqa: BLE001
                 continue
             if all(any(abs(decoded[s] - v) <= tol for v in vs) for s, vs, tol in rule.command_signals):
@@ -251,7 +252,7 @@ def stimuli(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracle
         return out
     assert rule.when is not None
     out, was = [], False
-    for o, value in _values(rule.stimulus_message, rule.stimulus_signal, bus_frames):
+    for o, value in _values(rule.db, rule.stimulus_message, rule.stimulus_signal, bus_frames):
         now = rule.when.met(value)
         if now and not was:
             out.append(o)
@@ -273,7 +274,7 @@ def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracl
     """The rule on one run's frames: counts, latency distribution (ms) and problems."""
     window_ns = int(rule.within_ms * 1e6)
     starts = sorted(stimuli(rule, commands, bus_frames), key=lambda o: o.t_ns)
-    seen = sorted(_values(rule.response_message, rule.response_signal,
+    seen = sorted(_values(rule.db, rule.response_message, rule.response_signal,
                           zenoh_frames if rule.side == "zenoh" else bus_frames), key=lambda ov: ov[0].t_ns)
     latencies: list[float] = []  # of every response found, in time or late
     answered = late = missing = duplicates = 0

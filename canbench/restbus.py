@@ -39,7 +39,16 @@ from typing import Any
 import can
 from crccheck.crc import Crc8SaeJ1850
 
-from .dbc import bits_range, cycle_time_ms, name_problem, range_problem, send_type_cyclic, too_long_for_can_20
+from .dbc import (
+    bits_range,
+    cycle_time_ms,
+    decode,
+    encode_problem,
+    name_problem,
+    range_problem,
+    send_type_cyclic,
+    too_long_for_can_20,
+)
 from .scenario import YAML_BOOLS, text_number
 
 
@@ -309,7 +318,7 @@ class Rule:
         """The n-th answer; UndecodableRequest if the request is not its message, Unanswerable
         if a copied value is one the answer's signal cannot carry."""
         try:
-            decoded = self.on.decode(request, decode_choices=False)
+            decoded = decode(self.on, request)
         except Exception as e:  # noqa: BLE001 - cantools' decode errors say what it could not read
             raise UndecodableRequest(str(e)) from None
         values = self.send.values(0.0)
@@ -558,9 +567,11 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
     if not sent:
         fail([*where, "dbc_node"], f"{node} transmits no message in the DBC (no BO_ names it as sender)")
         return (), ()
-    left_out = tuple(f"{m.name} ({m.length} data bytes: CAN FD)" for m in sent  # those it would send
-                     if too_long_for_can_20(m) and cycle_time_ms(m))
-    sent = [m for m in sent if not too_long_for_can_20(m)]
+    left_out = tuple(f"{m.name} ({m.length} data bytes: CAN FD)" if too_long_for_can_20(m)
+                     else f"{m.name} ({encode_problem(m)})" for m in sent  # those it would send
+                     if (too_long_for_can_20(m) or encode_problem(m)) and cycle_time_ms(m))
+    unsendable = {m.name: encode_problem(m) for m in sent if encode_problem(m) and not too_long_for_can_20(m)}
+    sent = [m for m in sent if not too_long_for_can_20(m) and m.name not in unsendable]
     by_name = {m.name: m for m in sent}
     for kind in ("signals", "counters", "checksums", "cycle_ms"):
         items = spec.get(kind) or {}
@@ -569,6 +580,8 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
             name = key if kind == "cycle_ms" else (_split(key) or ("", ""))[0]
             if kind != "cycle_ms" and _split(key) is None:
                 fail(at, f"{key!r}: name a signal as Message.Signal")
+            elif name in unsendable:
+                fail(at, f"{unsendable[name]}: {node}'s restbus leaves it out")
             elif name not in by_name:
                 known = "the DBC has no message" if name not in {m.name for m in db.messages} \
                     else f"{node} does not transmit" if not too_long_for_can_20(db.get_message_by_name(name)) \
@@ -592,8 +605,8 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
     return tuple(out), left_out
 
 
-def _message(db, name: str, at: list, fail: Fail):
-    """A message the bench can send or read: the DBC's, and CAN 2.0."""
+def _message(db, name: str, at: list, fail: Fail, sent: bool = True):
+    """A message the bench can read, or send (sent): the DBC's, CAN 2.0, and one it can encode."""
     try:
         message = db.get_message_by_name(name)
     except KeyError:
@@ -601,6 +614,9 @@ def _message(db, name: str, at: list, fail: Fail):
         return None
     if too_long_for_can_20(message):
         fail(at, f"{name} has {message.length} data bytes (CAN FD): the bench carries CAN 2.0 frames, up to 8")
+        return None
+    if sent and (why := encode_problem(message)):
+        fail(at, why)
         return None
     return message
 
@@ -612,7 +628,7 @@ def responder_rules(db, specs: list, where: list, base: Path, fail: Fail, fail_f
     rules = []
     for i, spec in enumerate(specs):
         at = [*where, i]
-        on = _message(db, spec["request"], [*at, "request"], fail)
+        on = _message(db, spec["request"], [*at, "request"], fail, sent=False)
         send = _message(db, spec["send"], [*at, "send"], fail)
         if on is None or send is None:
             continue

@@ -524,7 +524,7 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
     loaded with cantools here so a DBC it cannot read is a problem at its line; then
     expect.signals and cycle_time.from_dbc against them (canbench.signals)."""
     from . import signals
-    from .dbc import load_dbc, load_error_text
+    from .dbc import load_dbc, load_error_text, strict_problem
     bus_dbcs: dict[str, Path] = {}
     where_of: dict[Path, list] = {}
     if dbc is not None and dbc.is_file():
@@ -541,11 +541,16 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
             where_of.setdefault(shown.resolve(), ["buses", i, "dbc"])
         elif dbc is not None and dbc.is_file():
             bus_dbcs[spec["name"]] = dbc
+    strict = doc.get("dbc_strict", True) is not False
     for file, where in where_of.items():
         try:
-            load_dbc(file)
+            db = load_dbc(file)
         except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
             fail(where, load_error_text(e, file.name))
+            continue
+        if strict and (why := strict_problem(db)):
+            fail(where, f"cantools' strict mode refuses {file.name}: {why}; if the DBC is meant as written, "
+                        "set dbc_strict: false (each such message is then read signal by signal, and not sent)")
     cycle = (doc.get("expect") or {}).get("cycle_time") if isinstance(doc.get("expect"), dict) else None
     if isinstance(cycle, dict) and cycle.get("from_dbc") and not bus_dbcs:
         fail(["expect", "cycle_time", "from_dbc"], "needs a DBC: give the scenario a dbc, or a bus (buses[].dbc)")

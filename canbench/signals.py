@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import wire
-from .dbc import grid_problem, load_dbc, message_of, range_problem, raws_of, value_range
+from .dbc import decode, grid_problem, load_dbc, message_of, range_problem, raws_of, value_range
 from .scenario import text_number
 
 if TYPE_CHECKING:
@@ -371,7 +371,7 @@ class Evaluator:
             return
         series = self.by_message[message.name]
         try:  # raw values: equals and one_of are judged on what the frame carries
-            decoded = message.decode(frame.data, decode_choices=False, scaling=False)
+            decoded = decode(message, frame.data, scaling=False)
         except Exception as e:  # noqa: BLE001 - cantools' errors name what does not fit
             t_s = (t_ns - self.t0_ns) / 1e9
             for s in series:

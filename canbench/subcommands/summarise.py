@@ -1,4 +1,4 @@
-"""canbench summarise TRACE [--dbc F]: per-id counts, cycle times, jitter and bus load of a trace;
+"""canbench summarise TRACE [--dbc F [--dbc-lenient]]: per-id counts, cycle times, jitter and bus load of a trace;
 with a DBC, per message of it the statistics of each signal (count, min, max, mean, names seen)."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ def cmd_summarise(args) -> int:
     for trace in args.traces:
         print(authoring.summarise(trace, args.bitrate).table())
         if args.dbc:
-            print(authoring.summarise_signals(trace, args.dbc).table())
+            print(authoring.summarise_signals(trace, args.dbc, args.dbc_lenient).table())
     return 0
 
 
@@ -32,4 +32,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("traces", nargs="+", type=Path)
     p.add_argument("--bitrate", type=bitrate, default=500_000, help="for the bus load (default 500000)")
     p.add_argument("--dbc", type=Path, help="also per-message signal statistics, decoded with this DBC (cantools)")
+    p.add_argument("--dbc-lenient", action="store_true",
+                   help="read a DBC cantools' strict mode refuses (signals that overlap or pass their message's end) "
+                        "as written, each such message signal by signal")
     p.set_defaults(func=cmd_summarise)

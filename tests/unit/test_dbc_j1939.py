@@ -1,0 +1,131 @@
+"""J1939 parameter groups from any source address (dbc.message_of): a DBC names one 29-bit id
+per message, its usual sender and priority; a truck's network sends a group from other sources,
+at other priorities, to other destinations (PDU1). A frame of no message's id is the group's
+when the DBC marks one message of that group J1939 (VFrameFormat J1939PG), and only one; a
+29-bit message not marked J1939 (UDS on 29 bits) keeps its exact id. Signal gates, responses
+and the DBC's cycle times all follow; seeded faults fail each."""
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from canbench import checks, dbc, oracle, responses, scenario, wire
+
+pytestmark = pytest.mark.unit
+
+T0 = 1_700_000_000_000_000_000
+EXT = 0x80000000  # a DBC's flag of a 29-bit id
+J1939_DBC = f'''VERSION ""
+NS_ :
+BS_:
+BU_: ENGINE BRAKES
+BO_ {EXT | 0x0CF00400} EEC1: 8 ENGINE
+ SG_ EngineSpeed : 24|16@1+ (0.125,0) [0|8031.875] "rpm" Vector__XXX
+BO_ {EXT | 0x0C000F03} TSC1: 8 ENGINE
+ SG_ RequestedSpeed : 8|16@1+ (0.125,0) [0|8031.875] "rpm" Vector__XXX
+BO_ {EXT | 0x18FEF100} CCVS_ENGINE: 8 ENGINE
+ SG_ WheelSpeed : 8|16@1+ (0.00390625,0) [0|250.996] "km/h" Vector__XXX
+BO_ {EXT | 0x18FEF10B} CCVS_BRAKES: 8 BRAKES
+ SG_ WheelSpeed : 8|16@1+ (0.00390625,0) [0|250.996] "km/h" Vector__XXX
+BO_ {EXT | 0x18DAF110} UDS_REQUEST: 8 ENGINE
+ SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
+BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","J1939PG";
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 10000;
+BA_DEF_DEF_ "VFrameFormat" "J1939PG";
+BA_DEF_DEF_ "GenMsgCycleTime" 0;
+BA_ "VFrameFormat" BO_ {EXT | 0x18DAF110} 1;
+BA_ "GenMsgCycleTime" BO_ {EXT | 0x0CF00400} 10;
+'''
+
+
+@pytest.fixture
+def db(tmp_path):
+    (tmp_path / "truck.dbc").write_text(J1939_DBC)
+    return dbc.load_dbc(tmp_path / "truck.dbc")
+
+
+def name_of(db, can_id: int, extended: bool = True) -> str | None:
+    m = dbc.message_of(db, wire.Frame(can_id, 8, bytes(8), extended))
+    return None if m is None else m.name
+
+
+def test_a_group_is_found_from_any_source_priority_and_destination(db):
+    assert name_of(db, 0x0CF00400) == "EEC1"           # the DBC's own id
+    assert name_of(db, 0x0CF00417) == "EEC1"           # another source address
+    assert name_of(db, 0x18F00417) == "EEC1"           # and another priority
+    assert name_of(db, 0x0C000A05) == "TSC1"           # PDU1: another destination and source
+    assert name_of(db, 0x18FEF10B) == "CCVS_BRAKES"    # a sender the DBC names is its own message
+    assert name_of(db, 0x18FEF121) is None             # the DBC has the group from two senders: whose?
+    assert name_of(db, 0x18DAF110) == "UDS_REQUEST"
+    assert name_of(db, 0x18DA10F1) is None             # not a J1939 group in the DBC: its exact id only
+    assert name_of(db, 0x0CF00500) is None             # another group
+    assert name_of(db, 0x400, extended=False) is None  # an 11-bit frame is never a J1939 group's
+
+
+def scenario_path(tmp: Path, expect: str) -> Path:
+    (tmp / "truck.dbc").write_text(J1939_DBC)
+    (tmp / "trace.log").write_text(f"({T0 / 1e9:.6f}) vcan0 0CF00417#0000000000000000\n")
+    path = tmp / "sc.yaml"
+    path.write_text("name: truck\nduration_s: 10\ndbc: truck.dbc\nbuses:\n  - name: vcan0\n"
+                    "ecus:\n  - name: e\n    bus: vcan0\n    trace: trace.log\nexpect:\n" + expect)
+    return path
+
+
+def eec1(rpm: float, source: int = 0x17) -> wire.Frame:
+    raw = round(rpm / 0.125)
+    return wire.Frame(0x0CF00400 | source, 8, bytes([0xFF] * 3) + raw.to_bytes(2, "little") + bytes([0xFF] * 3), True)
+
+
+def observed(frames: list[wire.Frame], step_ns: int = 10_000_000):
+    bus = [oracle.Observed(f, T0 + i * step_ns, i, line=i + 1) for i, f in enumerate(frames)]
+    zen = [oracle.Observed(f, T0 + i * step_ns + 400_000, i, key="vehicle/can/rx", seq=i)
+           for i, f in enumerate(frames)]
+    return bus, zen
+
+
+def gate_problems(path: Path, frames: list[wire.Frame]) -> list[str]:
+    sc = scenario.load(path)
+    bus, zen = observed(frames)
+    b = SimpleNamespace(bus="vcan0", bus_frames=bus, can_frames=bus, zenoh_frames=zen,
+                        comparison=SimpleNamespace(matched=list(zip(bus, zen, strict=True)), corrupted=[]))
+    result = SimpleNamespace(scenario=SimpleNamespace(signal_gates=sc.signal_gates, bus_dbcs=sc.bus_dbcs, expect={}),
+                             buses=[b], metrics={})
+    return checks.signals_can(result)
+
+
+def test_a_signal_gate_judges_the_group_from_another_source(tmp_path):
+    path = scenario_path(tmp_path, "  signals:\n    EEC1.EngineSpeed: {range: [600, 2000]}\n")
+    assert gate_problems(path, [eec1(800), eec1(850)]) == []
+    problems = gate_problems(path, [eec1(800), eec1(2500)])
+    assert len(problems) == 1 and "EEC1.EngineSpeed = 2500 rpm outside [600, 2000] at t=0.010 s" in problems[0]
+
+
+def test_the_dbc_cycle_is_judged_on_the_group_from_another_source(tmp_path):
+    path = scenario_path(tmp_path, "  cycle_time: {from_dbc: true, tolerance_pct: 20}\n")
+    sc = scenario.load(path)
+    cycles = {"0CF00417": {"can": {"count": 50, "cycle_p50_ms": 20.0, "cycle_max_ms": 21.0},
+                           "zenoh": {"count": 50, "cycle_p50_ms": 20.0, "cycle_max_ms": 21.0}}}
+    result = SimpleNamespace(scenario=sc, buses=[SimpleNamespace(bus="vcan0", cycle_times=cycles)])
+    problems = checks.cycle_time(result)
+    assert problems and "vcan0 id 0CF00417 (EEC1): median cycle 20.00 ms on the bus, the DBC says 10.00 ms" \
+        in problems[0]
+    cycles["0CF00417"]["can"] |= {"cycle_p50_ms": 10.0, "cycle_max_ms": 10.5}
+    cycles["0CF00417"]["zenoh"] |= {"cycle_p50_ms": 10.0, "cycle_max_ms": 10.5}
+    assert checks.cycle_time(result) == []
+
+
+def test_a_response_is_read_from_the_group_from_another_source(db):
+    problems: list = []
+    spec = {"when": {"signal": "TSC1.RequestedSpeed", "above": 1000},
+            "then": {"signal": "EEC1.EngineSpeed", "above": 1000}, "within_ms": 100, "side": "bus"}
+    [rule] = responses.rules({"buses": [{"name": "vcan0"}], "expect": {"responses": [spec]}}, {"vcan0": "truck.dbc"},
+                             lambda _: db, lambda where, m: problems.append(m))
+    assert problems == []
+    request = wire.Frame(0x0C000A05, 8, bytes([0xFF]) + (1200 * 8).to_bytes(2, "little") + bytes(5), True)
+    frames, _ = observed([request, eec1(1100)])
+    values = responses._values(rule.db, rule.response_message, rule.response_signal, frames)
+    assert [v for _, v in values] == [1100]
+    stimuli = responses._values(rule.db, rule.stimulus_message, rule.stimulus_signal, frames)
+    assert [v for _, v in stimuli] == [1200]
