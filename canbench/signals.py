@@ -252,8 +252,9 @@ class Series:
     count: int = 0
     min: float | None = None
     max: float | None = None
-    last_t_ns: int | None = None
-    last_value: float | None = None
+    # per sender (frame id) the last (time its rate is judged at, value): a J1939 group's senders
+    # each change at their own rate (dbc.message_of), one id per message otherwise
+    last: dict[int, tuple[int, float]] = field(default_factory=dict)
     violations: list[str] = field(default_factory=list)
     more: int = 0  # violations beyond MAX_VIOLATIONS
     times: array = field(default_factory=lambda: array("d"))   # s since t0 of the plotted values, thinned
@@ -279,12 +280,14 @@ class Series:
             self.marks.append((t_s, value))
 
     def add(self, t_ns: int, t0_ns: int, value: float, where: str | Callable[[], str],
-            rate_t_ns: int | None = None, raw: int | float | None = None, exact: float | None = None) -> None:
+            rate_t_ns: int | None = None, raw: int | float | None = None, exact: float | None = None,
+            sender: int = 0) -> None:
         """One decoded value; where names its frame (a function giving that is called only for a
         violation, so good values build no strings); rate_t_ns: the time its rate is judged at
         (default t_ns; on Zenoh the bus stamp of the frame it was, as a batch arrives at once);
         raw: what the frame carries, for equals and one_of (default: value); exact: the physical
-        value before it became a float (a 64-bit integer's every digit), for the messages."""
+        value before it became a float (a 64-bit integer's every digit), for the messages; sender:
+        the frame's id, whose previous value max_rate compares with."""
         g = self.gate
         raw = value if raw is None else raw
         exact = value if exact is None else exact
@@ -304,17 +307,17 @@ class Series:
         if g.one_of is not None and raw not in g.one_of_raw:
             listed = list(dict.fromkeys(g._name(v) or _num(v) for v in g.one_of))
             self.violate(f"{g.key} = {g.show(value, _num(exact))} not one of [{', '.join(listed)}] {at()}", t_s, value)
-        if g.max_rate is not None and self.last_t_ns is not None and self.last_value is not None:
-            dt = (rate_t - self.last_t_ns) / 1e9
-            change = abs(value - self.last_value)
+        if g.max_rate is not None and (last := self.last.get(sender)) is not None:
+            dt = (rate_t - last[0]) / 1e9
+            change = abs(value - last[1])
             if change > 0 and (dt <= 0 or change / dt > g.max_rate):
                 rate = "no time" if dt <= 0 else f"{dt * 1000:.3f} ms ({_num(change / dt)}/s > {_num(g.max_rate)}/s)"
-                self.violate(f"{g.key} changed {g.show(self.last_value)} -> {g.show(value)} in {rate} {at()}",
+                self.violate(f"{g.key} changed {g.show(last[1])} -> {g.show(value)} in {rate} {at()}",
                              t_s, value)
         self.count += 1
         self.min = value if self.min is None else min(self.min, value)
         self.max = value if self.max is None else max(self.max, value)
-        self.last_t_ns, self.last_value = rate_t, value
+        self.last[sender] = (rate_t, value)
         if (self.count - 1) % self.step == 0:
             self.times.append(t_s)
             self.values.append(value)
@@ -383,7 +386,7 @@ class Evaluator:
             raw = decoded.get(s.gate.signal)
             if isinstance(raw, int | float):  # else a multiplexed signal not selected in this frame
                 exact = self._conversion(message, s.gate.signal).raw_to_scaled(raw, decode_choices=False)
-                s.add(t_ns, self.t0_ns, float(exact), where, rate_t_ns, raw, exact)
+                s.add(t_ns, self.t0_ns, float(exact), where, rate_t_ns, raw, exact, frame.can_id)
 
     def finish(self) -> list[Series]:
         side_name = "on the bus" if self.side == "can" else "on Zenoh"

@@ -129,3 +129,14 @@ def test_a_response_is_read_from_the_group_from_another_source(db):
     assert [v for _, v in values] == [1100]
     stimuli = responses._values(rule.db, rule.stimulus_message, rule.stimulus_signal, frames)
     assert [v for _, v in stimuli] == [1200]
+
+
+def test_max_rate_follows_each_sender_of_a_group(tmp_path):
+    """Two engines' EEC1 interleaved (sources 00 and 17): each steady, so no change between
+    one's value and the other's is a rate; a jump of one of them is."""
+    path = scenario_path(tmp_path, "  signals:\n    EEC1.EngineSpeed: {max_rate: 1000}\n")
+    steady = [f for _ in range(5) for f in (eec1(800, source=0x00), eec1(1500, source=0x17))]
+    assert gate_problems(path, steady) == []
+    jump = steady[:6] + [eec1(800, source=0x00), eec1(1600, source=0x17)]
+    problems = gate_problems(path, jump)
+    assert len(problems) == 1 and "EEC1.EngineSpeed changed 1500 rpm -> 1600 rpm in 20.000 ms" in problems[0]
