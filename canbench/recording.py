@@ -13,7 +13,8 @@ Channels (header.stamp = log time; header.frame_id = the bus):
   /signals_zenoh/<bus>/<msg>/<signal>  std_msgs/msg/Float64  the same decoded from the frames received on
                                                       Zenoh (log time: receive), so a corrupted signal shows
                                                       next to what the bus carried
-Signals are decoded with the bus's DBC (buses[].dbc, else the scenario's dbc).
+Signals are decoded with the bus's DBC (buses[].dbc, else the scenario's dbc); a J1939 group
+from another source than the DBC's id (dbc.message_of) is <msg>_<id>, one channel per sender.
 
 `canbench view recording.mcap` reads it back through the live viewer's decoders
 and loggers (view_mcap): the same entities as a live run."""
@@ -73,8 +74,11 @@ class Ros2McapWriter:
 
 def _signals(w: Ros2McapWriter, prefix: str, db, o: Observed) -> None:
     if db is not None and not o.frame.remote and (signals := decode_signals(db, o.frame)):
+        message = signals[0]
+        if o.frame.can_id != db.get_message_by_name(message).frame_id:  # a J1939 group's other sender
+            message = f"{message}_{wire.id_hex(o.frame.can_id, o.frame.extended)}"
         for name, value in signals[1].items():
-            w.write(f"{prefix}/{signals[0]}/{name}", FLOAT64, o.t_ns, ros2_msgs.Float64(value))
+            w.write(f"{prefix}/{message}/{name}", FLOAT64, o.t_ns, ros2_msgs.Float64(value))
 
 
 def write_mcap(result: RunResult, path: Path, dbc=None) -> None:

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from canbench import checks, dbc, oracle, responses, scenario, wire
+from canbench import checks, dbc, oracle, recording, responses, scenario, wire
 
 pytestmark = pytest.mark.unit
 
@@ -140,3 +140,11 @@ def test_max_rate_follows_each_sender_of_a_group(tmp_path):
     jump = steady[:6] + [eec1(800, source=0x00), eec1(1600, source=0x17)]
     problems = gate_problems(path, jump)
     assert len(problems) == 1 and "EEC1.EngineSpeed changed 1500 rpm -> 1600 rpm in 20.000 ms" in problems[0]
+
+
+def test_the_recording_keeps_each_sender_of_a_group_on_its_own_channel(db):
+    topics: list[str] = []
+    writer = SimpleNamespace(write=lambda topic, *_: topics.append(topic))
+    for f in (eec1(800, source=0x00), eec1(1500, source=0x17)):
+        recording._signals(writer, "/signals/vcan0", db, oracle.Observed(f, T0, 0))
+    assert topics == ["/signals/vcan0/EEC1/EngineSpeed", "/signals/vcan0/EEC1_0CF00417/EngineSpeed"]
