@@ -20,7 +20,7 @@ import yaml
 from . import scenario
 from .errors import InputError, TraceError
 from .trace import STREAM_CACHE, format_line, iter_trace, where_in
-from .wire import id_hex
+from .wire import Frame, id_hex
 
 # An id is periodic when nearly all its gaps sit near the median gap: a median alone
 # (or its absolute deviation) also "finds" a cycle in two interleaved streams of one id
@@ -369,20 +369,34 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
     return paths, {iface: round((t_ns - start) / 1e9, 6) for iface, t_ns in first.items()}
 
 
-def _dbc_cycles_off(s: TraceSummary, signal_summary: SignalSummary,
+def dbc_cycles_of(s: TraceSummary, dbc_path: Path) -> dict[str, float]:
+    """trace id -> the DBC's cycle (ms) of its message, for the trace's ids that are a cyclic
+    message of the DBC (its own id, or a J1939 group's from another source: dbc.message_of)."""
+    from .dbc import cycle_time_ms, load_dbc, message_of
+    db = load_dbc(dbc_path)
+    out = {}
+    for i in s.ids:
+        m = message_of(db, Frame(int(i.ident, 16), 0, b"", i.extended))
+        if m is not None and (cycle := cycle_time_ms(m)):
+            out[i.ident] = cycle
+    return out
+
+
+def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float],
                     tolerance_pct: float) -> dict[str, tuple[float, float]]:
-    """id -> (the trace's median cycle, the DBC's) for the DBC's cyclic messages the trace sends
-    at another cycle (beyond tolerance_pct; the median over its interfaces)."""
+    """id -> (the trace's median cycle, the DBC's) for the trace's ids of a cyclic message of the
+    DBC (dbc_cycles) that it sends at another cycle (beyond tolerance_pct; the median over its
+    interfaces)."""
     seen: dict[str, list[float]] = {}
     for i in s.ids:
         if i.cycle_ms:
             seen.setdefault(i.ident, []).append(i.cycle_ms)
     out = {}
-    for m in signal_summary.messages:
-        if m.cycle_ms and m.ident in seen:
-            median = statistics.median(seen[m.ident])
-            if abs(median - m.cycle_ms) > m.cycle_ms * tolerance_pct / 100:
-                out[m.ident] = (round(median, 3), m.cycle_ms)
+    for ident, cycle in dbc_cycles.items():
+        if ident in seen:
+            median = statistics.median(seen[ident])
+            if abs(median - cycle) > cycle * tolerance_pct / 100:
+                out[ident] = (round(median, 3), cycle)
     return out
 
 
@@ -477,7 +491,8 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
         if as_written:
             header += (f"# REVIEW: dbc_strict: false, as --dbc-lenient asked: the DBC has {as_written}. Each such "
                        "message is read signal by signal; the bench does not send it.\n")
-        from_dbc = {m.ident for m in signal_summary.messages if m.cycle_ms}
+        dbc_cycles = dbc_cycles_of(s, dbc)
+        from_dbc = set(dbc_cycles)
         if from_dbc:  # the database's cycles; ids: keeps only the periodic ids it has no cycle for
             expect: dict = doc["expect"]  # type: ignore[assignment]
             tolerance = expect["cycle_time"]["tolerance_pct"]
@@ -485,11 +500,11 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
             # where the recorded car sends a message at another cycle than its DBC says (another
             # variant, an event-periodic message's events), the trace's cycle: the gate judges the
             # bridge against the bus, and the car is what the bus replays
-            overridden = _dbc_cycles_off(s, signal_summary, tolerance)
+            overridden = _dbc_cycles_off(s, dbc_cycles, tolerance)
             ids |= {ident: trace_cycle for ident, (trace_cycle, _) in overridden.items()}
             expect["cycle_time"] = {"from_dbc": True, "tolerance_pct": tolerance} | ({"ids": ids} if ids else {})
-            header += (f"# cycle_time.from_dbc: the DBC's GenMsgCycleTime for its {len(from_dbc)} cyclic messages in "
-                       "the trace (REVIEW: the trace's own cycles are in `canbench summarise`).\n")
+            header += (f"# cycle_time.from_dbc: the DBC's GenMsgCycleTime for the trace's {len(from_dbc)} ids of its "
+                       "cyclic messages (REVIEW: the trace's own cycles are in `canbench summarise`).\n")
             if overridden:
                 shown = [f"{ident} every {trace_cycle:g} ms (the DBC: {dbc_cycle:g})"
                          for ident, (trace_cycle, dbc_cycle) in sorted(overridden.items())]

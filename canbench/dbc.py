@@ -19,7 +19,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import cantools
-from cantools import j1939
 from cantools.database.can import Message
 
 # per message that cantools' strict mode refuses: why (its words), and the one-signal messages it
@@ -61,11 +60,9 @@ def _one_signal_messages(message) -> tuple:
     out = []
     for signal in message.signals:
         chain, at = [signal], signal
-        while at.multiplexer_signal is not None and at.multiplexer_signal in by_name:
+        while at.multiplexer_signal in by_name and by_name[at.multiplexer_signal] not in chain:  # a loop ends
             at = by_name[at.multiplexer_signal]
             chain.insert(0, at)
-        if any(a is not b and _bits(a) & _bits(b) for a in chain for b in chain):
-            continue  # overlaps its own multiplexer: no value can be read apart from the page it selects
         length = max(message.length, *(_end_byte(s) for s in chain))
         out.append(Message(message.frame_id, message.name, length, chain, strict=False,
                            is_extended_frame=message.is_extended_frame))
@@ -185,27 +182,56 @@ def message_of(dbc, frame):
     above 7FF unless told. A 29-bit frame of no message's id is a J1939 message's when the DBC
     marks one of its parameter group (VFrameFormat J1939PG) and only one: the DBC's id names the
     usual sender and priority, and a J1939 network sends a group from any source address, at
-    any priority (to any destination, for a PDU1 group)."""
+    any priority (to any destination, for a PDU1 group). Not the proprietary groups nor UDS,
+    whose data each sender defines (J1939_BY_SENDER)."""
     try:
         message = dbc.get_message_by_frame_id(frame.can_id, force_extended_id=frame.extended)
     except KeyError:
         message = None
     if message is not None and message.is_extended_frame == frame.extended:
         return message
-    if frame.extended:
-        same = _j1939_groups(dbc).get(j1939.pgn_from_frame_id(frame.can_id), ())
+    if frame.extended and (groups := _j1939_groups(dbc)) and (pgn := j1939_group(frame.can_id)) is not None:
+        same = groups.get(pgn, ())
         return same[0] if len(same) == 1 else None  # several senders in the DBC, none this one: whose?
     return None
 
 
+# PDU formats whose data means what its sender makes it mean, so another source's frame is not the
+# DBC's message: proprietary A (EF) and B (FF), and ISO 15765-2 (UDS) on 29 bits (DA, DB)
+J1939_BY_SENDER = frozenset({0xEF, 0xFF, 0xDA, 0xDB})
+
+
+def j1939_group(can_id: int) -> int | None:
+    """The J1939 parameter group number of a 29-bit id (a PDU1 group's destination is not part
+    of it), None for a group whose meaning is its sender's (J1939_BY_SENDER) or an id past 29 bits."""
+    if can_id > 0x1FFFFFFF:
+        return None
+    pdu_format = (can_id >> 16) & 0xFF
+    if pdu_format in J1939_BY_SENDER:
+        return None
+    return (can_id >> 8) & (0x3FFFF if pdu_format >= 240 else 0x3FF00)
+
+
+def group_read(db, message) -> int | None:
+    """The J1939 group whose frames from any source are this message's (message_of), else None."""
+    pgn = j1939_group(message.frame_id) if message.is_extended_frame else None
+    return pgn if pgn is not None and _j1939_groups(db).get(pgn) == (message,) else None
+
+
+def group_mask(can_id: int) -> int:
+    """A 29-bit filter mask that passes a J1939 group's frames from any source, at any priority
+    (to any destination for a PDU1 group): the data pages and PDU format, and a PDU2's specific."""
+    return 0x03FFFF00 if (can_id >> 16) & 0xFF >= 240 else 0x03FF0000
+
+
 def _j1939_groups(db) -> dict[int, tuple]:
-    """The DBC's J1939 messages by parameter group number."""
+    """The DBC's J1939 messages by parameter group number (empty when it marks none J1939)."""
     groups = _J1939.get(db)
     if groups is None:
         found: dict[int, list] = {}
         for m in db.messages:
-            if m.protocol == "j1939" and m.is_extended_frame:
-                found.setdefault(j1939.pgn_from_frame_id(m.frame_id), []).append(m)
+            if m.protocol == "j1939" and m.is_extended_frame and (pgn := j1939_group(m.frame_id)) is not None:
+                found.setdefault(pgn, []).append(m)
         groups = _J1939[db] = {pgn: tuple(ms) for pgn, ms in found.items()}
     return groups
 

@@ -30,6 +30,7 @@ from pathlib import Path
 import can
 
 from . import restbus, runkeys
+from .dbc import group_mask, j1939_group
 from .plans import SENT_LOG_HEADER, frame_of, schedule, sent_line
 from .scenario import Ecu, Scenario
 from .stats import percentile
@@ -192,18 +193,36 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
             "turnaround_ms": fidelity(turnaround_ms)}
 
 
+def request_routes(rules) -> tuple[list[dict], Callable[[can.Message], restbus.Rule | None]]:
+    """The responder's socket filters (python-can's) and the rule of a received frame: a request
+    of its DBC id, or of a J1939 group the DBC reads from any source (dbc.group_read) at any
+    source, priority and PDU1 destination."""
+    by_id = {(r.on.frame_id, r.on.is_extended_frame): r for r in rules}
+    by_group = {r.group: r for r in rules if r.group is not None}
+    filters = [{"can_id": i, "can_mask": group_mask(i) if by_id[(i, ext)].group is not None
+                else 0x1FFFFFFF if ext else 0x7FF, "extended": ext} for i, ext in sorted(by_id)]
+
+    def rule_of(msg: can.Message) -> restbus.Rule | None:
+        rule = by_id.get((msg.arbitration_id, msg.is_extended_id))
+        if rule is None and msg.is_extended_id and by_group:
+            rule = by_group.get(j1939_group(msg.arbitration_id))  # type: ignore[arg-type]
+        return rule
+    return filters, rule_of
+
+
 def responder(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, timeout_s: float) -> dict:
     """Answers each frame of a rule's request message with the rule's answer (canbench.restbus.Rule),
     until stop is set and the socket holds nothing more, as echo."""
-    rules = {(r.on.frame_id, r.on.is_extended_frame): r for r in ecu.rules}
-    filters = [{"can_id": i, "can_mask": 0x1FFFFFFF if ext else 0x7FF, "extended": ext} for i, ext in sorted(rules)]
+    filters, rule_of = request_routes(ecu.rules)
     answers: dict[tuple[int, bool], int] = {}
     unanswerable: list[str] = []  # the first reason, then a count
 
     def answer_of(msg: can.Message) -> can.Message | None:
-        key = (msg.arbitration_id, msg.is_extended_id)
+        rule = rule_of(msg)
+        assert rule is not None  # asked only for frames rule_of knows
+        key = (rule.on.frame_id, rule.on.is_extended_frame)  # the answer's counter counts the rule's answers
         try:
-            message, data = rules[key].answer(bytes(msg.data), answers.get(key, 0))
+            message, data = rule.answer(bytes(msg.data), answers.get(key, 0))
         except restbus.UndecodableRequest:  # counted (received - answered - unanswerable), not answered
             return None
         except restbus.Unanswerable as e:
@@ -215,7 +234,7 @@ def responder(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: s
 
     received, answered, turnaround_ms = _answer_requests(
         ecu, filters, run_dir, stop, session, run_id, timeout_s,
-        lambda msg: (msg.arbitration_id, msg.is_extended_id) in rules, answer_of)
+        lambda msg: rule_of(msg) is not None, answer_of)
     # every request is answered, undecodable or unanswerable (a failed send ends the role)
     summary = {"name": ecu.name, "role": ecu.role, "bus": ecu.bus, "received": received, "sent": answered,
                "undecodable": received - answered - len(unanswerable), "unanswerable": len(unanswerable),

@@ -202,3 +202,44 @@ def test_command_lines_refuse_it_unless_told_and_scaffold_writes_the_setting(fil
     sc = scenario.load(out)
     assert sc.raw["dbc_strict"] is False and "OVERLAP.LOW_BIT" in out.read_text()
     assert authoring.summarise_signals(trace, files / "car.dbc", lenient=True).messages[0].name == "OVERLAP"
+
+
+def load_within(path: Path, seconds: float = 20.0):
+    """load_dbc in a thread: a DBC that made it loop fails the test instead of hanging it."""
+    import threading
+    out: list = []
+    worker = threading.Thread(target=lambda: out.append(dbc.load_dbc(path)), daemon=True)
+    worker.start()
+    worker.join(seconds)
+    assert not worker.is_alive(), f"loading {path.name} did not end"
+    return out[0]
+
+
+@pytest.mark.parametrize("selects", ["SG_MUL_VAL_ 256 A A 1-1;\n",
+                                     "SG_MUL_VAL_ 256 A B 1-1;\nSG_MUL_VAL_ 256 B A 1-1;\n"])
+def test_multiplexers_that_select_each_other_load_and_end(tmp_path, selects):
+    (tmp_path / "loop.dbc").write_text(HEAD + '''
+BO_ 256 LOOP: 8 ECU
+ SG_ A m1M : 0|8@1+ (1,0) [0|255] "" TESTER
+ SG_ B m1M : 8|8@1+ (1,0) [0|255] "" TESTER
+ SG_ X : 16|8@1+ (1,0) [0|255] "" TESTER
+ SG_ Y : 16|4@1+ (1,0) [0|15] "" TESTER
+''' + selects)
+    db = load_within(tmp_path / "loop.dbc")
+    assert dbc.decode(db.get_message_by_name("LOOP"), bytes([1, 1, 0x2A, 0, 0, 0, 0, 0]))["X"] == 0x2A
+
+
+def test_a_signal_overlapping_its_multiplexer_is_read_on_its_page(tmp_path):
+    """OBD-style: a PID's signal that starts with the PID byte itself (PID_AND_A) is read on the
+    PID's page like any other, not dropped."""
+    (tmp_path / "obd.dbc").write_text(HEAD + '''
+BO_ 256 OBD: 8 ECU
+ SG_ PID M : 8|8@1+ (1,0) [0|255] "" TESTER
+ SG_ PID_AND_A m12 : 8|16@1+ (1,0) [0|65535] "" TESTER
+ SG_ RPM m12 : 16|16@1+ (0.25,0) [0|16383] "rpm" TESTER
+''')
+    m = dbc.load_dbc(tmp_path / "obd.dbc").get_message_by_name("OBD")
+    assert dbc.as_written_problem(m) is not None
+    assert dbc.decode(m, bytes([0x41, 12, 0x20, 0x1F, 0, 0, 0, 0])) == {"PID": 12, "PID_AND_A": 0x200C,
+                                                                         "RPM": 0x1F20 * 0.25}
+    assert dbc.decode(m, bytes([0x41, 13, 0x20, 0x1F, 0, 0, 0, 0])) == {"PID": 13}

@@ -9,9 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
+import can
 import pytest
 
-from canbench import checks, dbc, oracle, recording, responses, scenario, wire
+from canbench import checks, cli, dbc, ecu, oracle, recording, responses, scenario, wire
 
 pytestmark = pytest.mark.unit
 
@@ -30,6 +31,12 @@ BO_ {EXT | 0x18FEF100} CCVS_ENGINE: 8 ENGINE
 BO_ {EXT | 0x18FEF10B} CCVS_BRAKES: 8 BRAKES
  SG_ WheelSpeed : 8|16@1+ (0.00390625,0) [0|250.996] "km/h" Vector__XXX
 BO_ {EXT | 0x18DAF110} UDS_REQUEST: 8 ENGINE
+ SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
+BO_ {EXT | 0x18DAF100} UDS_UNMARKED: 8 ENGINE
+ SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
+BO_ {EXT | 0x18FF1200} PROPB_ENGINE: 8 ENGINE
+ SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
+BO_ {EXT | 0x18EF2100} PROPA_ENGINE: 8 ENGINE
  SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
 BA_DEF_ BO_ "VFrameFormat" ENUM "StandardCAN","ExtendedCAN","reserved","J1939PG";
 BA_DEF_ BO_ "GenMsgCycleTime" INT 0 10000;
@@ -62,6 +69,16 @@ def test_a_group_is_found_from_any_source_priority_and_destination(db):
     assert name_of(db, 0x18DA10F1) is None             # not a J1939 group in the DBC: its exact id only
     assert name_of(db, 0x0CF00500) is None             # another group
     assert name_of(db, 0x400, extended=False) is None  # an 11-bit frame is never a J1939 group's
+    assert name_of(db, 0x2CF00417) is None             # past 29 bits (an EFF flag left in the id)
+
+
+def test_groups_whose_data_its_sender_defines_keep_their_exact_id(db):
+    """Proprietary A and B mean what each manufacturer makes them mean, and UDS on 29 bits is a
+    request or an answer by its addresses: another source's frame is not the DBC's message, even
+    where the DBC marks every message J1939 by default (BA_DEF_DEF_ "J1939PG")."""
+    assert name_of(db, 0x18FF1200) == "PROPB_ENGINE" and name_of(db, 0x18FF1233) is None
+    assert name_of(db, 0x18EF2100) == "PROPA_ENGINE" and name_of(db, 0x18EF4521) is None
+    assert name_of(db, 0x18DAF100) == "UDS_UNMARKED" and name_of(db, 0x18DA00F1) is None
 
 
 def scenario_path(tmp: Path, expect: str) -> Path:
@@ -148,3 +165,44 @@ def test_the_recording_keeps_each_sender_of_a_group_on_its_own_channel(db):
     for f in (eec1(800, source=0x00), eec1(1500, source=0x17)):
         recording._signals(writer, "/signals/vcan0", db, oracle.Observed(f, T0, 0))
     assert topics == ["/signals/vcan0/EEC1/EngineSpeed", "/signals/vcan0/EEC1_0CF00417/EngineSpeed"]
+
+
+@pytest.mark.parametrize("every_ms, said", [(10, None), (20, 20.0)])
+def test_scaffold_takes_the_dbc_cycle_for_the_group_from_another_source(tmp_path, capsys, every_ms, said):
+    """The recording's EEC1 comes from source 17: from_dbc judges it by the DBC's 10 ms, so a
+    trace at 20 ms gets its own cycle in ids (the first run passes), at 10 ms none."""
+    (tmp_path / "truck.dbc").write_text(J1939_DBC)
+    trace = tmp_path / "drive.log"
+    trace.write_text("".join(f"({T0 / 1e9 + i * every_ms / 1000:.6f}) can0 0CF00417#FFFFFF4019FFFFFF\n"
+                             for i in range(100)))
+    out = tmp_path / "sc" / "drive.yaml"
+    assert cli.main(["scaffold", str(trace), "--name", "drive", "--out", str(out),
+                     "--dbc", str(tmp_path / "truck.dbc")]) == 0
+    cycle = scenario.load(out).expect["cycle_time"]
+    assert cycle["from_dbc"] is True and (cycle.get("ids") or {}).get("0CF00417") == said
+
+
+def test_a_responder_answers_a_j1939_request_from_any_source(tmp_path):
+    """The request filter passes the group from any source and priority (the socket's filter as
+    SocketCAN applies it), and the frame finds its rule; another group does not."""
+    (tmp_path / "truck.dbc").write_text(J1939_DBC)
+    path = tmp_path / "sc.yaml"
+    (tmp_path / "trace.log").write_text(f"({T0 / 1e9:.6f}) vcan0 0CF00417#0000000000000000\n")
+    path.write_text("name: truck\nduration_s: 10\ndbc: truck.dbc\nbuses:\n  - name: vcan0\necus:\n"
+                    "  - name: e\n    bus: vcan0\n    trace: trace.log\n"
+                    "  - name: ecm\n    bus: vcan0\n    role: responder\n"
+                    "    rules: [{request: TSC1, send: EEC1, set: {EngineSpeed: RequestedSpeed}},\n"
+                    "            {request: UDS_UNMARKED, send: EEC1}]\nexpect:\n  integrity: true\n")
+    ecm = next(e for e in scenario.load(path).ecus if e.name == "ecm")
+    filters, rule_of = ecu.request_routes(ecm.rules)
+
+    def passes(can_id: int) -> bool:
+        return any((can_id & f["can_mask"]) == (f["can_id"] & f["can_mask"]) for f in filters)
+
+    def rule(can_id: int):
+        return rule_of(can.Message(arbitration_id=can_id, is_extended_id=True))
+    for request in (0x0C000F03, 0x0C000A05, 0x18000A05):  # the DBC's id; another source, destination, priority
+        assert passes(request) and rule(request).on.name == "TSC1"
+    assert passes(0x18DAF100) and rule(0x18DAF100).on.name == "UDS_UNMARKED"
+    assert not passes(0x18DA00F1) and rule(0x18DA00F1) is None  # UDS: its exact id only
+    assert not passes(0x0CF00400) and rule(0x0CF00400) is None  # another group
