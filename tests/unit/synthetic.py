@@ -1,11 +1,13 @@
 """What several unit tests share (imported from this folder): a synthetic run of smoke.yaml,
 its bus trace as the CAN capture and the Zenoh capture without one frame, analysed as a bench
-run is; the capture files of a run with commands (write_command_run)."""
+run is; the capture files of a run with commands (write_command_run); a scenario's signal gates
+judged on given bus frames (signal_problems)."""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
-from canbench import analysis, oracle, plans, scenario, wire
+from canbench import analysis, checks, oracle, plans, scenario, wire
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -45,3 +47,19 @@ def write_command_run(run_dir: Path, t0_ns: int, ecu_frames: int,
         for t, f in sorted(bus_lines, key=lambda x: x[0]):
             can_log.write(f"({t // 10**9}.{t % 10**9 // 1000:06d}) {f.candump('vcan0')}\n")
     (run_dir / "zenoh.tsv").write_text("".join(zenoh_lines))
+
+
+SIGNAL_T0 = 1_700_000_000_000_000_000
+
+
+def signal_problems(path: Path, frames: list[wire.Frame], step_ns: int = 10_000_000) -> list[str]:
+    """signals_can's problems for a scenario's gates (its DBCs as it names them) on these frames
+    of vcan0, step_ns apart from SIGNAL_T0 (can.log:N is the N-th), each forwarded to Zenoh."""
+    sc = scenario.load(path)
+    bus = [oracle.Observed(f, SIGNAL_T0 + i * step_ns, i, line=i + 1) for i, f in enumerate(frames)]
+    zen = [oracle.Observed(f, SIGNAL_T0 + i * step_ns + 400_000, i, key="vehicle/can/rx", seq=i)
+           for i, f in enumerate(frames)]
+    run_of = SimpleNamespace(signal_gates=sc.signal_gates, bus_dbcs=sc.bus_dbcs, expect={})
+    b = SimpleNamespace(bus="vcan0", bus_frames=bus, can_frames=bus, zenoh_frames=zen,
+                        comparison=SimpleNamespace(matched=list(zip(bus, zen, strict=True)), corrupted=[]))
+    return checks.signals_can(SimpleNamespace(scenario=run_of, buses=[b], metrics={}))

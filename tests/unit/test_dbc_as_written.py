@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import random
 from pathlib import Path
-from types import SimpleNamespace
 
 import cantools
 import pytest
+from synthetic import signal_problems
 
-from canbench import authoring, checks, cli, dbc, oracle, scenario, wire
+from canbench import authoring, cli, dbc, scenario, wire
 from canbench.errors import InputError, ScenarioError
 
 pytestmark = pytest.mark.unit
@@ -140,25 +140,14 @@ def test_a_scenario_refuses_it_at_its_dbc_line_and_says_what_to_set(files):
         scenario.load(path)
 
 
-def run_gate(path: Path, frames: list[wire.Frame]) -> list[str]:
-    gates = scenario.load(path).signal_gates
-    bus = [oracle.Observed(f, T0 + i * 10_000_000, i, line=i + 1) for i, f in enumerate(frames)]
-    zen = [oracle.Observed(f, T0 + i * 10_000_000 + 400_000, i, key="vehicle/can/rx", seq=i)
-           for i, f in enumerate(frames)]
-    sc = SimpleNamespace(signal_gates=gates, bus_dbcs={"vcan0": path.parent / "car.dbc"}, expect={})
-    b = SimpleNamespace(bus="vcan0", bus_frames=bus, can_frames=bus, zenoh_frames=zen,
-                        comparison=SimpleNamespace(matched=list(zip(bus, zen, strict=True)), corrupted=[]))
-    return checks.signals_can(SimpleNamespace(scenario=sc, buses=[b], metrics={}))
-
-
 def test_a_gate_on_an_overlapping_signal_is_judged_and_catches_a_wrong_bit(files):
     path = files / "sc.yaml"
     path.write_text(scenario_text("dbc_strict: false\n", "  signals:\n    OVERLAP.LOW_BIT: {equals: 1}\n"
                                   "    OVERLAP.MOTO: {range: [1934, 1935]}\n"))
     right = wire.Frame(0x100, 8, bytes.fromhex("8142F31455667788"))
-    assert run_gate(path, [right, right]) == []
+    assert signal_problems(path, [right, right]) == []
     wrong = wire.Frame(0x100, 8, bytes.fromhex("8042F31455667788"))  # LOW_BIT (and WIDE's lowest bit) cleared
-    problems = run_gate(path, [right, wrong])
+    problems = signal_problems(path, [right, wrong])
     assert len(problems) == 1 and "OVERLAP.LOW_BIT = 0, expected 1 at t=0.010 s, can.log:2" in problems[0]
 
 

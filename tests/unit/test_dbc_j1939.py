@@ -11,6 +11,7 @@ from types import SimpleNamespace
 
 import can
 import pytest
+from synthetic import signal_problems
 
 from canbench import checks, cli, dbc, ecu, oracle, recording, responses, scenario, wire
 
@@ -102,20 +103,10 @@ def observed(frames: list[wire.Frame], step_ns: int = 10_000_000):
     return bus, zen
 
 
-def gate_problems(path: Path, frames: list[wire.Frame]) -> list[str]:
-    sc = scenario.load(path)
-    bus, zen = observed(frames)
-    b = SimpleNamespace(bus="vcan0", bus_frames=bus, can_frames=bus, zenoh_frames=zen,
-                        comparison=SimpleNamespace(matched=list(zip(bus, zen, strict=True)), corrupted=[]))
-    result = SimpleNamespace(scenario=SimpleNamespace(signal_gates=sc.signal_gates, bus_dbcs=sc.bus_dbcs, expect={}),
-                             buses=[b], metrics={})
-    return checks.signals_can(result)
-
-
 def test_a_signal_gate_judges_the_group_from_another_source(tmp_path):
     path = scenario_path(tmp_path, "  signals:\n    EEC1.EngineSpeed: {range: [600, 2000]}\n")
-    assert gate_problems(path, [eec1(800), eec1(850)]) == []
-    problems = gate_problems(path, [eec1(800), eec1(2500)])
+    assert signal_problems(path, [eec1(800), eec1(850)]) == []
+    problems = signal_problems(path, [eec1(800), eec1(2500)])
     assert len(problems) == 1 and "EEC1.EngineSpeed = 2500 rpm outside [600, 2000] at t=0.010 s" in problems[0]
 
 
@@ -153,9 +144,9 @@ def test_max_rate_follows_each_sender_of_a_group(tmp_path):
     one's value and the other's is a rate; a jump of one of them is."""
     path = scenario_path(tmp_path, "  signals:\n    EEC1.EngineSpeed: {max_rate: 1000}\n")
     steady = [f for _ in range(5) for f in (eec1(800, source=0x00), eec1(1500, source=0x17))]
-    assert gate_problems(path, steady) == []
+    assert signal_problems(path, steady) == []
     jump = steady[:6] + [eec1(800, source=0x00), eec1(1600, source=0x17)]
-    problems = gate_problems(path, jump)
+    problems = signal_problems(path, jump)
     assert len(problems) == 1 and "EEC1.EngineSpeed changed 1500 rpm -> 1600 rpm in 20.000 ms" in problems[0]
 
 

@@ -5,12 +5,12 @@ line. Seeded faults: each wrong frame fails its gate, every right one passes."""
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import cantools
 import pytest
+from synthetic import signal_problems
 
-from canbench import checks, oracle, scenario, wire
+from canbench import oracle, scenario, wire
 from canbench.errors import ScenarioError
 
 pytestmark = pytest.mark.unit
@@ -47,14 +47,7 @@ def frame(db, message: str, data: bytes | None = None, **values) -> wire.Frame:
 
 
 def run(path: Path, frames: list[wire.Frame]):
-    gates = scenario.load(path).signal_gates
-    bus = [oracle.Observed(f, T0 + i * 10_000_000, i, line=i + 1) for i, f in enumerate(frames)]
-    zen = [oracle.Observed(f, T0 + i * 10_000_000 + 400_000, i, key="vehicle/can/rx", seq=i)
-           for i, f in enumerate(frames)]
-    sc = SimpleNamespace(signal_gates=gates, bus_dbcs={"vcan0": path.parent / "x.dbc"}, expect={})
-    b = SimpleNamespace(bus="vcan0", bus_frames=bus, can_frames=bus, zenoh_frames=zen,
-                        comparison=SimpleNamespace(matched=list(zip(bus, zen, strict=True)), corrupted=[]))
-    return checks.signals_can(SimpleNamespace(scenario=sc, buses=[b], metrics={}))
+    return signal_problems(path, frames)
 
 
 def test_a_32_bit_float_equals_its_own_rounding_and_nothing_next_to_it(tmp_path):
