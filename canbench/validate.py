@@ -9,6 +9,7 @@ from functools import partial
 from pathlib import Path
 
 from . import scenario
+from .dbc import load_dbc, strict_problem
 from .errors import InputError, ScenarioError, TraceError
 from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, interfaces_said, iter_trace, several_interfaces, too_many_frames
 from .wire import EXT_ID_MAX, STD_ID_MAX
@@ -195,6 +196,10 @@ def run(paths: list[Path]) -> int:
             for ecu in sc.ecus:
                 if ecu.left_out:
                     print(f"{path}: note: ECU {ecu.name} ({ecu.dbc_node}) leaves out {', '.join(ecu.left_out)}")
+            for dbc_path in sorted(set(sc.bus_dbcs.values())):
+                if why := strict_problem(load_dbc(dbc_path)):  # dbc_strict: false let it in
+                    print(f"{path}: note: {dbc_path.name} is read as written (dbc_strict: false): {why}; each such "
+                          "message signal by signal, and the bench sends none of them")
     if count:
         print(f"canbench validate: {count} problem{'s' if count > 1 else ''} in {bad} of {len(paths)} "
               f"scenario file{'s' if len(paths) > 1 else ''}", file=sys.stderr)

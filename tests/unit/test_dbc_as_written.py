@@ -125,7 +125,7 @@ def scenario_text(extra: str = "", expect: str = "  integrity: true\n") -> str:
             "ecus:\n  - name: e\n    bus: vcan0\n    trace: trace.log\nexpect:\n" + expect)
 
 
-def test_a_scenario_refuses_it_at_its_dbc_line_and_says_what_to_set(files):
+def test_a_scenario_refuses_it_at_its_dbc_line_and_says_what_to_set(files, capsys):
     path = files / "sc.yaml"
     path.write_text(scenario_text())
     with pytest.raises(ScenarioError) as e:
@@ -135,6 +135,9 @@ def test_a_scenario_refuses_it_at_its_dbc_line_and_says_what_to_set(files):
     assert "set dbc_strict: false" in said
     path.write_text(scenario_text("dbc_strict: false\n", "  signals:\n    OVERLAP.LOW_BIT: {equals: 1}\n"))
     assert [g.key for g in scenario.load(path).signal_gates] == ["OVERLAP.LOW_BIT"]
+    assert cli.main(["validate", str(path)]) == 0
+    assert ("note: car.dbc is read as written (dbc_strict: false): 3 messages with signals that overlap"
+            in capsys.readouterr().out)
     path.write_text(scenario_text("dbc_strict: 'false'\n"))
     with pytest.raises(ScenarioError, match="dbc_strict"):
         scenario.load(path)
