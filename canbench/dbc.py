@@ -218,10 +218,24 @@ def group_read(db, message) -> int | None:
     return pgn if pgn is not None and _j1939_groups(db).get(pgn) == (message,) else None
 
 
-def group_mask(can_id: int) -> int:
-    """A 29-bit filter mask that passes a J1939 group's frames from any source, at any priority
-    (to any destination for a PDU1 group): the data pages and PDU format, and a PDU2's specific."""
-    return 0x03FFFF00 if (can_id >> 16) & 0xFF >= 240 else 0x03FF0000
+J1939_GLOBAL = 0xFF  # a PDU1 destination: every ECU
+
+
+def group_filters(can_id: int) -> list[tuple[int, int]]:
+    """(id, mask) socket filters that pass what an ECU of this J1939 id receives of its group:
+    from any source, at any priority; a PDU1 group only to the id's destination or to global."""
+    mask = 0x03FFFF00  # the data pages, the PDU format and its specific; not priority or source
+    if (can_id >> 16) & 0xFF >= 240:
+        return [(can_id, mask)]
+    return [(can_id, mask), ((can_id & ~0xFF00) | J1939_GLOBAL << 8, mask)]
+
+
+def addressed(dbc_id: int, can_id: int) -> bool:
+    """Whether a frame of a J1939 group is for the ECU of dbc_id: any PDU2 frame, a PDU1 frame
+    to its destination or to global (a request to the brakes is not the engine's to answer)."""
+    if (dbc_id >> 16) & 0xFF >= 240:
+        return True
+    return (can_id >> 8) & 0xFF in ((dbc_id >> 8) & 0xFF, J1939_GLOBAL)
 
 
 def _j1939_groups(db) -> dict[int, tuple]:

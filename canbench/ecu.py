@@ -30,10 +30,11 @@ from pathlib import Path
 import can
 
 from . import restbus, runkeys
-from .dbc import group_mask, j1939_group
+from .dbc import addressed, group_filters, j1939_group, message_of
 from .plans import SENT_LOG_HEADER, frame_of, schedule, sent_line
 from .scenario import Ecu, Scenario
 from .stats import percentile
+from .wire import Frame
 
 SEND_TIMEOUT_S = 5.0
 ECHO_POLL_S = 0.05  # how often the echo loop looks at its stop flag while the bus is quiet
@@ -195,17 +196,23 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
 
 def request_routes(rules) -> tuple[list[dict], Callable[[can.Message], restbus.Rule | None]]:
     """The responder's socket filters (python-can's) and the rule of a received frame: a request
-    of its DBC id, or of a J1939 group the DBC reads from any source (dbc.group_read) at any
-    source, priority and PDU1 destination."""
+    of its DBC id, or of a J1939 group the DBC reads from any source (dbc.group_read) from any
+    source, at any priority, addressed to the DBC id's destination or to global (dbc.addressed)."""
     by_id = {(r.on.frame_id, r.on.is_extended_frame): r for r in rules}
     by_group = {r.group: r for r in rules if r.group is not None}
-    filters = [{"can_id": i, "can_mask": group_mask(i) if by_id[(i, ext)].group is not None
-                else 0x1FFFFFFF if ext else 0x7FF, "extended": ext} for i, ext in sorted(by_id)]
+    filters = []
+    for (i, ext), r in sorted(by_id.items()):
+        pairs = group_filters(i) if r.group is not None else [(i, 0x1FFFFFFF if ext else 0x7FF)]
+        filters += [{"can_id": can_id, "can_mask": mask, "extended": ext} for can_id, mask in pairs]
 
     def rule_of(msg: can.Message) -> restbus.Rule | None:
         rule = by_id.get((msg.arbitration_id, msg.is_extended_id))
         if rule is None and msg.is_extended_id and by_group:
             rule = by_group.get(j1939_group(msg.arbitration_id))  # type: ignore[arg-type]
+            frame = Frame(msg.arbitration_id, msg.dlc, b"", True)
+            if rule is not None and not (addressed(rule.on.frame_id, msg.arbitration_id)
+                                         and message_of(rule.db, frame) is rule.on):  # not another message's id
+                rule = None
         return rule
     return filters, rule_of
 

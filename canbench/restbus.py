@@ -315,6 +315,7 @@ class Rule:
     copies: dict[str, tuple[str, float, float]] = field(default_factory=dict)  # target -> (source, scale, offset)
     line: int = 0
     group: int | None = None  # a J1939 request's group: answered from any source (dbc.group_read)
+    db: Any = None            # the DBC of `on`: which frames are its (dbc.message_of)
 
     def answer(self, request: bytes, n: int) -> tuple[Any, bytes]:
         """The n-th answer; UndecodableRequest if the request is not its message, Unanswerable
@@ -650,7 +651,7 @@ def responder_rules(db, specs: list, where: list, base: Path, fail: Fail, fail_f
         plan = message_plan(send, {**spec, "set": constants}, at, base, fail, fail_file, signals_key="set")
         start_value_problems(plan, at, fail, frozenset(copies))
         carried_nowhere(plan, at, fail)
-        rules.append(Rule(on, plan, copies, group=group_read(db, on)))
+        rules.append(Rule(on, plan, copies, group=group_read(db, on), db=db))
     return tuple(rules)
 
 

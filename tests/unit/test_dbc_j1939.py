@@ -35,6 +35,8 @@ BO_ {EXT | 0x18DAF110} UDS_REQUEST: 8 ENGINE
  SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
 BO_ {EXT | 0x18DAF100} UDS_UNMARKED: 8 ENGINE
  SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
+BO_ {EXT | 0x0C000F0A} NOT_J1939: 8 ENGINE
+ SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
 BO_ {EXT | 0x18FF1200} PROPB_ENGINE: 8 ENGINE
  SG_ Byte0 : 0|8@1+ (1,0) [0|255] "" Vector__XXX
 BO_ {EXT | 0x18EF2100} PROPA_ENGINE: 8 ENGINE
@@ -44,6 +46,7 @@ BA_DEF_ BO_ "GenMsgCycleTime" INT 0 10000;
 BA_DEF_DEF_ "VFrameFormat" "J1939PG";
 BA_DEF_DEF_ "GenMsgCycleTime" 0;
 BA_ "VFrameFormat" BO_ {EXT | 0x18DAF110} 1;
+BA_ "VFrameFormat" BO_ {EXT | 0x0C000F0A} 1;
 BA_ "GenMsgCycleTime" BO_ {EXT | 0x0CF00400} 10;
 '''
 
@@ -174,8 +177,9 @@ def test_scaffold_takes_the_dbc_cycle_for_the_group_from_another_source(tmp_path
 
 
 def test_a_responder_answers_a_j1939_request_from_any_source(tmp_path):
-    """The request filter passes the group from any source and priority (the socket's filter as
-    SocketCAN applies it), and the frame finds its rule; another group does not."""
+    """The request filter passes the group from any source and priority, to the DBC's destination
+    or global (the socket's filter as SocketCAN applies it), and the frame finds its rule; another
+    group, another destination, or the id of another message of the DBC does not."""
     (tmp_path / "truck.dbc").write_text(J1939_DBC)
     path = tmp_path / "sc.yaml"
     (tmp_path / "trace.log").write_text(f"({T0 / 1e9:.6f}) vcan0 0CF00417#0000000000000000\n")
@@ -192,8 +196,10 @@ def test_a_responder_answers_a_j1939_request_from_any_source(tmp_path):
 
     def rule(can_id: int):
         return rule_of(can.Message(arbitration_id=can_id, is_extended_id=True))
-    for request in (0x0C000F03, 0x0C000A05, 0x18000A05):  # the DBC's id; another source, destination, priority
+    for request in (0x0C000F03, 0x0C000F05, 0x18000F05, 0x0C00FF05):  # the DBC's; another source, priority; global
         assert passes(request) and rule(request).on.name == "TSC1"
+    assert not passes(0x0C000A05) and rule(0x0C000A05) is None  # a TSC1 to another ECU: not this one's to answer
+    assert passes(0x0C000F0A) and rule(0x0C000F0A) is None  # the id of a message not J1939, in TSC1's group
     assert passes(0x18DAF100) and rule(0x18DAF100).on.name == "UDS_UNMARKED"
     assert not passes(0x18DA00F1) and rule(0x18DA00F1) is None  # UDS: its exact id only
     assert not passes(0x0CF00400) and rule(0x0CF00400) is None  # another group
