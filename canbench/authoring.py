@@ -62,6 +62,7 @@ class TraceSummary:
     longest_gap_s: float = 0.0  # between two frames of the trace (any ids)
     longest_gap_line: int = 0  # the frame after it
     drops: dict[str, int] = field(default_factory=dict)  # per interface: frames candump -d says the kernel dropped
+    error_frames: list[int] = field(default_factory=list)  # the lines (frame numbers) of error frames, left out
 
     def table(self) -> str:
         several = len(self.interfaces) > 1
@@ -74,6 +75,7 @@ class TraceSummary:
                     if self.longest_gap_line else ""),
                  *([f"  {dropped_note(self.drops)}: the gaps and cycles below count its holes"]
                    if self.drops else []),
+                 *([f"  {error_frames_note(self.path, self.error_frames)}"] if self.error_frames else []),
                  f"  {'interface  ' if several else ''}{'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  "
                  f"{'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:
@@ -83,6 +85,13 @@ class TraceSummary:
             iface = f"{s.interface or '-':<9}  " if several else ""
             lines.append(f"  {iface}{s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
         return "\n".join(lines)
+
+
+def error_frames_note(path: Path, lines: list[int]) -> str:
+    """What a recording's error frames mean for what is read from it."""
+    n = len(lines)
+    return (f"{n} error frame{'s' if n != 1 else ''} of {path.name} (the first: {where_in(path, lines[0])}), not "
+            "replayed: the bridge carries data and remote frames only")
 
 
 def dropped_note(drops: dict[str, int]) -> str:
@@ -110,7 +119,8 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
     first_ns = last_ns = None
     gap_ns, gap_line = 0, 0
     drops: dict[str, int] = {}
-    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, drops=drops):
+    error_frames: list[int] = []
+    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, drops=drops, error_frames=error_frames):
         frames += 1
         state = by_id[(iface, frame.can_id, frame.extended)]
         if state.last_ns is not None:
@@ -142,7 +152,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
              if i is not None}
     total_load = 100 * sum(bits.values()) / bitrate / span if span > 0 else 0.0
     return TraceSummary(path, frames, span, sorted(loads), ids, max(loads.values(), default=total_load), bitrate,
-                        loads, gap_ns / 1e9, gap_line, drops)
+                        loads, gap_ns / 1e9, gap_line, drops, error_frames)
 
 
 # ---- signals of a trace, with a DBC (canbench summarise --dbc, canbench scaffold --dbc) ----
@@ -223,7 +233,7 @@ def summarise_signals(path: Path, dbc_path: Path, lenient: bool = False) -> Sign
     stats: dict[str, MessageStats] = {}
     unknown: dict[str, int] = defaultdict(int)
     interfaces: set[str] = set()
-    for _, _, iface, frame in iter_trace(path, cache_size=STREAM_CACHE):
+    for _, _, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, error_frames=[]):  # summarise says them
         if iface is not None:
             interfaces.add(iface)
         message = message_of(db, frame)
@@ -347,6 +357,18 @@ def copy_in(source: Path, copy: Path) -> Path:
     return copy
 
 
+def without_error_frames(trace: Path, bus: str, folder: Path) -> Path:
+    """A one-interface trace as a candump -L file of its data and remote frames, on bus: what
+    its replay ECU can send (error frames are not an ECU's to send)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=folder) as work:  # copy_in when whole
+        part = Path(work) / f"{trace.stem}.without-error-frames.log"
+        with open(part, "w") as out:
+            for _, t_ns, _, frame in iter_trace(trace, cache_size=STREAM_CACHE, error_frames=[]):
+                out.write(format_line(t_ns, bus, frame) + "\n")
+        return copy_in(part, folder / part.name)
+
+
 def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[str, Path], dict[str, float]]:
     """A trace of several interfaces as one candump -L file per interface (its frames only, in
     order, the frame on the interface's bus): what each bus's replay ECU sends; and each one's
@@ -358,7 +380,7 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
         parts = {iface: Path(work) / f"{trace.stem}.{iface}.log" for iface in buses}
         outs = {iface: open(path, "w") for iface, path in parts.items()}
         try:
-            for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE):
+            for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE, error_frames=[]):
                 first.setdefault(str(iface), t_ns)
                 outs[str(iface)].write(format_line(t_ns, buses[str(iface)], frame) + "\n")
         finally:
@@ -451,12 +473,18 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
         notes += (f"# The trace's interfaces {', '.join(f'{i} -> {b}' for i, b in buses.items())}: one bus and one "
                   f"replay ECU each (traces/{trace.stem}.<interface>.log, candump -L).\n")
     else:
-        if not trace.resolve().is_relative_to(home):
-            trace = copy_in(trace, home / "traces" / trace.name)
-        ecus = [{"name": "recorded", "bus": next(iter(buses.values()), "vcan0"),
-                 "trace": os.path.relpath(trace.resolve(), home)}]
+        bus = next(iter(buses.values()), "vcan0")
+        replayed = trace
+        if s.error_frames:
+            replayed = without_error_frames(trace, bus, home / "traces")
+        elif not trace.resolve().is_relative_to(home):
+            replayed = copy_in(trace, home / "traces" / trace.name)
+        ecus = [{"name": "recorded", "bus": bus, "trace": os.path.relpath(replayed.resolve(), home)}]
     if s.drops:
         notes += f"# {dropped_note(s.drops)}: the proposed cycles are read across its holes.\n"
+    if s.error_frames:
+        notes += (f"# Left out: {error_frames_note(trace, s.error_frames)}; the replay sends the rest "
+                  f"({', '.join(str(e['trace']) for e in ecus)}).\n")
     cycles, disagree = gated_cycles(s)
     if disagree:
         notes += (f"# Not gated in cycle_time.ids: {', '.join(disagree[:10])}{', ...' if len(disagree) > 10 else ''} "

@@ -17,7 +17,7 @@ class InputError(BenchError):
     def __init__(self, path: str, line: int | None, message: str):
         where = f"{path}:{line}" if line else str(path)
         super().__init__(f"{where}: {message}")
-        self.path, self.line = path, line
+        self.path, self.line, self.reason = path, line, message
 
 
 class ScenarioError(InputError):

@@ -41,7 +41,8 @@ FRAME_CACHE = 1 << 20  # distinct frame texts kept for sharing (then it starts a
 STREAM_CACHE = 1 << 14  # the same for a pass that keeps no frames (summarise, validate): ~4 MiB
 
 
-ERROR_FRAME = "an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames)"
+ERROR_FRAME = ("an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames: "
+               "canbench scaffold leaves them out of the trace it writes)")
 
 
 def fd_refusal(size: int, brs: bool, esi: bool) -> str:
@@ -502,14 +503,17 @@ def _stamp_ns(timestamp: float) -> int:
 def iter_trace(path: str | Path, interfaces: set[str] | None = None,
                on_problem: Callable[[TraceError], None] | None = None,
                cache_size: int = FRAME_CACHE,
-               drops: dict[str, int] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
+               drops: dict[str, int] | None = None,
+               error_frames: list[int] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
     """(line, t_ns, interface or None, frame) of every frame of a trace in any format the bench
     reads, checked alike: CAN 2.0 data and remote frames only, ids in range, dlc 0..8, time never
     going back, interfaces among `interfaces` (None: any). line: the file's line (text formats),
     the frame's number (.blf, .mf4: said as 'frame N'). A problem raises TraceError, or with
     on_problem is handed to it and the frame left out (validate: every problem at once).
     cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames).
-    drops: filled with the frames a candump -d recording says the kernel dropped, per interface."""
+    drops: filled with the frames a candump -d recording says the kernel dropped, per interface.
+    error_frames: given, an error frame is left out and its line added here, not a problem (what
+    summarise and scaffold do with a recording: a scenario's trace has none)."""
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
@@ -524,11 +528,22 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     zero_based = path.suffix.lower() in (".asc", ".blf")
 
     def fail(line: int | None, message: str) -> None:
+        if message == ERROR_FRAME and error_frames is not None:
+            error_frames.append(line or 0)
+            return
         error = (TraceError(str(path), None, f"frame {line}: {message}") if by_number and line
                  else TraceError(str(path), line, message))
         if on_problem is None:
             raise error
         on_problem(error)
+
+    def bad_line(error: TraceError) -> None:  # candump's: raised as they are, error frames counted
+        if error.reason == ERROR_FRAME and error_frames is not None:
+            error_frames.append(error.line or 0)
+        elif on_problem is None:
+            raise error
+        else:
+            on_problem(error)
 
     # time never goes back per interface: candump of several interfaces writes each socket's frames
     # as it reads them (one per wakeup), so its lines are in order per interface only
@@ -548,7 +563,7 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         return f"timestamp earlier than {said} {before[1]}'s, the frame before on {iface}{stamps}"
 
     if path.suffix.lower() in CANDUMP_SUFFIXES:
-        for lineno, t_ns, iface, frame in iter_candump(path, drops=drops, strict=True, on_error=on_problem,
+        for lineno, t_ns, iface, frame in iter_candump(path, drops=drops, strict=True, on_error=bad_line,
                                                      cache_size=cache_size):
             if interfaces is not None and iface not in interfaces:
                 fail(lineno, f"interface '{iface}' is not one of {sorted(interfaces)} (remap it in the scenario)")

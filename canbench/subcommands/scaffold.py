@@ -42,7 +42,7 @@ def cmd_scaffold(args) -> int:
 
 NAME = re.compile(scenario.schema()["properties"]["name"]["pattern"])
 # header lines said on the terminal too
-NOTES = ("# The trace's interfaces", "# Not gated in cycle_time.ids", "# REVIEW: dbc_strict")
+NOTES = ("# The trace's interfaces", "# Not gated in cycle_time.ids", "# REVIEW: dbc_strict", "# Left out:")
 
 
 def add_subparser(sub: argparse._SubParsersAction) -> None:

@@ -11,7 +11,7 @@ import pytest
 
 from canbench import cli, validate
 from canbench.errors import TraceError
-from canbench.trace import iter_trace, read_trace
+from canbench.trace import ERROR_FRAME, iter_trace, read_trace
 
 pytestmark = pytest.mark.unit
 
@@ -80,7 +80,7 @@ def test_trc_error_frames_and_unreadable_lines_are_named_with_their_line(tmp_pat
     path = tmp_path / "drive.trc"
     path.write_text(TRC)
     assert problems(path) == [
-        f"{path}:6: an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames)",
+        f"{path}:6: {ERROR_FRAME}",
         f"{path}:10: not a TRC frame (record type 'the'): 'garbage at the end'",
     ]
     frames = [(line, t_ns, frame.candump()) for line, t_ns, _, frame in iter_trace(path, on_problem=lambda e: None)]

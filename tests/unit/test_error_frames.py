@@ -1,0 +1,84 @@
+"""Error frames in a recording (a bus fault the logger saw; CANalyzer's ErrorFrame, PCAN's ER,
+candump -e's error-flag ids): a scenario's trace refuses them (the bridge carries data and
+remote frames, so a replay cannot send them), while summarise counts them and scaffold writes a
+trace without them, said in its header, so the recording needs no editing by hand."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import can
+import pytest
+
+from canbench import authoring, cli, scenario
+from canbench.errors import TraceError
+from canbench.trace import ERROR_FRAME, iter_trace, read_trace
+
+pytestmark = pytest.mark.unit
+
+T0 = 1_700_000_000.0
+
+
+def recording(path: Path) -> Path:
+    """Ten frames of 123 every 10 ms, an error frame after the 3rd and after the 7th."""
+    messages = [can.Message(timestamp=T0 + k * 0.01, arbitration_id=0x123, is_extended_id=False, data=bytes([k]),
+                            channel=0) for k in range(10)]
+    messages += [can.Message(timestamp=T0 + k * 0.01 + 0.005, arbitration_id=0x4, is_error_frame=True, dlc=8,
+                             data=bytes(8), channel=0) for k in (2, 6)]
+    if path.suffix == ".log":
+        path.write_text("".join(f"({m.timestamp:.6f}) can0 " + ("20000004#0000000000000000" if m.is_error_frame
+                                                                 else f"123#{m.data.hex().upper()}") + "\n"
+                                for m in sorted(messages, key=lambda m: m.timestamp)))
+        return path
+    with can.Logger(str(path)) as log:
+        for m in sorted(messages, key=lambda m: m.timestamp):
+            log.on_message_received(m)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc", ".blf", ".csv"])
+def test_error_frames_are_counted_and_left_out_only_when_asked(tmp_path, suffix):
+    path = recording(tmp_path / f"drive{suffix}")
+    with pytest.raises(TraceError, match="an error frame"):
+        read_trace(path)
+    lines: list[int] = []
+    frames = [frame.data[0] for _, _, _, frame in iter_trace(path, error_frames=lines)]
+    assert frames == list(range(10)) and len(lines) == 2
+
+
+def test_summarise_says_how_many_and_where_the_first_is(tmp_path):
+    path = recording(tmp_path / "drive.log")
+    s = authoring.summarise(path)
+    assert s.frames == 10 and s.error_frames == [4, 9]
+    assert ("2 error frames of drive.log (the first: line 4), not replayed: the bridge carries data and remote "
+            "frames only") in s.table()
+
+
+@pytest.mark.parametrize("suffix", [".asc", ".log"])
+def test_scaffold_writes_the_trace_without_them_and_says_so(tmp_path, capsys, suffix):
+    path = recording(tmp_path / f"drive{suffix}")
+    out = tmp_path / "sc" / "drive.yaml"
+    assert cli.main(["scaffold", str(path), "--name", "drive", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "Left out: 2 error frames of " in said and "traces/drive.without-error-frames.log" in said
+    [ecu] = scenario.load(out).ecus
+    assert ecu.trace == (tmp_path / "sc" / "traces" / "drive.without-error-frames.log").resolve()
+    assert [f.message.data[0] for f in read_trace(ecu.trace)] == list(range(10))
+    assert "# Left out: 2 error frames" in out.read_text()
+
+
+def test_scaffold_of_several_interfaces_leaves_them_out_of_each(tmp_path, capsys):
+    path = tmp_path / "two.log"
+    path.write_text("(1700000000.000000) can0 123#00\n(1700000000.001000) can1 456#00\n"
+                    "(1700000000.005000) can1 20000004#0000000000000000\n"
+                    "(1700000000.010000) can0 123#01\n(1700000000.011000) can1 456#01\n")
+    out = tmp_path / "sc" / "two.yaml"
+    assert cli.main(["scaffold", str(path), "--name", "two", "--out", str(out)]) == 0
+    assert "Left out: 1 error frame of two.log (the first: line 3)" in capsys.readouterr().out
+    assert sorted(len(read_trace(e.trace)) for e in scenario.load(out).ecus) == [2, 2]
+
+
+def test_a_scenario_trace_with_one_is_refused_saying_what_to_do(tmp_path):
+    path = recording(tmp_path / "drive.log")
+    with pytest.raises(TraceError) as e:
+        read_trace(path)
+    assert str(e.value) == f"{path}:4: {ERROR_FRAME}" and "canbench scaffold leaves them out" in str(e.value)
