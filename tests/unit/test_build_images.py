@@ -76,7 +76,9 @@ def events(tmp_path: Path) -> list[tuple[str, str]]:
 
 
 def test_pyenv_builds_beside_the_builder_and_nothing_starts_before_what_it_copies_from(tmp_path: Path) -> None:
-    done = run(tmp_path, env={"WAIT_FOR_START_OF_builder": "pyenv"})
+    # each waits for the other to start: on a loaded machine pyenv's stand-in could otherwise start
+    # and end before the builder's had started, and the two would not be seen side by side
+    done = run(tmp_path, env={"WAIT_FOR_START_OF_builder": "pyenv", "WAIT_FOR_START_OF_pyenv": "builder"})
     assert done.returncode == 0, done.stderr
     ev = events(tmp_path)
     at = {e: i for i, e in enumerate(ev)}
