@@ -62,7 +62,7 @@ class TraceSummary:
     longest_gap_s: float = 0.0  # between two frames of the trace (any ids)
     longest_gap_line: int = 0  # the frame after it
     drops: dict[str, int] = field(default_factory=dict)  # per interface: frames candump -d says the kernel dropped
-    error_frames: list[int] = field(default_factory=list)  # the lines (frame numbers) of error frames, left out
+    left_out: dict[str, list[int]] = field(default_factory=dict)  # error and CAN FD frames: lines (frame numbers)
 
     def table(self) -> str:
         several = len(self.interfaces) > 1
@@ -75,7 +75,7 @@ class TraceSummary:
                     if self.longest_gap_line else ""),
                  *([f"  {dropped_note(self.drops)}: the gaps and cycles below count its holes"]
                    if self.drops else []),
-                 *([f"  {error_frames_note(self.path, self.error_frames)}"] if self.error_frames else []),
+                 *([f"  {left_out_note(self.path, self.left_out)}"] if self.left_out else []),
                  f"  {'interface  ' if several else ''}{'id':>8}  {'frames':>7}  {'dlc':>3}  {'cycle ms':>9}  "
                  f"{'jitter ms':>9}  {'steady %':>8}  remote"]
         for s in self.ids:
@@ -87,11 +87,11 @@ class TraceSummary:
         return "\n".join(lines)
 
 
-def error_frames_note(path: Path, lines: list[int]) -> str:
-    """What a recording's error frames mean for what is read from it."""
-    n = len(lines)
-    return (f"{n} error frame{'s' if n != 1 else ''} of {path.name} (the first: {where_in(path, lines[0])}), not "
-            "replayed: the bridge carries data and remote frames only")
+def left_out_note(path: Path, left_out: dict[str, list[int]]) -> str:
+    """What a recording's error and CAN FD frames mean for what is read from it."""
+    said = " and ".join(f"{len(lines)} {kind}{'s' if len(lines) != 1 else ''} (the first: {where_in(path, lines[0])})"
+                        for kind, lines in sorted(left_out.items()))
+    return f"{said} of {path.name} not replayed: the bridge carries CAN 2.0 data and remote frames only"
 
 
 def dropped_note(drops: dict[str, int]) -> str:
@@ -119,8 +119,8 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
     first_ns = last_ns = None
     gap_ns, gap_line = 0, 0
     drops: dict[str, int] = {}
-    error_frames: list[int] = []
-    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, drops=drops, error_frames=error_frames):
+    left_out: dict[str, list[int]] = {}
+    for line, t_ns, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, drops=drops, left_out=left_out):
         frames += 1
         state = by_id[(iface, frame.can_id, frame.extended)]
         if state.last_ns is not None:
@@ -152,7 +152,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
              if i is not None}
     total_load = 100 * sum(bits.values()) / bitrate / span if span > 0 else 0.0
     return TraceSummary(path, frames, span, sorted(loads), ids, max(loads.values(), default=total_load), bitrate,
-                        loads, gap_ns / 1e9, gap_line, drops, error_frames)
+                        loads, gap_ns / 1e9, gap_line, drops, left_out)
 
 
 # ---- signals of a trace, with a DBC (canbench summarise --dbc, canbench scaffold --dbc) ----
@@ -233,7 +233,7 @@ def summarise_signals(path: Path, dbc_path: Path, lenient: bool = False) -> Sign
     stats: dict[str, MessageStats] = {}
     unknown: dict[str, int] = defaultdict(int)
     interfaces: set[str] = set()
-    for _, _, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, error_frames=[]):  # summarise says them
+    for _, _, iface, frame in iter_trace(path, cache_size=STREAM_CACHE, left_out={}):  # summarise says them
         if iface is not None:
             interfaces.add(iface)
         message = message_of(db, frame)
@@ -357,14 +357,14 @@ def copy_in(source: Path, copy: Path) -> Path:
     return copy
 
 
-def without_error_frames(trace: Path, bus: str, folder: Path) -> Path:
-    """A one-interface trace as a candump -L file of its data and remote frames, on bus: what
-    its replay ECU can send (error frames are not an ECU's to send)."""
+def classic_only(trace: Path, bus: str, folder: Path) -> Path:
+    """A one-interface trace as a candump -L file of its CAN 2.0 data and remote frames, on bus:
+    what its replay ECU can send (not error frames, nor CAN FD frames)."""
     folder.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=folder) as work:  # copy_in when whole
-        part = Path(work) / f"{trace.stem}.without-error-frames.log"
+        part = Path(work) / f"{trace.stem}.classic.log"
         with open(part, "w") as out:
-            for _, t_ns, _, frame in iter_trace(trace, cache_size=STREAM_CACHE, error_frames=[]):
+            for _, t_ns, _, frame in iter_trace(trace, cache_size=STREAM_CACHE, left_out={}):
                 out.write(format_line(t_ns, bus, frame) + "\n")
         return copy_in(part, folder / part.name)
 
@@ -380,7 +380,7 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
         parts = {iface: Path(work) / f"{trace.stem}.{iface}.log" for iface in buses}
         outs = {iface: open(path, "w") for iface, path in parts.items()}
         try:
-            for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE, error_frames=[]):
+            for _, t_ns, iface, frame in iter_trace(trace, cache_size=STREAM_CACHE, left_out={}):
                 first.setdefault(str(iface), t_ns)
                 outs[str(iface)].write(format_line(t_ns, buses[str(iface)], frame) + "\n")
         finally:
@@ -475,15 +475,15 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
     else:
         bus = next(iter(buses.values()), "vcan0")
         replayed = trace
-        if s.error_frames:
-            replayed = without_error_frames(trace, bus, home / "traces")
+        if s.left_out:
+            replayed = classic_only(trace, bus, home / "traces")
         elif not trace.resolve().is_relative_to(home):
             replayed = copy_in(trace, home / "traces" / trace.name)
         ecus = [{"name": "recorded", "bus": bus, "trace": os.path.relpath(replayed.resolve(), home)}]
     if s.drops:
         notes += f"# {dropped_note(s.drops)}: the proposed cycles are read across its holes.\n"
-    if s.error_frames:
-        notes += (f"# Left out: {error_frames_note(trace, s.error_frames)}; the replay sends the rest "
+    if s.left_out:
+        notes += (f"# Left out: {left_out_note(trace, s.left_out)}; the replay sends the rest "
                   f"({', '.join(str(e['trace']) for e in ecus)}).\n")
     cycles, disagree = gated_cycles(s)
     if disagree:

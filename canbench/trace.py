@@ -45,11 +45,24 @@ ERROR_FRAME = ("an error frame: the bridge carries CAN 2.0 data and remote frame
                "canbench scaffold leaves them out of the trace it writes)")
 
 
+def not_classic(refusal: str) -> str | None:
+    """The kind of frame a refusal is of when it is a whole frame a CAN 2.0 replay cannot send
+    (an error frame, a CAN FD frame), else None."""
+    if refusal == ERROR_FRAME:
+        return "error frame"
+    if refusal.startswith(FD_REFUSED):
+        return "CAN FD frame"
+    return None
+
+
+FD_REFUSED = "a CAN FD frame ("
+
+
 def fd_refusal(size: int, brs: bool, esi: bool) -> str:
     """Why a CAN FD frame is refused: the bridge, its wire format and the bus are CAN 2.0."""
     flags = "".join(f", {name}" for name, on in (("BRS", brs), ("ESI", esi)) if on)
-    return (f"a CAN FD frame ({size} data bytes{flags}): the bridge carries CAN 2.0 frames only "
-            "(remove FD frames from the trace)")
+    return (f"{FD_REFUSED}{size} data bytes{flags}): the bridge carries CAN 2.0 frames only "
+            "(remove FD frames from the trace: canbench scaffold leaves them out of the trace it writes)")
 
 
 @dataclass(frozen=True)
@@ -504,7 +517,7 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
                on_problem: Callable[[TraceError], None] | None = None,
                cache_size: int = FRAME_CACHE,
                drops: dict[str, int] | None = None,
-               error_frames: list[int] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
+               left_out: dict[str, list[int]] | None = None) -> Iterator[tuple[int, int, str | None, Frame]]:
     """(line, t_ns, interface or None, frame) of every frame of a trace in any format the bench
     reads, checked alike: CAN 2.0 data and remote frames only, ids in range, dlc 0..8, time never
     going back, interfaces among `interfaces` (None: any). line: the file's line (text formats),
@@ -512,8 +525,9 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     on_problem is handed to it and the frame left out (validate: every problem at once).
     cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames).
     drops: filled with the frames a candump -d recording says the kernel dropped, per interface.
-    error_frames: given, an error frame is left out and its line added here, not a problem (what
-    summarise and scaffold do with a recording: a scenario's trace has none)."""
+    left_out: given, an error frame or a CAN FD frame is left out and its line added here under
+    its kind (NOT_CLASSIC), not a problem: what summarise and scaffold do with a recording (a
+    scenario's trace has neither)."""
     path = Path(path)
     if not path.is_file():
         raise TraceError(str(path), None, "no such trace file")
@@ -528,8 +542,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     zero_based = path.suffix.lower() in (".asc", ".blf")
 
     def fail(line: int | None, message: str) -> None:
-        if message == ERROR_FRAME and error_frames is not None:
-            error_frames.append(line or 0)
+        if left_out is not None and (kind := not_classic(message)):
+            left_out.setdefault(kind, []).append(line or 0)
             return
         error = (TraceError(str(path), None, f"frame {line}: {message}") if by_number and line
                  else TraceError(str(path), line, message))
@@ -538,8 +552,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         on_problem(error)
 
     def bad_line(error: TraceError) -> None:  # candump's: raised as they are, error frames counted
-        if error.reason == ERROR_FRAME and error_frames is not None:
-            error_frames.append(error.line or 0)
+        if left_out is not None and (kind := not_classic(error.reason)):
+            left_out.setdefault(kind, []).append(error.line or 0)
         elif on_problem is None:
             raise error
         else:

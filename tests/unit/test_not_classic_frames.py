@@ -1,7 +1,8 @@
-"""Error frames in a recording (a bus fault the logger saw; CANalyzer's ErrorFrame, PCAN's ER,
-candump -e's error-flag ids): a scenario's trace refuses them (the bridge carries data and
-remote frames, so a replay cannot send them), while summarise counts them and scaffold writes a
-trace without them, said in its header, so the recording needs no editing by hand."""
+"""Error frames (a bus fault the logger saw; CANalyzer's ErrorFrame, PCAN's ER, candump -e's
+error-flag ids) and CAN FD frames in a recording: a scenario's trace refuses them (the bridge
+carries CAN 2.0 data and remote frames, so a replay cannot send them), while summarise counts
+them and scaffold writes a trace without them, said in its header, so the recording needs no
+editing by hand."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -40,17 +41,17 @@ def test_error_frames_are_counted_and_left_out_only_when_asked(tmp_path, suffix)
     path = recording(tmp_path / f"drive{suffix}")
     with pytest.raises(TraceError, match="an error frame"):
         read_trace(path)
-    lines: list[int] = []
-    frames = [frame.data[0] for _, _, _, frame in iter_trace(path, error_frames=lines)]
-    assert frames == list(range(10)) and len(lines) == 2
+    left_out: dict[str, list[int]] = {}
+    frames = [frame.data[0] for _, _, _, frame in iter_trace(path, left_out=left_out)]
+    assert frames == list(range(10)) and list(left_out) == ["error frame"] and len(left_out["error frame"]) == 2
 
 
 def test_summarise_says_how_many_and_where_the_first_is(tmp_path):
     path = recording(tmp_path / "drive.log")
     s = authoring.summarise(path)
-    assert s.frames == 10 and s.error_frames == [4, 9]
-    assert ("2 error frames of drive.log (the first: line 4), not replayed: the bridge carries data and remote "
-            "frames only") in s.table()
+    assert s.frames == 10 and s.left_out == {"error frame": [4, 9]}
+    assert ("2 error frames (the first: line 4) of drive.log not replayed: the bridge carries CAN 2.0 data and "
+            "remote frames only") in s.table()
 
 
 @pytest.mark.parametrize("suffix", [".asc", ".log"])
@@ -59,9 +60,9 @@ def test_scaffold_writes_the_trace_without_them_and_says_so(tmp_path, capsys, su
     out = tmp_path / "sc" / "drive.yaml"
     assert cli.main(["scaffold", str(path), "--name", "drive", "--out", str(out)]) == 0
     said = capsys.readouterr().out
-    assert "Left out: 2 error frames of " in said and "traces/drive.without-error-frames.log" in said
+    assert "Left out: 2 error frames (the first: " in said and "traces/drive.classic.log" in said
     [ecu] = scenario.load(out).ecus
-    assert ecu.trace == (tmp_path / "sc" / "traces" / "drive.without-error-frames.log").resolve()
+    assert ecu.trace == (tmp_path / "sc" / "traces" / "drive.classic.log").resolve()
     assert [f.message.data[0] for f in read_trace(ecu.trace)] == list(range(10))
     assert "# Left out: 2 error frames" in out.read_text()
 
@@ -73,7 +74,7 @@ def test_scaffold_of_several_interfaces_leaves_them_out_of_each(tmp_path, capsys
                     "(1700000000.010000) can0 123#01\n(1700000000.011000) can1 456#01\n")
     out = tmp_path / "sc" / "two.yaml"
     assert cli.main(["scaffold", str(path), "--name", "two", "--out", str(out)]) == 0
-    assert "Left out: 1 error frame of two.log (the first: line 3)" in capsys.readouterr().out
+    assert "Left out: 1 error frame (the first: line 3) of two.log" in capsys.readouterr().out
     assert sorted(len(read_trace(e.trace)) for e in scenario.load(out).ecus) == [2, 2]
 
 
@@ -82,3 +83,24 @@ def test_a_scenario_trace_with_one_is_refused_saying_what_to_do(tmp_path):
     with pytest.raises(TraceError) as e:
         read_trace(path)
     assert str(e.value) == f"{path}:4: {ERROR_FRAME}" and "canbench scaffold leaves them out" in str(e.value)
+
+
+def test_can_fd_frames_are_left_out_alike_and_said_with_the_error_frames(tmp_path, capsys):
+    """A CAN FD bus's recording mixes classic and FD frames: scaffold replays the classic ones."""
+    path = tmp_path / "mixed.asc"
+    messages = [can.Message(timestamp=T0 + k * 0.01, arbitration_id=0x123, is_extended_id=False, data=bytes([k]),
+                            channel=0) for k in range(6)]
+    messages += [can.Message(timestamp=T0 + 0.015, arbitration_id=0x456, is_fd=True, bitrate_switch=True,
+                             data=bytes(12), channel=0),
+                 can.Message(timestamp=T0 + 0.035, arbitration_id=0x4, is_error_frame=True, dlc=8, data=bytes(8),
+                             channel=0)]
+    with can.Logger(str(path)) as log:
+        for m in sorted(messages, key=lambda m: m.timestamp):
+            log.on_message_received(m)
+    s = authoring.summarise(path)
+    assert s.frames == 6 and sorted(s.left_out) == ["CAN FD frame", "error frame"]
+    out = tmp_path / "sc" / "mixed.yaml"
+    assert cli.main(["scaffold", str(path), "--name", "mixed", "--out", str(out)]) == 0
+    assert "Left out: 1 CAN FD frame (the first: line " in capsys.readouterr().out
+    [ecu] = scenario.load(out).ecus
+    assert [f.message.data[0] for f in read_trace(ecu.trace)] == list(range(6))

@@ -47,7 +47,8 @@ def test_a_can_fd_frame_is_refused_not_cut_to_eight_bytes(tmp_path, suffix, wher
     with pytest.raises(TraceError) as err:
         read_trace(path)
     assert str(err.value) == (where.format(path=path) + "a CAN FD frame (12 data bytes, BRS): the bridge carries "
-                              "CAN 2.0 frames only (remove FD frames from the trace)")
+                              "CAN 2.0 frames only (remove FD frames from the trace: canbench scaffold leaves "
+                              "them out of the trace it writes)")
 
 
 @pytest.mark.parametrize("suffix", [".asc", ".blf", ".csv"])

@@ -189,7 +189,8 @@ def test_an_asc_canfd_line_of_a_classic_frame_is_a_can_20_frame(tmp_path):
     read = [(line, frame.data.hex()) for line, _, _, frame in iter_trace(path, on_problem=lambda e: None)]
     assert read == [(5, "0102030405060708")]
     assert problems(path) == [f"{path}:6: a CAN FD frame (8 data bytes, BRS): the bridge carries CAN 2.0 frames "
-                              "only (remove FD frames from the trace)"]
+                              "only (remove FD frames from the trace: canbench scaffold leaves them out of the "
+                              "trace it writes)"]
 
 
 def test_candump_of_several_interfaces_is_in_order_per_interface_only(tmp_path):
