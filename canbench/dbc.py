@@ -37,6 +37,9 @@ def _load(path: str, mtime_ns: int):
         db = cantools.database.load_file(path, strict=False)
     finally:
         cantools_log.setLevel(level)
+    if not hasattr(db, "messages"):  # cantools reads a CDD by its suffix as a diagnostics database
+        raise DbcError("a diagnostics database (services and identifiers), not CAN messages: give a DBC "
+                       "(or a KCD, SYM or ARXML file)")
     _refuse_duplicates(db)
     _hold_to_strict(db)
     return db
