@@ -330,6 +330,7 @@ def run(args) -> int:
         if path is not None and not Path(path).is_file():
             raise InputError(str(path), None, f"{option}: no such file")
     bus_dbcs = {bus: read_dbc(path, args.dbc_lenient) for bus, path in bus_dbc_paths(args.bus_dbc).items()}
+    dbc = read_dbc(args.dbc, args.dbc_lenient) if args.dbc else None  # refused before a viewer opens
     rr.init("canbench-view", spawn=False)
     if args.save:
         rr.save(str(args.save))
@@ -340,7 +341,6 @@ def run(args) -> int:
         # Rerun's URDF importer: links become coordinate frames named as in the URDF, joints
         # transforms between them, so TF frames of the same names attach live data to the model
         rr.log_file_from_path(args.urdf, static=True)
-    dbc = read_dbc(args.dbc, args.dbc_lenient) if args.dbc else None
     if args.source:
         from .recording import view_mcap
         viewed = view_mcap(args.source, Context(dbc, bus_dbcs))

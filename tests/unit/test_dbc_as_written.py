@@ -235,3 +235,9 @@ BO_ 256 OBD: 8 ECU
     assert dbc.decode(m, bytes([0x41, 12, 0x20, 0x1F, 0, 0, 0, 0])) == {"PID": 12, "PID_AND_A": 0x200C,
                                                                          "RPM": 0x1F20 * 0.25}
     assert dbc.decode(m, bytes([0x41, 13, 0x20, 0x1F, 0, 0, 0, 0])) == {"PID": 13}
+
+
+def test_the_viewer_refuses_it_before_it_opens_unless_told(files, capsys):
+    out = files / "view.rrd"
+    assert cli.main(["view", "--dbc", str(files / "car.dbc"), "--save", str(out), "--duration", "0.1"]) == 2
+    assert "give --dbc-lenient" in capsys.readouterr().err and not out.exists()
