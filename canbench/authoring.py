@@ -137,7 +137,8 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         first_ns = t_ns if first_ns is None else min(first_ns, t_ns)
         last_ns = t_ns if last_ns is None else max(last_ns, t_ns)
     if first_ns is None or last_ns is None:
-        raise TraceError(str(path), None, "no frames in trace")
+        raise TraceError(str(path), None, f"no CAN 2.0 frames in trace: {left_out_note(path, left_out)}" if left_out
+                         else "no frames in trace")
     span = (last_ns - first_ns) / 1e9
     ids = []
     for (iface, can_id, extended), state in sorted(by_id.items(), key=lambda kv: (str(kv[0][0]), *kv[0][1:])):
@@ -344,13 +345,14 @@ def bus_names(interfaces: list[str]) -> dict[str, str]:
     return {i: i if i in taken else next(free) for i in interfaces}
 
 
-def copy_in(source: Path, copy: Path) -> Path:
+def copy_in(source: Path, copy: Path, said: str | None = None) -> Path:
     """source copied to copy, which may already hold the same bytes (a scaffold run again); one
-    with other bytes is another scenario's file there, never overwritten (an InputError)."""
+    with other bytes is another scenario's file there, never overwritten (an InputError naming
+    the source, or what `said` calls it)."""
     if copy.exists():
         if not filecmp.cmp(source, copy, shallow=False):
-            raise InputError(str(copy), None, f"exists with other contents than {source} (another scenario's "
-                             "file?): scaffold into another folder, or rename the file")
+            raise InputError(str(copy), None, f"exists with other contents than {said or source} (another "
+                             "scenario's file?): scaffold into another folder, or rename the recording")
         return copy
     copy.parent.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(source, copy)
@@ -366,7 +368,7 @@ def classic_only(trace: Path, bus: str, folder: Path) -> Path:
         with open(part, "w") as out:
             for _, t_ns, _, frame in iter_trace(trace, cache_size=STREAM_CACHE, left_out={}):
                 out.write(format_line(t_ns, bus, frame) + "\n")
-        return copy_in(part, folder / part.name)
+        return copy_in(part, folder / part.name, f"the CAN 2.0 frames of {trace}")
 
 
 def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[str, Path], dict[str, float]]:
@@ -386,7 +388,8 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
         finally:
             for out in outs.values():
                 out.close()
-        paths = {iface: copy_in(part, folder / part.name) for iface, part in parts.items()}
+        paths = {iface: copy_in(part, folder / part.name, f"the {iface} frames of {trace}")
+                 for iface, part in parts.items()}
     start = min(first.values())
     return paths, {iface: round((t_ns - start) / 1e9, 6) for iface, t_ns in first.items()}
 

@@ -56,6 +56,7 @@ def not_classic(refusal: str) -> str | None:
 
 
 FD_REFUSED = "a CAN FD frame ("
+FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)  # the data lengths a CAN FD frame can have
 
 
 def fd_refusal(size: int, brs: bool, esi: bool) -> str:
@@ -78,11 +79,17 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
     if not extended and can_id > STD_ID_MAX:
         raise TraceError(path, lineno, f"11-bit id {ident} is above 7FF")
     if extended and can_id > EXT_ID_MAX:
-        raise TraceError(path, lineno, ERROR_FRAME if can_id & CAN_ERR_FLAG else
-                         f"29-bit id {ident} is above 1FFFFFFF: the bridge carries CAN 2.0 data and remote frames only")
+        if can_id & CAN_ERR_FLAG and not body.startswith(("#", "R")) and len(body) <= 16:
+            raise TraceError(path, lineno, ERROR_FRAME)  # the kernel's error frame: 8 data bytes at most
+        raise TraceError(path, lineno, f"29-bit id {ident} is above 1FFFFFFF: the bridge carries CAN 2.0 data "
+                         "and remote frames only")
     if body.startswith("#"):  # "##<flags nibble><data>": flags 1 BRS, 2 ESI
+        digits = body[2:]
+        if len(digits) % 2 or len(digits) // 2 not in FD_LENGTHS:
+            raise TraceError(path, lineno, f"'##{body[1:]}': not a CAN FD frame (an even number of hex digits, "
+                             f"{', '.join(map(str, FD_LENGTHS))} bytes)")
         flags = int(body[1], 16)
-        raise TraceError(path, lineno, fd_refusal((len(body) - 2) // 2, bool(flags & 1), bool(flags & 2)))
+        raise TraceError(path, lineno, fd_refusal(len(digits) // 2, bool(flags & 1), bool(flags & 2)))
     if body.startswith("R"):
         if int(body[1:] or 0) > 8:
             raise TraceError(path, lineno, f"remote frame dlc {body[1:]}: classic CAN's is 0..8")
@@ -371,7 +378,7 @@ def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) ->
                         continue
                 if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
                     continue  # a transmit request is no frame on the bus
-                if suffix == ".asc" and msg.is_fd:
+                if suffix == ".asc" and msg.is_fd and not msg.is_error_frame:
                     msg = _classic_in_fd_line(counter.text, msg)
                 problem = _csv_problem(counter.text) if suffix == ".csv" else None
                 if problem:
@@ -478,7 +485,7 @@ def _frame_of_message(msg: can.Message) -> Frame:
     """The CAN 2.0 frame of a python-can message, or ValueError saying why it is none."""
     if msg.is_error_frame:
         raise ValueError(ERROR_FRAME)
-    if msg.is_fd:
+    if msg.is_fd or (len(msg.data) > 8 and len(msg.data) in FD_LENGTHS):  # CSV has no FD flag: longer is FD
         raise ValueError(fd_refusal(len(msg.data), msg.bitrate_switch, msg.error_state_indicator))
     can_id, extended = msg.arbitration_id, msg.is_extended_id
     if not 0 <= can_id <= (EXT_ID_MAX if extended else STD_ID_MAX):

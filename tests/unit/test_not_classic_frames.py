@@ -5,6 +5,7 @@ them and scaffold writes a trace without them, said in its header, so the record
 editing by hand."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import can
@@ -104,3 +105,48 @@ def test_can_fd_frames_are_left_out_alike_and_said_with_the_error_frames(tmp_pat
     assert "Left out: 1 CAN FD frame (the first: line " in capsys.readouterr().out
     [ecu] = scenario.load(out).ecus
     assert [f.message.data[0] for f in read_trace(ecu.trace)] == list(range(6))
+
+
+@pytest.mark.parametrize("line, said", [
+    ("456##1112", "'##1112': not a CAN FD frame"),                    # an odd number of digits
+    ("456##1" + "00" * 9, "'##1" + "00" * 9 + "': not a CAN FD frame"),  # 9 bytes: no CAN FD length
+    ("20000004#" + "00" * 12, "29-bit id 20000004 is above 1FFFFFFF"),   # an error frame has 8 bytes at most
+])
+def test_a_mangled_line_is_a_problem_not_a_frame_left_out(tmp_path, line, said):
+    path = tmp_path / "bad.log"
+    path.write_text(f"(1700000000.000000) can0 123#00\n(1700000000.001000) can0 {line}\n")
+    left_out: dict[str, list[int]] = {}
+    with pytest.raises(TraceError, match=f"bad.log:2: {re.escape(said)}"):
+        list(iter_trace(path, left_out=left_out))
+    assert left_out == {}
+
+
+def test_a_recording_of_nothing_but_fd_frames_says_so(tmp_path):
+    path = tmp_path / "fd.log"
+    path.write_text("(1700000000.000000) can0 123##100\n(1700000000.001000) can0 123##1" + "00" * 12 + "\n")
+    with pytest.raises(TraceError, match=r"fd.log: no CAN 2.0 frames in trace: 2 CAN FD frames \(the first: line 1\)"):
+        authoring.summarise(path)
+
+
+def test_another_recording_of_the_same_name_is_refused_naming_the_recording(tmp_path, capsys):
+    out = tmp_path / "sc" / "drive.yaml"
+    first, second = tmp_path / "a" / "drive.log", tmp_path / "b" / "drive.log"
+    for path, data in ((first, "11"), (second, "22")):
+        path.parent.mkdir()
+        path.write_text(f"(1700000000.000000) can0 123#{data}\n(1700000000.005000) can0 20000004#00\n"
+                        f"(1700000000.010000) can0 123#{data}\n")
+    assert cli.main(["scaffold", str(first), "--name", "drive", "--out", str(out)]) == 0
+    assert cli.main(["scaffold", str(second), "--name", "drive", "--out", str(out), "--force"]) == 2
+    assert f"exists with other contents than the CAN 2.0 frames of {second}" in capsys.readouterr().err
+
+
+def test_an_asc_canfd_error_frame_is_an_error_frame(tmp_path):
+    path = tmp_path / "e.asc"
+    path.write_text("date Sat Dec 5 10:00:00.000 am 2026\nbase hex  timestamps absolute\ninternal events logged\n"
+                    "Begin Triggerblock Sat Dec 5 10:00:00.000 am 2026\n"
+                    "   0.010000 1  123             Rx   d 2 11 22\n"
+                    "   0.020000 CANFD   1 Rx ErrorFrame 0 0 0 0 0 0 0 0 0 0 0 0 0\n"
+                    "End TriggerBlock\n")
+    left_out: dict[str, list[int]] = {}
+    assert [f.can_id for _, _, _, f in iter_trace(path, left_out=left_out)] == [0x123]
+    assert left_out == {"error frame": [6]}

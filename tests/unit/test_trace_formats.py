@@ -58,10 +58,13 @@ def test_an_error_frame_is_refused_not_replayed_as_a_data_frame(tmp_path, suffix
     assert len(found) == 1 and "an error frame: the bridge carries CAN 2.0 data and remote frames only" in found[0]
 
 
-def test_a_csv_frame_of_more_than_eight_bytes_is_refused(tmp_path):
+def test_a_csv_frame_of_more_than_eight_bytes_is_a_can_fd_frame(tmp_path):
     path = written(tmp_path / "fd.csv", [*classic(), FD])  # python-can's CSV has no FD flag: 12 bytes, dlc 12
-    assert problems(path) == [f"{path}:4: dlc 12: classic CAN's is 0..8 (a CAN FD frame? the bridge carries "
-                              "CAN 2.0 only)"]
+    assert problems(path) == [f"{path}:4: a CAN FD frame (12 data bytes): the bridge carries CAN 2.0 frames "
+                              "only (remove FD frames from the trace: canbench scaffold leaves them out of the "
+                              "trace it writes)"]
+    left_out: dict[str, list[int]] = {}
+    assert len(list(iter_trace(path, left_out=left_out))) == 5 and left_out == {"CAN FD frame": [4]}
 
 
 TRC = """;$FILEVERSION=2.0
