@@ -90,6 +90,8 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
         for bus, bus_dbc in sc.bus_dbcs.items():
             if bus_dbc != sc.dbc:
                 dbc += ["--bus-dbc", f"{bus}={inside(bus_dbc)}"]
+        if dbc and sc.raw.get("dbc_strict") is False:  # the scenario's DBCs as written, as its checks read them
+            dbc.append("--dbc-lenient")
         services["viewer"] = hardened({
             "image": "canbench/orchestrator:${BENCH_TAG:-latest}",
             "network_mode": "service:bus",

@@ -8,7 +8,10 @@ where it is used: a scenario refuses one whose signals overlap or pass their mes
 unless it says `dbc_strict: false`, a command line unless given --dbc-lenient. Such a message
 cantools cannot decode whole (its codec needs the bits in one piece), so it is decoded signal by
 signal, each from its own bits as the DBC places them (_one_signal_messages), and it is not encoded:
-what the bench sends must carry every signal's value, and overlapping signals cannot."""
+what the bench sends must carry every signal's value, and overlapping signals cannot.
+
+A 29-bit frame of no message's id is a J1939 message's when the DBC marks one message of its
+parameter group J1939 (message_of): a truck's network sends a group from any source address."""
 from __future__ import annotations
 
 import logging
@@ -85,6 +88,13 @@ def _bits(signal) -> set[int]:
 
 def _end_byte(signal) -> int:
     return max(_bits(signal)) // 8 + 1
+
+
+def past_can_20(signal) -> str | None:
+    """Why no CAN 2.0 frame carries a signal (None if one can): its bits end past the 8th byte,
+    as in a DBC read as written whose message is shorter than its signals."""
+    end = _end_byte(signal)
+    return None if end <= 8 else f"{signal.name}'s bits end in byte {end}: no CAN 2.0 frame (8 bytes) carries it"
 
 
 def as_written_problem(message) -> str | None:

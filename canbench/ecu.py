@@ -196,8 +196,8 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
 
 def request_routes(rules) -> tuple[list[dict], Callable[[can.Message], restbus.Rule | None]]:
     """The responder's socket filters (python-can's) and the rule of a received frame: a request
-    of its DBC id, or of a J1939 group the DBC reads from any source (dbc.group_read) from any
-    source, at any priority, addressed to the DBC id's destination or to global (dbc.addressed)."""
+    of its DBC id, or of a J1939 group the DBC reads from any source (dbc.group_read), at any
+    priority, addressed to the DBC id's destination or to global (dbc.addressed)."""
     by_id = {(r.on.frame_id, r.on.is_extended_frame): r for r in rules}
     by_group = {r.group: r for r in rules if r.group is not None}
     filters = []

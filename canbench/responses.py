@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .dbc import decode, grid_problem, message_of, name_problem, range_problem, raws_of, value_range
+from .dbc import decode, grid_problem, message_of, name_problem, past_can_20, range_problem, raws_of, value_range
 from .stats import latency_stats
 
 if TYPE_CHECKING:
@@ -71,6 +71,9 @@ def value_problem(signal, value) -> str | None:
 
 def condition_problems(signal, spec: dict, where: list, fail) -> bool:
     """Each value of a `when`/`then` condition the signal cannot have, at its line; True if any."""
+    if why := past_can_20(signal):
+        fail([*where, "signal"], why)
+        return True
     values: list[tuple[list, Any]] = [(["equals"], spec["equals"])] if "equals" in spec else []
     values += [(["one_of", k], v) for k, v in enumerate(spec.get("one_of") or [])]
     bad = False

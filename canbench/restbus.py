@@ -570,11 +570,15 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
     if not sent:
         fail([*where, "dbc_node"], f"{node} transmits no message in the DBC (no BO_ names it as sender)")
         return (), ()
-    left_out = tuple(f"{m.name} ({m.length} data bytes: CAN FD)" if too_long_for_can_20(m)
-                     else f"{m.name} ({encode_problem(m)})" for m in sent  # those it would send
-                     if (too_long_for_can_20(m) or encode_problem(m)) and cycle_time_ms(m))
-    unsendable = {m.name: encode_problem(m) for m in sent if encode_problem(m) and not too_long_for_can_20(m)}
-    sent = [m for m in sent if not too_long_for_can_20(m) and m.name not in unsendable]
+    unsendable = {m.name: f"{m.length} data bytes: CAN FD" if too_long_for_can_20(m) else encode_problem(m)
+                  for m in sent if too_long_for_can_20(m) or encode_problem(m)}
+    left_out = tuple(f"{m.name} ({unsendable[m.name]})" for m in sent  # those it would send
+                     if m.name in unsendable and cycle_time_ms(m))
+    if len(unsendable) == len(sent):  # cycle_ms would not help
+        fail([*where, "dbc_node"], f"{node} transmits nothing the bench can send: "
+             + "; ".join(f"{name} ({why})" for name, why in list(unsendable.items())[:8]))
+        return (), left_out
+    sent = [m for m in sent if m.name not in unsendable]
     by_name = {m.name: m for m in sent}
     for kind in ("signals", "counters", "checksums", "cycle_ms"):
         items = spec.get(kind) or {}
@@ -584,7 +588,7 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
             if kind != "cycle_ms" and _split(key) is None:
                 fail(at, f"{key!r}: name a signal as Message.Signal")
             elif name in unsendable:
-                fail(at, f"{unsendable[name]}: {node}'s restbus leaves it out")
+                fail(at, f"{node}'s restbus leaves {name} out: {unsendable[name]}")
             elif name not in by_name:
                 known = "the DBC has no message" if name not in {m.name for m in db.messages} \
                     else f"{node} does not transmit" if not too_long_for_can_20(db.get_message_by_name(name)) \
@@ -603,8 +607,7 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
             out.append(MessagePlan(m, plan.sources, plan.counter, plan.checksum, float(cycle)))
     if not out:
         why = "; ".join(f"{m.name}: {why_not_cyclic(m)}" for m in sent[:8]) + ("; ..." if len(sent) > 8 else "")
-        fail([*where, "dbc_node"], f"{node} transmits no cyclic CAN 2.0 message ({why or 'only CAN FD ones'}): "
-             "give cycle_ms per message")
+        fail([*where, "dbc_node"], f"{node} transmits no cyclic CAN 2.0 message ({why}): give cycle_ms per message")
     return tuple(out), left_out
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import wire
-from .dbc import decode, grid_problem, load_dbc, message_of, range_problem, raws_of, value_range
+from .dbc import decode, grid_problem, load_dbc, message_of, past_can_20, range_problem, raws_of, value_range
 from .scenario import text_number
 
 if TYPE_CHECKING:
@@ -157,6 +157,9 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
         for b in _named_without(wanted, on, having):
             fail([*where, "buses"], f"message {message_name} in the DBC of {b} has no signal {signal_name}")
         signal = found[having[0]]
+        if why := past_can_20(signal):
+            fail(where, why)
+            continue
         gate = _gate(key, message_name, signal, tuple(having), spec, where, fail)
         if gate is not None:
             out.append(gate)

@@ -533,7 +533,7 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames).
     drops: filled with the frames a candump -d recording says the kernel dropped, per interface.
     left_out: given, an error frame or a CAN FD frame is left out and its line added here under
-    its kind (NOT_CLASSIC), not a problem: what summarise and scaffold do with a recording (a
+    its kind (not_classic), not a problem: what summarise and scaffold do with a recording (a
     scenario's trace has neither)."""
     path = Path(path)
     if not path.is_file():

@@ -13,6 +13,8 @@ from .summarise import bitrate
 
 def cmd_scaffold(args) -> int:
     out = args.out or Path("scenarios") / f"{args.name}.yaml"
+    if args.dbc_lenient and not args.dbc:
+        raise InputError("--dbc-lenient", None, "reads the DBC --dbc names: give --dbc too")
     if not NAME.match(args.name):
         raise InputError("--name", None, f"{args.name!r}: a scenario's name is lowercase letters, digits, - and _ "
                          "(it names the test and the report)")

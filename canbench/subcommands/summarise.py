@@ -6,9 +6,15 @@ import argparse
 from pathlib import Path
 
 from .. import authoring
+from ..dbc import read_dbc
+from ..errors import InputError
 
 
 def cmd_summarise(args) -> int:
+    if args.dbc_lenient and not args.dbc:
+        raise InputError("--dbc-lenient", None, "reads the DBC --dbc names: give --dbc too")
+    if args.dbc:
+        read_dbc(args.dbc, args.dbc_lenient)  # refused before any table is printed
     for trace in args.traces:
         print(authoring.summarise(trace, args.bitrate).table())
         if args.dbc:

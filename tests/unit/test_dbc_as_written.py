@@ -166,8 +166,8 @@ def test_the_bench_never_sends_a_message_it_cannot_encode(files):
                              "overlapping in message OVERLAP in the DBC)",)
     path.write_text(scenario_text("dbc_strict: false\n").replace(
         "ecus:\n", "ecus:\n" + RESTBUS + "    signals: {OVERLAP.WIDE: 3}\n"))
-    with pytest.raises(ScenarioError, match=r"sc.yaml:\d+: ecus.0.signals.OVERLAP.WIDE: the bench cannot encode "
-                                            r"OVERLAP: .*: ECU's restbus leaves it out"):
+    with pytest.raises(ScenarioError, match=r"sc.yaml:\d+: ecus.0.signals.OVERLAP.WIDE: ECU's restbus leaves OVERLAP "
+                                            r"out: the bench cannot encode OVERLAP: The signals LOW_BIT and WIDE"):
         scenario.load(path)
     path.write_text(scenario_text("dbc_strict: false\n") + "commands:\n  - {bus: vcan0, message: SHORT, "
                     "schedule: [{at_s: 1, signals: {A: 1}}]}\n")
@@ -241,3 +241,66 @@ def test_the_viewer_refuses_it_before_it_opens_unless_told(files, capsys):
     out = files / "view.rrd"
     assert cli.main(["view", "--dbc", str(files / "car.dbc"), "--save", str(out), "--duration", "0.1"]) == 2
     assert "give --dbc-lenient" in capsys.readouterr().err and not out.exists()
+
+
+def test_make_test_s_viewer_reads_the_scenario_s_dbcs_as_it_does(files):
+    """make test VIEWER=1: the viewer would refuse a DBC the scenario lets in, and the run waits
+    for the viewer before its traffic."""
+    from canbench import compose
+    path = files / "sc.yaml"
+    path.write_text(scenario_text("dbc_strict: false\n"))
+    command = compose.compose_override(scenario.load(path), "/scenarios/sc.yaml", viewer=True,
+                                       can_mode="userspace")["services"]["viewer"]["command"]
+    assert "--dbc-lenient" in command and command[command.index("--dbc") + 1] == "/scenarios/car.dbc"
+    (files / "fine.dbc").write_text(HEAD + 'BO_ 259 FINE: 8 ECU\n SG_ X : 0|8@1+ (1,0) [0|255] "" TESTER\n')
+    path.write_text(scenario_text().replace("dbc: car.dbc", "dbc: fine.dbc"))
+    command = compose.compose_override(scenario.load(path), "/scenarios/sc.yaml", viewer=True,
+                                       can_mode="userspace")["services"]["viewer"]["command"]
+    assert "--dbc" in command and "--dbc-lenient" not in command
+
+
+def test_a_node_whose_every_message_cannot_be_sent_is_told_so(tmp_path):
+    """Not 'give cycle_ms per message': no cycle makes an unencodable message sendable."""
+    (tmp_path / "car.dbc").write_text(HEAD + '''
+BO_ 256 OVERLAP: 8 ECU
+ SG_ WIDE : 0|16@1+ (1,0) [0|65535] "" TESTER
+ SG_ LOW_BIT : 0|1@1+ (1,0) [0|1] "" TESTER
+BA_DEF_ BO_ "GenMsgCycleTime" INT 0 10000;
+BA_ "GenMsgCycleTime" BO_ 256 10;
+''')
+    (tmp_path / "trace.log").write_text(f"({T0 / 1e9:.6f}) vcan0 103#00\n")
+    path = tmp_path / "sc.yaml"
+    path.write_text(scenario_text("dbc_strict: false\n").replace("ecus:\n", "ecus:\n" + RESTBUS))
+    with pytest.raises(ScenarioError, match=r"ecus.0.dbc_node: ECU transmits nothing the bench can send: OVERLAP "
+                                            r"\(the bench cannot encode OVERLAP"):
+        scenario.load(path)
+
+
+def test_a_gate_on_a_signal_past_the_eighth_byte_is_refused_at_its_line(tmp_path):
+    """A DBC read as written may place a signal where no CAN 2.0 frame reaches (opendbc's
+    mazda_3_2019 CAM_KEEP_ALIVE_1.NEW_SIGNAL_4): a gate on it could only judge nothing."""
+    (tmp_path / "car.dbc").write_text(HEAD + '''
+BO_ 256 M: 8 ECU
+ SG_ A : 0|8@1+ (1,0) [0|255] "" TESTER
+ SG_ Past : 64|8@1+ (1,0) [0|255] "" TESTER
+''')
+    (tmp_path / "trace.log").write_text(f"({T0 / 1e9:.6f}) vcan0 100#00\n")
+    path = tmp_path / "sc.yaml"
+    path.write_text(scenario_text("dbc_strict: false\n", "  signals:\n    M.Past: {equals: 1}\n    M.A: {equals: 1}\n"))
+    with pytest.raises(ScenarioError, match=r"sc.yaml:\d+: expect.signals.M.Past: Past's bits end in byte 9: no CAN "
+                                            r"2.0 frame \(8 bytes\) carries it"):
+        scenario.load(path)
+    path.write_text(scenario_text("dbc_strict: false\n", "  responses:\n    - {when: {signal: M.A, equals: 1}, "
+                                  "then: {signal: M.Past, equals: 1, side: bus}, within_ms: 100}\n"))
+    with pytest.raises(ScenarioError, match=r"expect.responses.0.then.signal: Past's bits end in byte 9"):
+        scenario.load(path)
+
+
+def test_dbc_lenient_without_a_dbc_is_refused_and_a_refused_dbc_prints_nothing(files, capsys):
+    trace = files / "drive.log"
+    trace.write_text(f"({T0 / 1e9:.6f}) can0 100#8142F31455667788\n")
+    for command in (["summarise", str(trace)], ["scaffold", str(trace), "--name", "d", "--out", str(files / "d.yaml")]):
+        assert cli.main([*command, "--dbc-lenient"]) == 2
+        assert "--dbc-lenient: reads the DBC --dbc names: give --dbc too" in capsys.readouterr().err
+    assert cli.main(["summarise", str(trace), "--dbc", str(files / "car.dbc")]) == 2
+    assert capsys.readouterr().out == ""  # no trace table before the refusal
