@@ -20,7 +20,7 @@ import yaml
 from . import scenario
 from .errors import InputError, TraceError
 from .trace import STREAM_CACHE, format_line, iter_trace, where_in
-from .wire import Frame, id_hex
+from .wire import id_hex
 
 # An id is periodic when nearly all its gaps sit near the median gap: a median alone
 # (or its absolute deviation) also "finds" a cycle in two interleaved streams of one id
@@ -397,14 +397,9 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
 def dbc_cycles_of(s: TraceSummary, dbc_path: Path) -> dict[str, float]:
     """trace id -> the DBC's cycle (ms) of its message, for the trace's ids that are a cyclic
     message of the DBC (its own id, or a J1939 group's from another source: dbc.message_of)."""
-    from .dbc import cycle_time_ms, load_dbc, message_of
+    from .dbc import cycle_of_id, load_dbc
     db = load_dbc(dbc_path)
-    out = {}
-    for i in s.ids:
-        m = message_of(db, Frame(int(i.ident, 16), 0, b"", i.extended))
-        if m is not None and (cycle := cycle_time_ms(m)):
-            out[i.ident] = cycle
-    return out
+    return {i.ident: found[1] for i in s.ids if (found := cycle_of_id(db, int(i.ident, 16), i.extended))}
 
 
 def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float],

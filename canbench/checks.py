@@ -11,7 +11,7 @@ from functools import wraps
 from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult, bus_stats
 from .commands import explained_refusals, stale_at_put, stamp_ages_ns
-from .dbc import cycle_time_ms, load_dbc, message_of, send_type_at_most
+from .dbc import cycle_of_id, load_dbc, send_type_at_most
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import FAULT_LEAD_NS, FAULT_SETTLE_NS, describe
 
@@ -257,10 +257,8 @@ def _dbc_cycles(result: RunResult, bus: str, idents) -> dict:
     db = load_dbc(path)
     out: dict[str, tuple[float, str, bool]] = {}
     for ident in idents:
-        m = message_of(db, wire.Frame(int(ident, 16), 0, b"", extended=len(ident) == 8))
-        cycle = cycle_time_ms(m) if m is not None else None
-        if cycle is not None:
-            out[ident] = (cycle, m.name, send_type_at_most(m.send_type))
+        if (found := cycle_of_id(db, *wire.id_of(ident))) is not None:
+            out[ident] = (found[1], found[0].name, send_type_at_most(found[0].send_type))
     return out
 
 

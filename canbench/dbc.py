@@ -20,9 +20,12 @@ import struct
 import weakref
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import cantools
 from cantools.database.can import Message
+
+from . import j1939
 
 # per message that cantools' strict mode refuses: why (its words), and the one-signal messages it
 # is decoded by; filled when the DBC is loaded, so a database in use is never changed
@@ -196,59 +199,23 @@ def message_of(dbc, frame):
     marks one of its parameter group (VFrameFormat J1939PG) and only one: the DBC's id names the
     usual sender and priority, and a J1939 network sends a group from any source address, at
     any priority (to any destination, for a PDU1 group). Not the proprietary groups nor UDS,
-    whose data each sender defines (J1939_BY_SENDER)."""
+    whose data each sender defines (j1939.BY_SENDER)."""
     try:
         message = dbc.get_message_by_frame_id(frame.can_id, force_extended_id=frame.extended)
     except KeyError:
         message = None
     if message is not None and message.is_extended_frame == frame.extended:
         return message
-    if frame.extended and (groups := _j1939_groups(dbc)) and (pgn := j1939_group(frame.can_id)) is not None:
+    if frame.extended and (groups := _j1939_groups(dbc)) and (pgn := j1939.group_of(frame.can_id)) is not None:
         same = groups.get(pgn, ())
         return same[0] if len(same) == 1 else None  # several senders in the DBC, none this one: whose?
     return None
 
 
-# PDU formats whose data means what its sender makes it mean, so another source's frame is not the
-# DBC's message: proprietary A (EF) and B (FF), and ISO 15765-2 (UDS) on 29 bits (DA, DB)
-J1939_BY_SENDER = frozenset({0xEF, 0xFF, 0xDA, 0xDB})
-
-
-def j1939_group(can_id: int) -> int | None:
-    """The J1939 parameter group number of a 29-bit id (a PDU1 group's destination is not part
-    of it), None for a group whose meaning is its sender's (J1939_BY_SENDER) or an id past 29 bits."""
-    if can_id > 0x1FFFFFFF:
-        return None
-    pdu_format = (can_id >> 16) & 0xFF
-    if pdu_format in J1939_BY_SENDER:
-        return None
-    return (can_id >> 8) & (0x3FFFF if pdu_format >= 240 else 0x3FF00)
-
-
 def group_read(db, message) -> int | None:
     """The J1939 group whose frames from any source are this message's (message_of), else None."""
-    pgn = j1939_group(message.frame_id) if message.is_extended_frame else None
+    pgn = j1939.group_of(message.frame_id) if message.is_extended_frame else None
     return pgn if pgn is not None and _j1939_groups(db).get(pgn) == (message,) else None
-
-
-J1939_GLOBAL = 0xFF  # a PDU1 destination: every ECU
-
-
-def group_filters(can_id: int) -> list[tuple[int, int]]:
-    """(id, mask) socket filters that pass what an ECU of this J1939 id receives of its group:
-    from any source, at any priority; a PDU1 group only to the id's destination or to global."""
-    mask = 0x03FFFF00  # the data pages, the PDU format and its specific; not priority or source
-    if (can_id >> 16) & 0xFF >= 240:
-        return [(can_id, mask)]
-    return [(can_id, mask), ((can_id & ~0xFF00) | J1939_GLOBAL << 8, mask)]
-
-
-def addressed(dbc_id: int, can_id: int) -> bool:
-    """Whether a frame of a J1939 group is for the ECU of dbc_id: any PDU2 frame, a PDU1 frame
-    to its destination or to global (a request to the brakes is not the engine's to answer)."""
-    if (dbc_id >> 16) & 0xFF >= 240:
-        return True
-    return (can_id >> 8) & 0xFF in ((dbc_id >> 8) & 0xFF, J1939_GLOBAL)
 
 
 def _j1939_groups(db) -> dict[int, tuple]:
@@ -257,7 +224,7 @@ def _j1939_groups(db) -> dict[int, tuple]:
     if groups is None:
         found: dict[int, list] = {}
         for m in db.messages:
-            if m.protocol == "j1939" and m.is_extended_frame and (pgn := j1939_group(m.frame_id)) is not None:
+            if m.protocol == "j1939" and m.is_extended_frame and (pgn := j1939.group_of(m.frame_id)) is not None:
                 found.setdefault(pgn, []).append(m)
         groups = _J1939[db] = {pgn: tuple(ms) for pgn, ms in found.items()}
     return groups
@@ -395,6 +362,15 @@ def cycle_time_ms(message) -> float | None:
     if cycle is None or not math.isfinite(cycle) or cycle <= 0:
         return None
     return cycle if send_type_cyclic(message.send_type) else None
+
+
+def cycle_of_id(dbc, can_id: int, extended: bool) -> tuple[Any, float] | None:
+    """(message, its cycle in ms) of frames of this id (message_of: the message of its own id,
+    or a J1939 group's from another source) when the DBC gives it a cycle (cycle_time_ms)."""
+    from .wire import Frame
+    message = message_of(dbc, Frame(can_id, 0, b"", extended))
+    cycle = cycle_time_ms(message) if message is not None else None
+    return None if cycle is None else (message, cycle)
 
 
 def _cycle_number(message) -> float | None:

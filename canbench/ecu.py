@@ -30,7 +30,8 @@ from pathlib import Path
 import can
 
 from . import restbus, runkeys
-from .dbc import addressed, group_filters, j1939_group, message_of
+from .dbc import message_of
+from .j1939 import addressed, group_filters, group_of
 from .plans import SENT_LOG_HEADER, frame_of, schedule, sent_line
 from .scenario import Ecu, Scenario
 from .stats import percentile
@@ -197,7 +198,7 @@ def echo(ecu: Ecu, run_dir: Path, stop: threading.Event, session, run_id: str, t
 def request_routes(rules) -> tuple[list[dict], Callable[[can.Message], restbus.Rule | None]]:
     """The responder's socket filters (python-can's) and the rule of a received frame: a request
     of its DBC id, or of a J1939 group the DBC reads from any source (dbc.group_read), at any
-    priority, addressed to the DBC id's destination or to global (dbc.addressed)."""
+    priority, addressed to the DBC id's destination or to global (j1939.addressed)."""
     by_id = {(r.on.frame_id, r.on.is_extended_frame): r for r in rules}
     by_group = {r.group: r for r in rules if r.group is not None}
     filters = []
@@ -208,7 +209,7 @@ def request_routes(rules) -> tuple[list[dict], Callable[[can.Message], restbus.R
     def rule_of(msg: can.Message) -> restbus.Rule | None:
         rule = by_id.get((msg.arbitration_id, msg.is_extended_id))
         if rule is None and msg.is_extended_id and by_group:
-            rule = by_group.get(j1939_group(msg.arbitration_id))  # type: ignore[arg-type]
+            rule = by_group.get(group_of(msg.arbitration_id))  # type: ignore[arg-type]
             frame = Frame(msg.arbitration_id, msg.dlc, b"", True)
             if rule is not None and not (addressed(rule.on.frame_id, msg.arbitration_id)
                                          and message_of(rule.db, frame) is rule.on):  # not another message's id

@@ -17,7 +17,7 @@ class InputError(BenchError):
     def __init__(self, path: str, line: int | None, message: str):
         where = f"{path}:{line}" if line else str(path)
         super().__init__(f"{where}: {message}")
-        self.path, self.line, self.reason = path, line, message
+        self.path, self.line = path, line
 
 
 class ScenarioError(InputError):
@@ -26,6 +26,15 @@ class ScenarioError(InputError):
 
 class TraceError(InputError):
     """A CAN trace is malformed, empty, unordered or names an unknown interface."""
+
+
+class NotClassicFrame(TraceError):
+    """A whole frame a CAN 2.0 replay cannot send (kind: 'error frame', 'CAN FD frame'): a
+    scenario's trace refuses it, a recording's summary and scaffold leave it out and count it."""
+
+    def __init__(self, path: str, line: int | None, message: str, kind: str):
+        super().__init__(path, line, message)
+        self.kind = kind
 
 
 class RunError(BenchError):

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import can
 
-from .errors import TraceError
+from .errors import NotClassicFrame, TraceError
 from .wire import EXT_ID_MAX, STD_ID_MAX, Frame
 
 # candump -L grammar (can-utils lib.h), e.g. "(1700000000.123456) vcan0 123#DEADBEEF":
@@ -45,24 +45,24 @@ ERROR_FRAME = ("an error frame: the bridge carries CAN 2.0 data and remote frame
                "canbench scaffold leaves them out of the trace it writes)")
 
 
-def not_classic(refusal: str) -> str | None:
-    """The kind of frame a refusal is of when it is a whole frame a CAN 2.0 replay cannot send
-    (an error frame, a CAN FD frame), else None."""
-    if refusal == ERROR_FRAME:
-        return "error frame"
-    if refusal.startswith(FD_REFUSED):
-        return "CAN FD frame"
-    return None
+ERROR_KIND, FD_KIND = "error frame", "CAN FD frame"  # NotClassicFrame's kinds, as summaries count them
 
 
-FD_REFUSED = "a CAN FD frame ("
+class NotClassic(ValueError):
+    """A python-can message that is a whole frame a CAN 2.0 replay cannot send, of a kind."""
+
+    def __init__(self, message: str, kind: str):
+        super().__init__(message)
+        self.kind = kind
+
+
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)  # the data lengths a CAN FD frame can have
 
 
 def fd_refusal(size: int, brs: bool, esi: bool) -> str:
     """Why a CAN FD frame is refused: the bridge, its wire format and the bus are CAN 2.0."""
     flags = "".join(f", {name}" for name, on in (("BRS", brs), ("ESI", esi)) if on)
-    return (f"{FD_REFUSED}{size} data bytes{flags}): the bridge carries CAN 2.0 frames only "
+    return (f"a CAN FD frame ({size} data bytes{flags}): the bridge carries CAN 2.0 frames only "
             "(remove FD frames from the trace: canbench scaffold leaves them out of the trace it writes)")
 
 
@@ -80,7 +80,7 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
         raise TraceError(path, lineno, f"11-bit id {ident} is above 7FF")
     if extended and can_id > EXT_ID_MAX:
         if can_id & CAN_ERR_FLAG and not body.startswith(("#", "R")) and len(body) <= 16:
-            raise TraceError(path, lineno, ERROR_FRAME)  # the kernel's error frame: 8 data bytes at most
+            raise NotClassicFrame(path, lineno, ERROR_FRAME, ERROR_KIND)  # the kernel's: 8 data bytes at most
         raise TraceError(path, lineno, f"29-bit id {ident} is above 1FFFFFFF: the bridge carries CAN 2.0 data "
                          "and remote frames only")
     if body.startswith("#"):  # "##<flags nibble><data>": flags 1 BRS, 2 ESI
@@ -89,7 +89,7 @@ def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
             raise TraceError(path, lineno, f"'##{body[1:]}': not a CAN FD frame (an even number of hex digits, "
                              f"{', '.join(map(str, FD_LENGTHS))} bytes)")
         flags = int(body[1], 16)
-        raise TraceError(path, lineno, fd_refusal(len(digits) // 2, bool(flags & 1), bool(flags & 2)))
+        raise NotClassicFrame(path, lineno, fd_refusal(len(digits) // 2, bool(flags & 1), bool(flags & 2)), FD_KIND)
     if body.startswith("R"):
         if int(body[1:] or 0) > 8:
             raise TraceError(path, lineno, f"remote frame dlc {body[1:]}: classic CAN's is 0..8")
@@ -341,7 +341,7 @@ TRC_ERROR_FRAMES = {"ER", "Error"}
 UNSUPPORTED_TYPE = re.compile(r"^TRCReader: Unsupported type '(.*)'$")
 
 
-def _python_can_messages(path: Path, fail: Callable[[int | None, str], None]) -> Iterator[tuple[int, can.Message]]:
+def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tuple[int, can.Message]]:
     """(line, message) of a trace python-can reads: text formats with the file's line, binary ones
     with the frame's number; what its readers skip with only a log line is a problem here."""
     suffix = path.suffix.lower()
@@ -469,13 +469,13 @@ def _trc_version(path: Path) -> str | None:
     return None
 
 
-def _reader_problems(log: _ReaderLog, fail: Callable[[int | None, str], None]) -> None:
+def _reader_problems(log: _ReaderLog, fail: Callable[..., None]) -> None:
     for line, text, record in log.records:
         unsupported = UNSUPPORTED_TYPE.match(record.getMessage())
         if record.levelno >= logging.WARNING and text:  # not the end of a file without frames
             fail(line, f"python-can cannot read it: {text!r}")
         elif unsupported and unsupported[1] in TRC_ERROR_FRAMES:
-            fail(line, ERROR_FRAME)
+            fail(line, ERROR_FRAME, ERROR_KIND)
         elif unsupported and unsupported[1] not in TRC_NOT_FRAMES:
             fail(line, f"not a TRC frame (record type '{unsupported[1]}'): {text!r}")
     log.records.clear()
@@ -484,9 +484,9 @@ def _reader_problems(log: _ReaderLog, fail: Callable[[int | None, str], None]) -
 def _frame_of_message(msg: can.Message) -> Frame:
     """The CAN 2.0 frame of a python-can message, or ValueError saying why it is none."""
     if msg.is_error_frame:
-        raise ValueError(ERROR_FRAME)
+        raise NotClassic(ERROR_FRAME, ERROR_KIND)
     if msg.is_fd or (len(msg.data) > 8 and len(msg.data) in FD_LENGTHS):  # CSV has no FD flag: longer is FD
-        raise ValueError(fd_refusal(len(msg.data), msg.bitrate_switch, msg.error_state_indicator))
+        raise NotClassic(fd_refusal(len(msg.data), msg.bitrate_switch, msg.error_state_indicator), FD_KIND)
     can_id, extended = msg.arbitration_id, msg.is_extended_id
     if not 0 <= can_id <= (EXT_ID_MAX if extended else STD_ID_MAX):
         raise ValueError(f"{'29' if extended else '11'}-bit id {can_id:X} is above "
@@ -533,7 +533,7 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     cache_size: candump frame texts kept for sharing (STREAM_CACHE: a pass that keeps no frames).
     drops: filled with the frames a candump -d recording says the kernel dropped, per interface.
     left_out: given, an error frame or a CAN FD frame is left out and its line added here under
-    its kind (not_classic), not a problem: what summarise and scaffold do with a recording (a
+    its kind (NotClassicFrame.kind), not a problem: what summarise and scaffold do with a recording (a
     scenario's trace has neither)."""
     path = Path(path)
     if not path.is_file():
@@ -548,8 +548,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     # python-can numbers ASC and BLF channels from 0; the file, CANalyzer and CANoe from 1: said as the file has them
     zero_based = path.suffix.lower() in (".asc", ".blf")
 
-    def fail(line: int | None, message: str) -> None:
-        if left_out is not None and (kind := not_classic(message)):
+    def fail(line: int | None, message: str, kind: str | None = None) -> None:
+        if left_out is not None and kind is not None:
             left_out.setdefault(kind, []).append(line or 0)
             return
         error = (TraceError(str(path), None, f"frame {line}: {message}") if by_number and line
@@ -558,9 +558,9 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
             raise error
         on_problem(error)
 
-    def bad_line(error: TraceError) -> None:  # candump's: raised as they are, error frames counted
-        if left_out is not None and (kind := not_classic(error.reason)):
-            left_out.setdefault(kind, []).append(error.line or 0)
+    def bad_line(error: TraceError) -> None:  # candump's: raised as they are, error and FD frames counted
+        if left_out is not None and isinstance(error, NotClassicFrame):
+            left_out.setdefault(error.kind, []).append(error.line or 0)
         elif on_problem is None:
             raise error
         else:
@@ -597,6 +597,9 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     for line, msg in _python_can_messages(path, fail):
         try:
             frame = _frame_of_message(msg)
+        except NotClassic as e:
+            fail(line, str(e), e.kind)
+            continue
         except ValueError as e:
             fail(line, str(e))
             continue

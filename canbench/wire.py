@@ -31,6 +31,11 @@ def id_hex(can_id: int, extended: bool) -> str:
     return f"{can_id:08X}" if extended else f"{can_id:03X}"
 
 
+def id_of(text: str) -> tuple[int, bool]:
+    """(id, 29-bit) of an id as id_hex writes it."""
+    return int(text, 16), len(text) == 8
+
+
 @dataclass(frozen=True, slots=True)  # slots: an hour's analysis holds tens of millions
 class Frame:
     can_id: int
