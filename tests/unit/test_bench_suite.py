@@ -52,7 +52,14 @@ FAKE_BENCH_RUN = """#!/usr/bin/env bash
 s=$1 name=$(basename "$1" .yaml)
 echo "start $name $(date +%s%N)" >>"$FAKE_LOG"
 code=$(sed -n 's/^# exit: //p' "$s")
-sleep 0.5 # the run's work
+if [ -n "${FAKE_MEET:-}" ]; then # runs that must meet: wait (FAKE_MEET_S at most) for the group of FAKE_MEET
+	started=$(grep -c '^start ' "$FAKE_LOG") # this run's place among the starts
+	group_end=$(((started + FAKE_MEET - 1) / FAKE_MEET * FAKE_MEET))
+	for _ in $(seq $((${FAKE_MEET_S:-30} * 100))); do
+		[ "$(grep -c '^start ' "$FAKE_LOG")" -ge "$group_end" ] && break
+		sleep 0.01
+	done
+fi
 if [ -n "${FAKE_UNTIL:-}" ]; then # a longer run: until the suite's output shows FAKE_UNTIL (30 s at most)
 	for _ in $(seq 300); do grep -qF "$FAKE_UNTIL" "$FAKE_OUT" && break; sleep 0.1; done
 fi
@@ -125,7 +132,7 @@ def test_jobs_run_concurrently_and_the_summary_covers_all(bench):
     run, add, events, root = bench
     for i in range(4):
         add(f"s{i}", code=1 if i == 2 else 0)
-    proc = run([f"s{i}" for i in range(4)], JOBS="2")
+    proc = run([f"s{i}" for i in range(4)], JOBS="2", FAKE_MEET="2")  # each waits for its pair: seen side by side
     assert proc.returncode == 1, proc.stdout + proc.stderr
     assert overlap(events()) == 2
     assert "s2: FAILED (exit 1)" in proc.stdout and "make test: FAILED, 3 of 4 passed" in proc.stdout
@@ -152,7 +159,8 @@ def test_serial_is_one_at_a_time(bench):
     run, add, events, _ = bench
     for i in range(3):
         add(f"s{i}")
-    proc = run([f"s{i}" for i in range(3)])
+    # each waits a second for a second run beside it: one started beside it would be seen
+    proc = run([f"s{i}" for i in range(3)], FAKE_MEET="2", FAKE_MEET_S="1")
     assert proc.returncode == 0 and overlap(events()) == 1, proc.stdout + proc.stderr
     assert "make test: all 3 scenario(s) passed" in proc.stdout
 

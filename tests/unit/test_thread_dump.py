@@ -6,11 +6,10 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
-from conftest import thread_dump
+from conftest import thread_dump, wait_for
 
 pytestmark = pytest.mark.unit
 pytest_plugins = ["pytester"]
@@ -26,10 +25,8 @@ def sleeper():
     proc = subprocess.Popen(SLEEPER, stdout=subprocess.PIPE, text=True)
     assert proc.stdout.readline().strip() == "ready"  # both threads started
     # the main thread prints before it sleeps: on a loaded machine it may not be asleep yet
-    deadline = time.monotonic() + 10
-    while not all(_asleep(task) for task in Path(f"/proc/{proc.pid}/task").iterdir()):
-        assert time.monotonic() < deadline, "the sleeper's threads never slept"
-        time.sleep(0.01)
+    wait_for(lambda: all(_asleep(task) for task in Path(f"/proc/{proc.pid}/task").iterdir()),
+             "the sleeper's threads asleep", timeout=10)
     yield proc
     proc.kill()
     proc.wait()
