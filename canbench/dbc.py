@@ -107,7 +107,7 @@ def as_written_problem(message) -> str | None:
 
 
 def strict_problem(db) -> str | None:
-    """Why cantools' strict mode refuses a DBC (None if it does not), naming every message."""
+    """Why cantools' strict mode refuses a DBC (None if it does not): how many messages, the first five named."""
     said = [f"{m.name} ({_AS_WRITTEN[m]})" for m in db.messages if m in _AS_WRITTEN]
     if not said:
         return None

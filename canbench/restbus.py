@@ -570,8 +570,10 @@ def restbus_plans(db, spec: dict, where: list, base: Path, fail: Fail,
     if not sent:
         fail([*where, "dbc_node"], f"{node} transmits no message in the DBC (no BO_ names it as sender)")
         return (), ()
-    unsendable = {m.name: f"{m.length} data bytes: CAN FD" if too_long_for_can_20(m) else encode_problem(m)
-                  for m in sent if too_long_for_can_20(m) or encode_problem(m)}
+    unsendable: dict[str, str] = {}  # message -> why the bench cannot send it
+    for m in sent:
+        if why := f"{m.length} data bytes: CAN FD" if too_long_for_can_20(m) else encode_problem(m):
+            unsendable[m.name] = why
     left_out = tuple(f"{m.name} ({unsendable[m.name]})" for m in sent  # those it would send
                      if m.name in unsendable and cycle_time_ms(m))
     if len(unsendable) == len(sent):  # cycle_ms would not help
