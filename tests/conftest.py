@@ -252,11 +252,33 @@ def read_field(task: Path, name: str, pick=lambda text: text.strip()) -> str:
         return "?"
 
 
+def tcp_sockets(pid: int) -> list[tuple[int, int, int, int]]:
+    """The process's TCP connections as (local port, remote port, bytes unsent, bytes unread), from
+    the kernel's tables: which side of a link holds what when a test finds the link stuck."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = fd.readlink().as_posix()
+        except OSError:  # closed meanwhile
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[9] in inodes:
+                unsent, unread = (int(x, 16) for x in f[4].split(":"))
+                found.append((int(f[1].rsplit(":", 1)[1], 16), int(f[2].rsplit(":", 1)[1], 16), unsent, unread))
+    return found
+
+
 def thread_dump(pid: int) -> str:
     """Every thread of a live process: name, state and the syscall it sleeps in (/proc), then each
     stack (gdb, where installed and allowed to attach). What a failing bridge test records before
     teardown stops the bridge: a hang that happens once in a hundred CI runs is then read, not guessed."""
-    lines = []
+    lines = [f"TCP port {local} -> {remote}: {unsent} bytes unsent, {unread} unread"
+             for local, remote, unsent, unread in tcp_sockets(pid)]
     for task in sorted(Path(f"/proc/{pid}/task").glob("*"), key=lambda t: int(t.name)):
         state = read_field(task, "status", lambda t: next(ln.split(None, 1)[1] for ln in t.splitlines()
                                                           if ln.startswith("State:")))
@@ -284,18 +306,21 @@ def thread_dump(pid: int) -> str:
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item, call):
-    """A test that failed while its bridge still runs gets the bridge's thread dump in its report."""
+    """A test that failed while its bridge still runs gets the bridge's and its router's thread dumps
+    (and their TCP queues) in its report: a stuck link is then seen from both ends."""
     outcome = yield
     report = outcome.get_result()
     if call.when != "call" or not report.failed:
         return
-    proc = getattr(getattr(item, "funcargs", {}).get("bridge"), "proc", None)
-    if proc is not None and proc.poll() is None:
+    for name in ("bridge", "router"):
+        proc = getattr(getattr(item, "funcargs", {}).get(name), "proc", None)
+        if proc is None or proc.poll() is not None:
+            continue
         try:
             dump = thread_dump(proc.pid)
         except Exception as e:  # noqa: BLE001 - a diagnostic must never turn a failure into an internal error
             dump = f"(no thread dump: {e!r})"
-        report.sections.append(("the bridge's threads when the test failed", dump))
+        report.sections.append((f"the {name}'s threads when the test failed", dump))
 
 
 @pytest.fixture

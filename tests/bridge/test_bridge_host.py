@@ -69,7 +69,9 @@ def wait_accounted(bridge, session, total: int, timeout: float = READY_TIMEOUT_S
     try:
         return wait_for(accounted, "the bridge to account for every frame", timeout=timeout)
     except TimeoutError:
-        raise AssertionError(f"last stats: {seen[-1] if seen else None}") from None
+        # first and last: a link that is stuck shows the same counts, one that is slow shows progress
+        raise AssertionError(f"{len(seen)} stats read; first: {seen[0] if seen else None}; "
+                             f"last: {seen[-1] if seen else None}") from None
 
 
 def start_candump(bus, path, frames: int | None = None):

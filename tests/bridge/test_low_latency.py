@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import signal
 import time
-from pathlib import Path
 
 import pytest
-from conftest import LOW_LATENCY_ROUTER, wait_for
+from conftest import LOW_LATENCY_ROUTER, tcp_sockets, wait_for
 from test_bridge_host import Collector, wait_accounted
 from test_direct_put import HOLD_S, MAX_BACKLOG, SNDBUF, check_published_in_order, small_send_buffer, stops_cleanly
 
@@ -78,21 +77,7 @@ FULL_S = 5.0  # the link must fill within this, well inside Zenoh's 10 s lease (
 
 def link_send_queue(pid: int, port: int) -> int:
     """Bytes the kernel holds unsent on the process's TCP connections to this port (its link)."""
-    inodes = set()
-    for fd in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            target = fd.readlink().as_posix()
-        except OSError:  # closed meanwhile
-            continue
-        if target.startswith("socket:["):
-            inodes.add(target[8:-1])
-    queued = 0
-    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
-        for line in Path(table).read_text().splitlines()[1:]:
-            f = line.split()
-            if f[9] in inodes and int(f[2].rsplit(":", 1)[1], 16) == port:
-                queued += int(f[4].split(":")[0], 16)
-    return queued
+    return sum(unsent for _, remote, unsent, _ in tcp_sockets(pid) if remote == port)
 
 
 def freeze_until_the_link_is_full(bus, bridge, router, backlog: list[int]) -> None:
