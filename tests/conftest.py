@@ -277,8 +277,17 @@ def thread_dump(pid: int) -> str:
     """Every thread of a live process: name, state and the syscall it sleeps in (/proc), then each
     stack (gdb, where installed and allowed to attach). What a failing bridge test records before
     teardown stops the bridge: a hang that happens once in a hundred CI runs is then read, not guessed."""
+    sockets = tcp_sockets(pid)
     lines = [f"TCP port {local} -> {remote}: {unsent} bytes unsent, {unread} unread"
-             for local, remote, unsent, unread in tcp_sockets(pid)]
+             for local, remote, unsent, unread in sockets]
+    ss = shutil.which("ss")
+    if ss and sockets:  # the kernel's view of each: windows, timers (a zero-window probe's backoff), retransmits
+        ports = " or ".join(f"sport = :{local}" for local, _, _, _ in sockets)
+        try:
+            lines.append(subprocess.run([ss, "-tnoi", f"( {ports} )"], capture_output=True, text=True,
+                                        timeout=10).stdout.rstrip())
+        except subprocess.TimeoutExpired:
+            lines.append("(ss took over 10 s)")
     for task in sorted(Path(f"/proc/{pid}/task").glob("*"), key=lambda t: int(t.name)):
         state = read_field(task, "status", lambda t: next(ln.split(None, 1)[1] for ln in t.splitlines()
                                                           if ln.startswith("State:")))
