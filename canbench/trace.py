@@ -476,7 +476,9 @@ def _reader_problems(log: _ReaderLog, fail: Callable[..., None]) -> None:
             fail(line, f"python-can cannot read it: {text!r}")
         elif unsupported and unsupported[1] in TRC_ERROR_FRAMES:
             fail(line, ERROR_FRAME, ERROR_KIND)
-        elif unsupported and unsupported[1] not in TRC_NOT_FRAMES:
+        elif unsupported and unsupported[1] not in TRC_NOT_FRAMES and not text.lstrip().startswith(";"):
+            # a ';' line is a comment: python-can hands back the header's last one at the end of a file
+            # without frames
             fail(line, f"not a TRC frame (record type '{unsupported[1]}'): {text!r}")
     log.records.clear()
 
@@ -642,10 +644,15 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
 
 def trace_start(path: str | Path) -> float:
     """The trace's first stamp (s) on any interface: what a replay of one interface keeps its
-    timing to (its first frame 3 s after the trace's is sent 3 s after the start)."""
-    for _, t_ns, _, _ in iter_trace(path, None, lambda e: None, STREAM_CACHE):
-        return t_ns / 1e9
-    raise TraceError(str(path), None, "no frames in trace")
+    timing to (its first frame 3 s after the trace's is sent 3 s after the start). The earliest of
+    the interfaces' first frames, as scaffold's split_trace takes it: candump's lines are in time
+    order per interface only, so the first line need not be the first frame."""
+    first: dict[str | None, int] = {}
+    for _, t_ns, iface, _ in iter_trace(path, None, lambda e: None, STREAM_CACHE):
+        first.setdefault(iface, t_ns)
+    if not first:
+        raise TraceError(str(path), None, "no frames in trace")
+    return min(first.values()) / 1e9
 
 
 def too_many_frames() -> str:

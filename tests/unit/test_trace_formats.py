@@ -171,6 +171,15 @@ def test_an_empty_trc_has_no_frames(tmp_path):
     assert [str(p) for p in validate.trace_problems(path)] == [f"{path}: no frames in trace"]
 
 
+def test_a_trc_of_only_its_header_has_no_frames(tmp_path):
+    # python-can's TRCWriter's header: its last comment line is handed back at the end of the file
+    whole = written(tmp_path / "whole.trc", classic())
+    lines = whole.read_text().splitlines(keepends=True)
+    path = tmp_path / "header.trc"
+    path.write_text("".join(line for line in lines if line.startswith(";")))
+    assert [str(p) for p in validate.trace_problems(path)] == [f"{path}: no frames in trace"]
+
+
 @pytest.mark.parametrize("suffix", [".asc", ".blf"])
 def test_channels_are_numbered_as_the_file_numbers_them(tmp_path, suffix):
     # python-can reads the file's channel 1 as 0; CANalyzer, CANoe and the file itself say 1

@@ -120,6 +120,18 @@ def test_an_interface_keeps_its_timing_to_the_traces_start(tmp_path):
     assert [(round(t, 6), line) for t, _, line, _ in commands.plan(scenario.load(path))] == [(3.0, 2), (3.5, 3)]
 
 
+def test_the_traces_start_is_its_earliest_frame_not_its_first_line(tmp_path):
+    # candump of two sockets wrote can1's lines first, though can0's first frame is 5 ms earlier:
+    # each interface keeps its recorded offset from the earliest, none is sent before the start
+    log = ("(10.000000) can1 200#01\n(10.010000) can1 200#02\n(9.995000) can0 100#01\n"
+             "(10.005000) can0 100#02\n(10.015000) can0 100#03\n(10.020000) can1 200#03\n")
+    for interface, expected in (("can0", [0.0, 0.01, 0.02]), ("can1", [0.005, 0.015, 0.025])):
+        path = scenario_file(tmp_path, log, f"    interface: {interface}\n")
+        sc = scenario.load(path)
+        assert [round(m.timestamp, 6) for _, m in plans.schedule(sc.ecus[0], sc).frames()] == expected
+    assert trace.trace_start(tmp_path / "drive.log") == pytest.approx(9.995)
+
+
 def test_a_role_that_sends_no_trace_needs_no_interface(tmp_path, capsys):
     (tmp_path / "drive.log").write_text(TWO)
     path = tmp_path / "s.yaml"
