@@ -75,6 +75,9 @@ def _construct_int(loader: _LineLoader, node: yaml.ScalarNode) -> int:
 
 def _construct_float(loader: _LineLoader, node: yaml.ScalarNode) -> float:
     value = loader.construct_yaml_float(node)
+    if math.isnan(value):  # it passes no minimum or maximum: a gate of it would judge nothing
+        raise _AmbiguousNumber(None, None, f"{node.value} is not a number (NaN): no value of a scenario can be, "
+                               "write a number", node.start_mark)
     if ":" in str(node.value):
         raise _AmbiguousNumber(None, None, f"{node.value} is {value:g} to YAML 1.1 (base 60), text to YAML 1.2: "
                                f"write {yaml_number(value)}, or quote it", node.start_mark)

@@ -99,6 +99,21 @@ def test_a_number_yaml_versions_read_differently_is_refused_at_its_line(tmp_path
     assert problems(tmp_path, text) == [f"6: {said}"]
 
 
+@pytest.mark.parametrize("where,text", [
+    ("duration_s", "duration_s: .nan\nbuses: [{name: vcan0}]\n"),
+    ("a gate", "duration_s: 10\nbuses: [{name: vcan0}]\nexpect:\n  latency: {can_to_zenoh: {p50_ms: .NaN}}\n"),
+    ("a cycle", "duration_s: 10\nbuses: [{name: vcan0}]\nexpect:\n  cycle_time: {tolerance_pct: .NAN}\n"),
+])
+def test_nan_is_refused_at_its_line_wherever_it_stands(tmp_path, where, text):
+    # NaN passes every minimum and maximum of the schema, and a gate of it fails nothing
+    path = tmp_path / "s.yaml"
+    path.write_text("name: t\n" + text)
+    line = next(n for n, ln in enumerate(path.read_text().splitlines(), 1) if "nan" in ln.lower())
+    with pytest.raises(ScenarioError) as err:
+        scenario.load(path)
+    assert str(err.value).startswith(f"{path}:{line}: ") and "is not a number (NaN)" in str(err.value), where
+
+
 def test_underscores_and_hex_are_numbers_to_yaml_1_1(tmp_path):
     (tmp_path / "powertrain.dbc").write_text(DBC.read_text())
     path = tmp_path / "s.yaml"
