@@ -202,7 +202,7 @@ def cycle_time(result: RunResult) -> list[str] | None:
         return None
     tolerance = gate.get("tolerance_pct")
     factor = gate.get("max_gap_factor")
-    explicit = {int(k, 16): v for k, v in gate.get("ids", {}).items()}
+    explicit = {wire.id_key(k): v for k, v in gate.get("ids", {}).items()}  # as the cycles are keyed: 11/29-bit apart
     problems = []
     for b in result.buses:
         from_dbc = _dbc_cycles(result, b.bus, b.cycle_times) if gate.get("from_dbc") else None
@@ -211,12 +211,12 @@ def cycle_time(result: RunResult) -> list[str] | None:
             if can["count"] < gate.get("min_frames", 5):
                 continue
             if from_dbc is not None:  # the database's cycle, judged on the bus too (a wrong sender)
-                if int(ident, 16) not in explicit and ident not in from_dbc:
+                if ident not in explicit and ident not in from_dbc:
                     continue  # not a cyclic message of the DBC: no cycle to expect
                 cycle, message, at_most = from_dbc.get(ident, (None, "", False))
-                expected = explicit.get(int(ident, 16), cycle)
+                expected = explicit.get(ident, cycle)
                 name = f" ({message})" if message else ""
-                if at_most and int(ident, 16) not in explicit:  # a cycle plus events: the longest gap
+                if at_most and ident not in explicit:  # a cycle plus events: the longest gap
                     if tolerance is not None and can["cycle_max_ms"] > expected * (1 + tolerance / 100):
                         problems.append(f"{b.bus} id {ident}{name}: longest gap {can['cycle_max_ms']:.2f} ms on the "
                                         f"bus, the DBC's cycle of an event-periodic message (the most it may be) "
@@ -224,12 +224,12 @@ def cycle_time(result: RunResult) -> list[str] | None:
                     expected = can["cycle_p50_ms"]  # Zenoh keeps the bus's rhythm, events and all
                 elif tolerance is not None and can["cycle_p50_ms"] is not None and \
                         abs(can["cycle_p50_ms"] - expected) > expected * tolerance / 100:
-                    said = "cycle_time.ids says" if int(ident, 16) in explicit else "the DBC says"
+                    said = "cycle_time.ids says" if ident in explicit else "the DBC says"
                     problems.append(f"{b.bus} id {ident}{name}: median cycle {can['cycle_p50_ms']:.2f} ms on the bus, "
                                     f"{said} {expected:.2f} ms +-{tolerance}%")
                     expected = can["cycle_p50_ms"]  # the sender's fault, said once: Zenoh is judged against the bus
             else:
-                expected = explicit.get(int(ident, 16), can["cycle_p50_ms"])
+                expected = explicit.get(ident, can["cycle_p50_ms"])
             if not zen:
                 continue  # nothing of this id arrived: integrity reports that
             if zen["count"] < 2:

@@ -15,7 +15,7 @@ import yaml
 
 from . import rxqos
 from .errors import ScenarioError
-from .wire import EXT_ID_MAX
+from .wire import EXT_ID_MAX, id_key
 
 SCHEMA_PATH = Path(__file__).with_name("scenario.schema.json")
 
@@ -508,6 +508,7 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
             flagged.add(f.step)
             fail(["faults", f.step], f"can_flood id {f.can_id:03X} is sent by an ECU or a command too; "
                  "give the flood an id of its own")
+    _cycle_id_problems(doc, fail)
     dbc = None
     if "dbc" in doc:
         shown = path.parent / str(doc["dbc"])
@@ -520,6 +521,23 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
         return None
     return Scenario(path, doc["name"], doc.get("description", ""), doc["duration_s"], doc["buses"], ecus,
                     bridge, dict(doc.get("expect", {})), doc, commands, consumer, dbc, faults, bus_dbcs, gates)
+
+
+def _cycle_id_problems(doc: Any, fail) -> None:
+    """Two keys of expect.cycle_time.ids that name one id ('123' and '0123'; '00000123' is the 29-bit
+    id, another): the second is a problem at its line, not a silent override of the first."""
+    expect = doc.get("expect")
+    cycle = expect.get("cycle_time") if isinstance(expect, dict) else None
+    ids = cycle.get("ids") if isinstance(cycle, dict) else None
+    said: dict[str, str] = {}
+    for key in ids if isinstance(ids, dict) else ():
+        try:
+            first = said.setdefault(id_key(key), key)
+        except (TypeError, ValueError):
+            continue  # not a hex id: the schema says so
+        if first != key:
+            fail(["expect", "cycle_time", "ids", key], f"the same id as {first} ({id_key(key)}): an 11-bit id is "
+                 "at most 7FF, a 29-bit one is written with 8 digits (00000123)")
 
 
 def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[str, Path], tuple]:

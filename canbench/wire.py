@@ -36,6 +36,13 @@ def id_of(text: str) -> tuple[int, bool]:
     return int(text, 16), len(text) == 8
 
 
+def id_key(text: str) -> str:
+    """A hex id as a scenario's key gives it (1-8 digits), in id_hex's form: 29-bit when written
+    with 8 digits, as candump writes 29-bit ids, or when above 7FF; else 11-bit ('0123' is 123)."""
+    can_id = int(text, 16)
+    return id_hex(can_id, len(text) == 8 or can_id > STD_ID_MAX)
+
+
 @dataclass(frozen=True, slots=True)  # slots: an hour's analysis holds tens of millions
 class Frame:
     can_id: int
