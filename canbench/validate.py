@@ -148,6 +148,28 @@ def encoding_problems(path: Path, doc, sc: scenario.Scenario) -> list[InputError
     return found
 
 
+def traffic_end(sc: scenario.Scenario) -> tuple[float, str] | None:
+    """When the scenario's last planned frame goes out (s from the start, speed, loops and offsets
+    applied: the plans the ECUs and the consumer send by), and whose it is."""
+    from . import commands, plans
+    ends = [(plan.last.timestamp, f"ECU {e.name}'s last frame") for e in sc.ecus
+            if e.role not in ("echo", "responder")  # these answer, on no schedule of their own (canbench.ecu.run)
+            and (plan := plans.schedule(e, sc)).last is not None]
+    ends += [(t, f"the last command (bus {bus})") for t, bus, _, _ in commands.plan(sc)[-1:]]
+    return max(ends, default=None)
+
+
+def duration_problems(path: Path, doc, sc: scenario.Scenario) -> list[InputError]:
+    """Traffic planned past duration_s, the upper bound of the traffic phase: found here, at its
+    line, not as a bench error after the whole stack started and waited duration_s + 30 s."""
+    end = traffic_end(sc)
+    if end is None or end[0] <= sc.duration_s:
+        return []
+    return [ScenarioError(str(path), scenario.line_of(doc, ["duration_s"]),
+                          f"duration_s: {sc.duration_s:g} s ends before the traffic does: {end[1]} goes out at "
+                          f"{end[0]:.3f} s (speed, loops and start offsets applied); give duration_s at least that")]
+
+
 def _first_frame(command: scenario.Commands) -> object:
     from . import restbus
     return next(iter(restbus.command_frames(command)), None)
@@ -177,7 +199,10 @@ def checked(path: Path) -> tuple[list[InputError], scenario.Scenario | None]:
     traces_found: list[InputError] = []
     for trace in named_traces(path, doc):
         traces_found += trace_problems(trace, interfaces_of.setdefault(trace, {}))
-    return found + interface_problems(path, doc, interfaces_of) + traces_found, sc
+    found += interface_problems(path, doc, interfaces_of) + traces_found
+    if sc is not None and not found:  # the plans read the traces: only once they are known good
+        found += duration_problems(path, doc, sc)
+    return found, sc
 
 
 def run(paths: list[Path]) -> int:
