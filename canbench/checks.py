@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from functools import wraps
+from typing import Any
 
 from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult, bus_stats
@@ -162,12 +163,38 @@ def zenoh_to_can(result: RunResult) -> list[str] | None:
             if c.unexpected:
                 problems.append(f"{b.bus}: {len(c.unexpected)} frames on the bus that neither a command nor an ECU "
                                 f"explains: {_frames(c.unexpected)}")
-        # waiting together, a command of higher CAN priority goes first: the bridge's order (docs/bridge.md)
-        reordered = [(s, p) for s, p in c.reordered if arbitration_key(p.frame) >= arbitration_key(s.frame)]
+        reordered = overtaken_commands(c.matched)
         if _expect(result, "ordering", True) and reordered:
             listed = "; ".join(f"{describe(s)} after {describe(p)}" for s, p in reordered[:SHOW])
             problems.append(f"{b.bus}: {len(reordered)} commands out of put order: {listed}")
     return problems
+
+
+def overtaken_commands(matched) -> list[tuple]:
+    """(command, a command put after it that the bus carried first and that has no higher CAN
+    priority) for each command out of put order. Waiting together, a command of higher priority
+    goes first (the bridge's order, docs/bridge.md), so only such overtakers are in order; every
+    overtaker is looked at, not only the latest put (a Fenwick tree of the highest arbitration key
+    over later puts). matched: (command, bus frame) in bus order."""
+    order = sorted({s.index for s, _ in matched})
+    slot = {index: len(order) - i for i, index in enumerate(order)}  # 1-based, later puts first
+    tree: list[tuple[int, Any] | None] = [None] * (len(order) + 1)
+    out = []
+    for s, _ in matched:
+        key = arbitration_key(s.frame)
+        worst, i = None, slot[s.index] - 1  # the carried commands put after s: slots before its own
+        while i > 0:
+            if tree[i] is not None and (worst is None or tree[i][0] > worst[0]):  # type: ignore[index]
+                worst = tree[i]
+            i -= i & -i
+        if worst is not None and worst[0] >= key:
+            out.append((s, worst[1]))
+        i = slot[s.index]
+        while i < len(tree):
+            if tree[i] is None or tree[i][0] < key:  # type: ignore[index]
+                tree[i] = (key, s)
+            i += i & -i
+    return out
 
 
 def arbitration_key(f) -> int:

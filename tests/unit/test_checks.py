@@ -135,16 +135,25 @@ def test_no_deadline_is_not_judged(tmp_path):
     assert checks.no_stale_commands(stale_result(tmp_path, [(0x6A0, 0, 5000)], stale=0, deadline=0)) is None
 
 
-def reorder_result(pairs: list[tuple[int, int]]) -> SimpleNamespace:
-    """zenoh_to_can's input with reordered (command, the one put after it that reached the bus first) ids."""
+def obs(can_id, i):
     from canbench import oracle, wire
+    return oracle.Observed(wire.Frame(can_id, 1, b"\x01", can_id > 0x7FF), i, i, line=i + 2, origin="commands.tsv")
 
-    def obs(can_id, i):
-        return oracle.Observed(wire.Frame(can_id, 1, b"\x01", can_id > 0x7FF), i, i, line=i + 2, origin="commands.tsv")
+
+def written_result(put: list[int], written: list[int]) -> SimpleNamespace:
+    """zenoh_to_can's input: commands of these ids put in this order, carried by the bus in the order
+    of their put positions in `written`."""
+    commands = [obs(can_id, i) for i, can_id in enumerate(put)]
     c = SimpleNamespace(lost=[], duplicates=[], corrupted=[], unexpected=[],
-                        reordered=[(obs(s, 2 * i), obs(p, 2 * i + 1)) for i, (s, p) in enumerate(pairs)])
+                        matched=[(commands[i], commands[i]) for i in written])
     return SimpleNamespace(scenario=SimpleNamespace(commands=[object()], expect={}),
                            buses=[SimpleNamespace(bus="vcan0", zenoh_to_can=c, commands=[object()])])
+
+
+def reorder_result(pairs: list[tuple[int, int]]) -> SimpleNamespace:
+    """Each pair: a command, then one put after it that the bus carried first."""
+    return written_result([i for pair in pairs for i in pair],
+                          [k for n in range(len(pairs)) for k in (2 * n + 1, 2 * n)])
 
 
 def test_a_command_overtaken_by_a_higher_priority_one_is_in_order():
@@ -155,6 +164,14 @@ def test_a_command_overtaken_by_a_higher_priority_one_is_in_order():
         assert problems and "1 commands out of put order" in problems[0], pairs
     assert checks.arbitration_key(SimpleNamespace(can_id=0x100, extended=False, remote=True)) < \
         checks.arbitration_key(SimpleNamespace(can_id=0x100 << 18, extended=True, remote=False))
+
+
+def test_every_command_that_overtook_one_is_looked_at_not_only_the_latest_put():
+    # put 500, 600, 100; the bus carried 600, 100, 500: 100 may overtake 500, 600 may not
+    problems = checks.zenoh_to_can(written_result([0x500, 0x600, 0x100], [1, 2, 0]))
+    assert problems == ["vcan0: 1 commands out of put order: 500#01 (commands.tsv:2) after 600#01 (commands.tsv:3)"]
+    assert checks.zenoh_to_can(written_result([0x500, 0x300, 0x100], [1, 2, 0])) == []  # both of higher priority
+    assert checks.zenoh_to_can(written_result([0x100, 0x200, 0x300], [0, 1, 2])) == []
 
 
 def stale_scenario_run(run_dir, write_stamped_stale: bool):
