@@ -319,17 +319,22 @@ def latency_regression(result: RunResult) -> list[str] | None:
     gates = {d: g for d, g in (_expect(result, "latency", {}) or {}).items() if "max_regression_pct" in g}
     if not gates or result.baseline is None:
         return None
+    base = result.baseline
+    for key in ("scenario", "schema_version"):  # another scenario's or format's numbers compare with nothing
+        if base.get(key) != result.metrics.get(key):
+            return [f"the baseline run {base.get('run_id')} has {key} {base.get(key)!r}, this run "
+                    f"{result.metrics.get(key)!r}: no comparison (give a run of this scenario)"]
     problems = []
     for direction, gate in gates.items():
         for bus, now in result.metrics.get(direction, {}).items():
-            before = result.baseline.get(direction, {}).get(bus)
+            before = base.get(direction, {}).get(bus)
             if not before or before["latency"]["p50_ms"] is None or now["latency"]["p50_ms"] is None:
                 continue
             old, new = before["latency"]["p50_ms"], now["latency"]["p50_ms"]
             if new > old * (1 + gate["max_regression_pct"] / 100) and new - old > gate.get("regression_floor_ms", 0.05):
+                grown = f"+{(new / old - 1) * 100:.0f}%" if old > 0 else "from a baseline of 0 or below"
                 problems.append(f"{direction} {bus}: p50 {new:.3f} ms vs {old:.3f} ms in baseline run "
-                                f"{result.baseline.get('run_id')} (+{(new / old - 1) * 100:.0f}% > "
-                                f"{gate['max_regression_pct']}%)")
+                                f"{base.get('run_id')} ({grown} > {gate['max_regression_pct']}%)")
     return problems
 
 

@@ -63,9 +63,9 @@ def compare(old: dict, new: dict, latency_pct: float = 50.0, floor_ms: float = 0
                 b, a = before["latency"].get(key), after["latency"].get(key)
                 if b is None or a is None:
                     continue
-                change = (a / b - 1) * 100 if b else 0.0
                 worse = pct is not None and a > b * (1 + pct / 100) and a - b > floor_ms
-                note = f"{change:+.0f}%" + (f" (limit +{pct:g}% and +{floor_ms:g} ms)" if pct is not None else "")
+                change = f"{(a / b - 1) * 100:+.0f}%" if b > 0 else f"{a - b:+.3f} ms from {b:.3f}"  # no ratio of 0
+                note = change + (f" (limit +{pct:g}% and +{floor_ms:g} ms)" if pct is not None else "")
                 rows.append(Row(f"{direction} {bus} {key}", f"{b:.3f}", f"{a:.3f}", worse, note))
     return rows
 

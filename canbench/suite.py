@@ -203,11 +203,24 @@ def suite_runs(reports: Path, passed_only: bool = False) -> dict[str, Path]:
     return {name: run_dir for name, (_, run_dir) in runs.items()}
 
 
+def listed_scenarios(reports: Path) -> set[str]:
+    """Every scenario the suites under reports list, whether or not its run left a metrics.json."""
+    return {Path(r["scenario"]).stem for summary in reports.glob("**/summary.json")
+            for r in json.loads(summary.read_text()).get("runs", []) if r.get("scenario")}
+
+
 def compare_suites(old_reports: Path, new_reports: Path) -> int:
-    """Exit 1 if any scenario regressed against its baseline; a scenario without one is named."""
+    """Exit 1 if any scenario regressed against its baseline, or ran tonight and left no metrics to
+    compare (a bench error, a run stopped early); a scenario without a baseline is named, and so is
+    one only the baseline has (removed since, or its shard's reports are missing)."""
     old, new = suite_runs(old_reports, passed_only=True), suite_runs(new_reports)
     if not new:
         raise InputError(str(new_reports), None, "no suite summary.json with runs under it (make test writes them)")
+    no_metrics = sorted(listed_scenarios(new_reports) - set(new))
+    for name in no_metrics:
+        print(f"{name}: its run in {new_reports} left no metrics.json: nothing to compare (a failure)")
+    for name in sorted(set(old) - set(new) - set(no_metrics)):
+        print(f"{name}: not in the suites under {new_reports} (removed, or its shard's reports are missing)")
     regressed = []
     for name, run_dir in sorted(new.items()):
         if name not in old:
@@ -219,8 +232,9 @@ def compare_suites(old_reports: Path, new_reports: Path) -> int:
         if any(r.regression for r in rows):
             regressed.append(name)
     print(f"suite compare: {len(regressed)} of {len(new)} scenarios regressed{': ' if regressed else ''}"
-          f"{', '.join(regressed)}")
-    return 1 if regressed else 0
+          f"{', '.join(regressed)}" + (f"; {len(no_metrics)} left no metrics: {', '.join(no_metrics)}"
+                                       if no_metrics else ""))
+    return 1 if regressed or no_metrics else 0
 
 
 def check_verdicts(suite_dirs: list[Path]) -> dict[str, dict[str, str]]:

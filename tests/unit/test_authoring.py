@@ -98,6 +98,14 @@ def test_compare_exit_code(tmp_path, capsys, new, regressed):
     assert ("REGRESSION" in capsys.readouterr().out) == regressed
 
 
+def test_compare_from_a_baseline_of_zero_says_by_how_much_not_a_percentage(tmp_path, capsys):
+    (tmp_path / "a.json").write_text(json.dumps(metrics(p50=0.0)))
+    (tmp_path / "b.json").write_text(json.dumps(metrics(p50=5.0)))
+    assert cli.main(["compare", str(tmp_path / "a.json"), str(tmp_path / "b.json")]) == 1
+    row = next(line for line in capsys.readouterr().out.splitlines() if "p50_ms" in line)
+    assert "+5.000 ms from 0.000" in row and "+0%" not in row
+
+
 def test_compare_refuses_unknown_schema(tmp_path):
     bad = copy.deepcopy(metrics())
     bad["schema_version"] = 99

@@ -13,11 +13,13 @@ from canbench import faults as faults_mod
 pytestmark = pytest.mark.unit
 
 
-def result(p50_now: float, p50_before: float | None, gate: dict) -> SimpleNamespace:
-    def metrics(p50):
-        return {"run_id": "r", "can_to_zenoh": {"vcan0": {"latency": {"p50_ms": p50}}}}
+def result(p50_now: float, p50_before: float | None, gate: dict, base_scenario: str = "smoke") -> SimpleNamespace:
+    def metrics(p50, scenario="smoke"):
+        return {"schema_version": 1, "run_id": f"r-{scenario}", "scenario": scenario,
+                "can_to_zenoh": {"vcan0": {"latency": {"p50_ms": p50}}}}
     return SimpleNamespace(scenario=SimpleNamespace(expect={"latency": {"can_to_zenoh": gate}}),
-                           metrics=metrics(p50_now), baseline=metrics(p50_before) if p50_before else None)
+                           metrics=metrics(p50_now),
+                           baseline=metrics(p50_before, base_scenario) if p50_before is not None else None)
 
 
 def test_regression_beyond_threshold_fails_naming_both_runs():
@@ -28,6 +30,17 @@ def test_regression_beyond_threshold_fails_naming_both_runs():
 @pytest.mark.parametrize("now,before", [(0.7, 0.5), (0.09, 0.05), (0.3, 0.5)])
 def test_within_threshold_or_below_the_noise_floor_passes(now, before):
     assert checks.latency_regression(result(now, before, {"max_regression_pct": 50})) == []
+
+
+def test_a_baseline_of_another_scenario_is_refused_not_compared():
+    assert checks.latency_regression(result(0.9, 0.5, {"max_regression_pct": 50}, "can-fd-smoke")) == [
+        "the baseline run r-can-fd-smoke has scenario 'can-fd-smoke', this run 'smoke': no comparison "
+        "(give a run of this scenario)"]
+
+
+def test_a_baseline_of_zero_says_so_without_a_percentage():
+    assert checks.latency_regression(result(0.9, 0.0, {"max_regression_pct": 50})) == [
+        "can_to_zenoh vcan0: p50 0.900 ms vs 0.000 ms in baseline run r-smoke (from a baseline of 0 or below > 50%)"]
 
 
 def test_no_baseline_or_no_gate_is_not_judged():

@@ -129,6 +129,22 @@ def test_suite_compare_against_the_last_good_night(tmp_path, capsys):
     assert "suite compare: 1 of 3 scenarios regressed: burst" in capsys.readouterr().out
 
 
+def test_suite_compare_fails_a_scenario_whose_run_left_no_metrics(tmp_path, capsys):
+    old, new = tmp_path / "old", tmp_path / "new"
+    write_suite(old, "suite-a", {"smoke": (metrics(0.5), 0), "burst": (metrics(0.5), 0), "peer": (metrics(0.5), 0)})
+    write_suite(new, "suite-b", {"smoke": (metrics(0.5), 0)})
+    # burst ran and ended in a bench error before its metrics: listed, no run directory
+    summary = new / "suite-b" / "summary.json"
+    runs = json.loads(summary.read_text())["runs"] + [{"scenario": "scenarios/burst.yaml", "run_id": None,
+                                                       "exit_code": 1}]
+    summary.write_text(json.dumps({"runs": runs}))
+    assert cli.main(["suite", "compare", str(old), str(new)]) == 1
+    out = capsys.readouterr().out
+    assert "burst: its run in" in out and "left no metrics.json" in out
+    assert "peer: not in the suites under" in out  # only the baseline has it: named, not a failure
+    assert "suite compare: 0 of 1 scenarios regressed; 1 left no metrics: burst" in out
+
+
 def write_verdicts(d: Path, runs: dict[str, dict[str, str]]) -> Path:
     d.mkdir(parents=True)
     entries = [{"scenario": f"scenarios/{n}.yaml", "verdict": "passed", "checks": c} for n, c in runs.items()]
