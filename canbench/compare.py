@@ -36,6 +36,8 @@ def load_metrics(path: Path) -> dict:
         metrics = json.loads(file.read_text())
     except (OSError, ValueError) as e:
         raise InputError(str(file), None, f"not a readable metrics.json: {e}") from None
+    if not isinstance(metrics, dict):
+        raise InputError(str(file), None, f"not a run's metrics.json: a JSON {type(metrics).__name__}, not an object")
     if metrics.get("schema_version") != SUPPORTED_SCHEMA:
         raise InputError(str(file), None, f"schema_version {metrics.get('schema_version')!r}, this canbench reads "
                          f"{SUPPORTED_SCHEMA}")
@@ -45,6 +47,8 @@ def load_metrics(path: Path) -> dict:
 def compare(old: dict, new: dict, latency_pct: float = 50.0, floor_ms: float = 0.05,
             p99_pct: float | None = None) -> list[Row]:
     rows: list[Row] = []
+    if old.get("verdicts") and not new.get("verdicts"):  # the run stopped between its analysis and its checks
+        rows.append(Row("verdicts", f"{len(old['verdicts'])} checks", "none", True, "no check ran"))
     for test, before in sorted(old.get("verdicts", {}).items()):
         after = new.get("verdicts", {}).get(test, "missing")
         if before != after:

@@ -106,6 +106,22 @@ def test_compare_from_a_baseline_of_zero_says_by_how_much_not_a_percentage(tmp_p
     assert "+5.000 ms from 0.000" in row and "+0%" not in row
 
 
+def test_compare_of_a_run_whose_checks_never_ran_is_a_regression(tmp_path, capsys):
+    stopped = metrics()
+    stopped["verdicts"] = {}  # metrics written, the checks' session killed before it added them
+    (tmp_path / "a.json").write_text(json.dumps(metrics()))
+    (tmp_path / "b.json").write_text(json.dumps(stopped))
+    assert cli.main(["compare", str(tmp_path / "a.json"), str(tmp_path / "b.json")]) == 1
+    assert "no check ran" in capsys.readouterr().out
+
+
+def test_compare_refuses_a_file_that_is_not_a_metrics_object(tmp_path, capsys):
+    (tmp_path / "a.json").write_text(json.dumps(metrics()))
+    (tmp_path / "b.json").write_text("[]")
+    assert cli.main(["compare", str(tmp_path / "a.json"), str(tmp_path / "b.json")]) == 2
+    assert "not a run's metrics.json: a JSON list, not an object" in capsys.readouterr().err
+
+
 def test_compare_refuses_unknown_schema(tmp_path):
     bad = copy.deepcopy(metrics())
     bad["schema_version"] = 99
