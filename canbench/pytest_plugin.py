@@ -22,7 +22,7 @@ def pytest_addoption(parser):
     group.addoption("--scenario", default=os.environ.get("SCENARIO"), help="scenario file to run")
     group.addoption("--run-id", default=os.environ.get("RUN_ID", "local"), help="run identifier")
     group.addoption("--run-dir", default=os.environ.get("RUN_DIR"), help="where the run writes its files")
-    group.addoption("--router", default=os.environ.get("BENCH_ROUTER", "tcp/router:7447"),
+    group.addoption("--router", default=os.environ.get("BENCH_ROUTER", "tcp/127.0.0.1:7447"),  # compose sets it
                     help="Zenoh router endpoint the bench coordinates through")
     group.addoption("--consumer", default=os.environ.get("BENCH_CONSUMER"),
                     help="endpoint the capture and the commands connect to (default: the router)")

@@ -18,6 +18,7 @@ Network safety: multicast scouting is off; endpoints are explicit."""
 from __future__ import annotations
 
 import json
+import os
 import queue
 import signal
 import sys
@@ -35,6 +36,7 @@ from . import ros2, ros2_msgs, runkeys, wire
 from .dbc import read_dbc
 from .errors import InputError
 from .viewer_args import DEFAULT_ENDPOINT
+from .viewer_spawn import spawn_local_viewer
 from .viewer_types import LOGGERS, Context
 from .viewer_types.can import CanColumns
 from .viewer_types.markers import expire
@@ -302,6 +304,8 @@ def open_session(mode: str, endpoints: list[str]) -> zenoh.Session:
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("connect/endpoints", json.dumps(endpoints or [DEFAULT_ENDPOINT]))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    if not os.environ.get("ZENOH_CONFIG"):  # a peer listens nowhere unless the user's config says where
+        conf.insert_json5("listen/endpoints", "[]")  # (Zenoh's default: every interface)
     return zenoh.open(conf)
 
 
@@ -335,7 +339,7 @@ def run(args) -> int:
     if args.save:
         rr.save(str(args.save))
     else:
-        rr.spawn()
+        spawn_local_viewer()  # on loopback, no usage data (canbench.viewer_spawn)
     rr.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)  # ROS's axes (REP 103): x forward, z up
     if args.urdf:
         # Rerun's URDF importer: links become coordinate frames named as in the URDF, joints

@@ -25,6 +25,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", required=True)
     p.add_argument("--run-id", required=True)
     p.add_argument("--run-dir", required=True)
-    p.add_argument("--router", default="tcp/router:7447")
+    p.add_argument("--router", default="tcp/127.0.0.1:7447",
+                   help="the bench router (compose passes its service's; loopback unless told)")
     p.add_argument("--timeout", type=float, default=120, help="seconds to wait for the capture to be ready")
     p.set_defaults(func=cmd_ecu)

@@ -13,10 +13,11 @@ import time
 
 import pytest
 import zenoh
-from conftest import require_userspace, wait_for
+from conftest import require_userspace, tcp_sockets, wait_for
 from test_bridge_host import Collector, start_candump, stop_candump
 
 from canbench import wire
+from canbench.rig import free_port
 
 RSS_CEILING_KIB = 8 * 1024  # the tx queue is 2048 x 24 bytes; anything near this is a leak or a buffer
 STATS_ANSWER_S = 2.0        # a stats query on the session the commands arrive on, while they do
@@ -210,3 +211,22 @@ def test_an_endpoint_of_a_protocol_the_build_lacks_exits_2_naming_what_it_has(bu
     log = bridge.log.read_text()
     assert "retrying" not in log, log
     assert endpoint in log and "it has tcp, tls" in log, log
+
+
+def listening_ports(pid: int) -> list[int]:
+    """The TCP ports the process listens on (its sockets with no peer)."""
+    return [local for local, remote, _, _ in tcp_sockets(pid) if remote == 0]
+
+
+@pytest.mark.parametrize("mode", ["peer", "router"])
+def test_a_peer_or_router_bridge_listens_only_where_it_is_told(bus, bridge, router, session, mode):
+    """Network safety: Zenoh alone would have a peer listen on every interface (tcp/[::]:0) and a
+    router on tcp/[::]:7447; the bridge listens nowhere unless --listen (or its config file) says."""
+    bridge.start("--mode", mode)
+    bridge.wait_ready(session)
+    assert listening_ports(bridge.proc.pid) == [], bridge.log.read_text()[-2000:]
+    bridge.stop()
+    port = free_port()
+    bridge.start("--mode", mode, "--listen", f"tcp/127.0.0.1:{port}")
+    bridge.wait_ready(session)
+    assert listening_ports(bridge.proc.pid) == [port]

@@ -35,7 +35,7 @@ def test_a_run_records_verdicts_into_metrics_and_writes_reports(pytester, monkey
     outcome = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--pyargs", "canbench.scenario_checks",
                                            f"--scenario={scenario_file}", f"--run-dir={tmp_path}", "--run-id=r1")
     metrics = json.loads((tmp_path / "metrics.json").read_text())
-    assert executed == [("smoke", "r1", "tcp/router:7447")]  # once per session
+    assert executed == [("smoke", "r1", "tcp/127.0.0.1:7447")]  # once per session; loopback unless told
     assert metrics["verdicts"]["test_check[integrity]"] == "failed"
     assert metrics["passed"] is False and "1 frames lost" in json.dumps(metrics["problems"])
     failed = [name for name, v in metrics["verdicts"].items() if v == "failed"]

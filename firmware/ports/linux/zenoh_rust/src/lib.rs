@@ -115,6 +115,10 @@ fn build_config(cfg: &ZnSessionConfig) -> Result<Config, String> {
     }
     if let Some(listen) = c_str(cfg.listen).filter(|s| !s.trim().is_empty()) {
         set("listen/endpoints", endpoints_json(listen))?;
+    } else if c_str(cfg.config_file).is_none_or(str::is_empty) {
+        // Network safety: a peer or router listens only where it is told (--listen, or the user's
+        // config file); Zenoh's default would be every interface (tcp/[::]:0, tcp/[::]:7447)
+        set("listen/endpoints", "[]".into())?;
     }
     if cfg.compression != 0 {
         set("transport/unicast/compression/enabled", "true".into())?;

@@ -81,6 +81,10 @@ fn main() {
     set(&mut config, "mode", format!("{:?}", args.mode));
     set(&mut config, "scouting/multicast/enabled", "false".into());
     set(&mut config, "connect/endpoints", format!("[{:?}]", args.connect));
+    if args.zenoh_config.as_deref().is_none_or(str::is_empty) {
+        // a peer capture listens nowhere (Zenoh's default would be every interface): it connects out
+        set(&mut config, "listen/endpoints", "[]".into());
+    }
     // back within a second of a router restart (the bench's fault steps)
     set(&mut config, "connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}".into());
     let file = std::fs::File::create(&args.out).unwrap_or_else(|e| {
