@@ -253,7 +253,7 @@ $(VENV)/.installed: pyproject.toml
 
 # canbench for scenario writing, right after make test or make check: from $(VENV)/ when it
 # exists, else in the orchestrator image with this checkout mounted at its own path.
-CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run --rm --pull never -u $$(id -u):$$(id -g) \
+CANBENCH = $(if $(wildcard $(VENV)/bin/canbench),$(VENV)/bin/canbench,docker run --rm --pull never --network none -u $$(id -u):$$(id -g) \
            -v $(CURDIR):$(CURDIR) -w $(CURDIR) canbench/orchestrator:$(BENCH_TAG) canbench)
 CANBENCH_DEP = $(if $(wildcard $(VENV)/bin/canbench),,images)
 # Paths are quoted for the shell ('a b.log', it's.log); a TRACE or SCENARIO naming one file is one
@@ -361,7 +361,7 @@ soak: images
 	@scripts/bench-run $(SOAK_SCENARIO)
 
 shell: images
-	docker run --rm -it --pull never -v $(CURDIR)/scenarios:/scenarios:ro -v $(CURDIR)/reports:/reports canbench/orchestrator:$(BENCH_TAG) bash
+	docker run --rm -it --pull never --network none -v $(CURDIR)/scenarios:/scenarios:ro -v $(CURDIR)/reports:/reports canbench/orchestrator:$(BENCH_TAG) bash
 
 logs:
 	@cat reports/latest/containers.log

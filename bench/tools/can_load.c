@@ -50,12 +50,21 @@ static int open_ifaces(char *ifaces, int *fds)
 	return n;
 }
 
-/* A full send queue is back-pressure, not an error: wait until it drains. */
+#define STUCK_NS 10000000000LL /* a bus that takes no frame for this long is gone: the load stops */
+
+/* A full send queue is back-pressure, not an error: wait until it drains, for at most STUCK_NS. */
 static void write_frame(int fd, const struct can_frame *f, long *retries)
 {
+	int64_t since = 0;
 	while (write(fd, f, sizeof(*f)) != sizeof(*f)) {
 		if (errno != ENOBUFS && errno != EAGAIN && errno != EINTR) {
 			perror("can-load: write");
+			exit(1);
+		}
+		if (!since)
+			since = now_ns(CLOCK_MONOTONIC);
+		else if (now_ns(CLOCK_MONOTONIC) - since > STUCK_NS) {
+			fprintf(stderr, "can-load: the bus took no frame for %lld s: stopping\n", STUCK_NS / 1000000000LL);
 			exit(1);
 		}
 		++*retries;

@@ -8,6 +8,8 @@ from test_compose_privileges import merged, override_of, variants
 
 from canbench import compose
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize(("path", "viewer", "mode"), variants())
 def test_the_bus_and_the_ecus_go_first(path, viewer, mode):

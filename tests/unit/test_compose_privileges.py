@@ -14,6 +14,8 @@ import yaml
 
 from canbench import compose, scenario
 
+pytestmark = pytest.mark.unit
+
 REPO = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted(p for p in (REPO / "scenarios").rglob("*.yaml") if "traces" not in p.parts)
 VAR = re.compile(r"\$\{([A-Z0-9_]+)(?::?[-?]([^}]*))?\}")
@@ -128,3 +130,14 @@ def test_the_bus_socket_directory_is_the_bench_groups_only():
     # the services that share the socket run in that group
     users = {s["user"] for n, s in doc["services"].items() if "canbus:/run/ucan" in s.get("volumes", [])}
     assert users == {f"{fields['uid']}:{fields['gid']}"}, users
+
+
+def test_every_one_off_container_is_offline():
+    """The containers scripts and make start outside compose (validation, suite plans and summaries,
+    canbench for scenario writing, make shell) reach nothing: each runs with --network none."""
+    found = []
+    for path in [REPO / "Makefile", *sorted((REPO / "scripts").iterdir())]:
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            if re.search(r"\bdocker run\b", line) and not line.lstrip().startswith("#"):
+                found.append((f"{path.name}:{n}", "--network none" in line))
+    assert found and all(offline for _, offline in found), [where for where, offline in found if not offline]

@@ -18,6 +18,8 @@ import zenoh
 
 from canbench import identities, runkeys
 
+pytestmark = pytest.mark.unit
+
 P = "vehicle/can"
 
 

@@ -11,6 +11,8 @@ from synthetic import write_command_run
 
 from canbench import analysis, checks, commands, oracle, scenario, wire
 
+pytestmark = pytest.mark.unit
+
 SCENARIO = """name: late
 description: commands through a link that stalls
 duration_s: 5

@@ -4,8 +4,12 @@ a wait for a full bus is not. The real ECU under SIGSTOP is tests/bus/test_ecu_l
 places the stop exactly where that test can only hit by chance."""
 from __future__ import annotations
 
+import pytest
+
 from canbench.ecu import OwnLateness
 from canbench.stats import percentile
+
+pytestmark = pytest.mark.unit
 
 GAP_S = 0.005  # a frame every 5 ms
 SEND_S = 0.00005  # what a send takes when nothing holds it up

@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import pytest
+
 from canbench import oracle, validity, wire
+
+pytestmark = pytest.mark.unit
 
 
 def _run(bridge_offset_ns: int) -> SimpleNamespace:
