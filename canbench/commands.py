@@ -18,7 +18,7 @@ from . import periodic, restbus, wire
 from .plans import SENT_LOG_HEADER, frame_of, sent_line, timed_plan
 from .runkeys import bridge_stats, tx_key
 from .scenario import Commands, Scenario
-from .trace import read_trace, trace_start
+from .trace import read_replay
 
 if TYPE_CHECKING:  # the analysis uses this module's plan without a Zenoh session
     import zenoh
@@ -107,8 +107,8 @@ def _messages(c: Commands):
     if c.signal_plan is not None:  # commands in signals, encoded with cantools
         return restbus.command_frames(c)
     if c.trace is not None:
-        t0 = trace_start(c.trace) if c.interface is not None else None  # the interface's timing in the trace's
-        return timed_plan(read_trace(c.trace, None, c.interface), c.speed, 1, c.start_offset_s, c.bus, {}, t0).frames()
+        frames, t0 = read_replay(c.trace, c.interface)  # an interface keeps its timing in the trace
+        return timed_plan(frames, c.speed, 1, c.start_offset_s, c.bus, {}, t0).frames()
     return ((0, m) for m in periodic.periodic_frames(c.messages, c.run_s, c.start_offset_s, c.bus))
 
 

@@ -11,7 +11,7 @@ import can
 
 from . import periodic, restbus
 from .scenario import Ecu, Scenario
-from .trace import read_trace, trace_start
+from .trace import read_replay
 from .wire import Frame
 
 
@@ -37,8 +37,7 @@ def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
                     last_id_count=sum(periodic.periodic_count(m, run_s) for m in msgs
                                       if last and (m.can_id, m.extended) == (last.arbitration_id,
                                                                              last.is_extended_id)))
-    frames = read_trace(ecu.trace, None, ecu.interface) if ecu.trace else []
-    t0 = trace_start(ecu.trace) if ecu.trace and ecu.interface is not None else None
+    frames, t0 = read_replay(ecu.trace, ecu.interface) if ecu.trace else ([], None)
     return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap, t0)
 
 

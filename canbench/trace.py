@@ -617,15 +617,19 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
         yield line, t_ns, channel, frame
 
 
-def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str | None = None) -> list[TraceFrame]:
+def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str | None = None,
+               starts: dict[str | None, int] | None = None) -> list[TraceFrame]:
     """All frames of a trace, in order, each with the line it came from (iter_trace's checks).
     interfaces: names the trace may use (None: any). only: the one interface to keep (a bus
     carries one); None: the trace must have one, since merging several would put two buses'
-    frames on one, out of time order (candump's lines are in order per interface only)."""
+    frames on one, out of time order (candump's lines are in order per interface only). starts:
+    filled with each interface's first stamp (ns), the others' too."""
     frames: list[TraceFrame] = []
     seen: dict[str | None, int] = {}  # interface -> its first line
     for line, t_ns, iface, frame in iter_trace(path, interfaces):
         seen.setdefault(iface, line)
+        if starts is not None:
+            starts.setdefault(iface, t_ns)
         if only is not None and iface != only:
             continue
         if only is None and len(seen) > 1:
@@ -642,17 +646,16 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
     return frames
 
 
-def trace_start(path: str | Path) -> float:
-    """The trace's first stamp (s) on any interface: what a replay of one interface keeps its
-    timing to (its first frame 3 s after the trace's is sent 3 s after the start). The earliest of
-    the interfaces' first frames, as scaffold's split_trace takes it: candump's lines are in time
-    order per interface only, so the first line need not be the first frame."""
-    first: dict[str | None, int] = {}
-    for _, t_ns, iface, _ in iter_trace(path, None, lambda e: None, STREAM_CACHE):
-        first.setdefault(iface, t_ns)
-    if not first:
-        raise TraceError(str(path), None, "no frames in trace")
-    return min(first.values()) / 1e9
+def read_replay(path: str | Path, only: str | None) -> tuple[list[TraceFrame], float | None]:
+    """What a replay of the trace sends (of one interface, `only`, or of its only one), and the time
+    (s) its frames are sent relative to: their own first for a trace's only interface (None); for
+    one interface of several, the trace's start, so its first frame 3 s after the trace's is sent
+    3 s after the start. The start is the earliest of the interfaces' first frames, as scaffold's
+    split_trace takes it: candump's lines are in time order per interface only, so the first line
+    need not be the first frame. One pass over the trace."""
+    starts: dict[str | None, int] = {}
+    frames = read_trace(path, None, only, starts)
+    return frames, min(starts.values()) / 1e9 if only is not None else None
 
 
 def too_many_frames() -> str:

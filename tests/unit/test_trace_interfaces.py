@@ -129,7 +129,7 @@ def test_the_traces_start_is_its_earliest_frame_not_its_first_line(tmp_path):
         path = scenario_file(tmp_path, log, f"    interface: {interface}\n")
         sc = scenario.load(path)
         assert [round(m.timestamp, 6) for _, m in plans.schedule(sc.ecus[0], sc).frames()] == expected
-    assert trace.trace_start(tmp_path / "drive.log") == pytest.approx(9.995)
+    assert trace.read_replay(tmp_path / "drive.log", "can1")[1] == pytest.approx(9.995)
 
 
 def test_a_role_that_sends_no_trace_needs_no_interface(tmp_path, capsys):
