@@ -55,7 +55,8 @@ def merged(override: dict) -> dict:
                 target[key] = [*env_list(target[key]), *env_list(value)]
             else:
                 target[key] = value
-    return {"services": services, "volumes": base.get("volumes", {})}
+    return {"services": services, "volumes": base.get("volumes", {}),
+            "networks": {**base.get("networks", {}), **override.get("networks", {})}}
 
 
 def variants() -> list:
@@ -141,3 +142,22 @@ def test_every_one_off_container_is_offline():
             if re.search(r"\bdocker run\b", line) and not line.lstrip().startswith("#"):
                 found.append((f"{path.name}:{n}", "--network none" in line))
     assert found and all(offline for _, offline in found), [where for where, offline in found if not offline]
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_the_bench_network_leads_nowhere_off_the_machine(path):
+    # internal: no gateway, so nothing the bench starts can reach beyond its own containers, and
+    # no service publishes a port on the host's interfaces
+    doc = defaults(merged(override_of(path, True, "userspace")))
+    assert doc.get("networks", {}).get("default", {}).get("internal") is True, "the default network is not internal"
+    for name, svc in doc["services"].items():
+        assert not svc.get("ports") and not svc.get("networks"), f"{path.name}: service {name} leaves the bench network"
+
+
+def test_the_router_images_own_config_listens_on_loopback_only():
+    # used by a `docker run` of the image outside the bench (with --network host it would be the
+    # host's interfaces): wider only where the user says
+    text = (REPO / "images" / "router" / "zenohd.json5").read_text()
+    endpoints = re.findall(r'"([a-z]+/[^"]+:\d+)"', text)
+    assert endpoints and all(re.match(r"[a-z]+/(127\.0\.0\.1|\[::1\]|localhost):", e) for e in endpoints), endpoints
+    assert re.search(r"multicast:\s*\{\s*enabled:\s*false", text)
