@@ -12,6 +12,7 @@ from . import oracle, signals, wire
 from .capture import iter_zenoh_capture
 from .commands import delivered_late, explained_refusals, read_arrivals, stale_at_put, stamp_ages_ns
 from .faults import disruptive
+from .put_order import overtaken_commands
 from .runkeys import rx_key, tx_key
 from .scenario import Scenario
 
@@ -143,6 +144,11 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             # every bus frame not from an ECU or a flood is the bridge's
             tx, from_ecus = oracle.compare_commands(bus_commands, can_frames,
                                                     sent_by_ecus + _flood_frames(scenario, bus, can_frames))
+            # out of order as the bridge keeps order (arbitration among waiting commands), as the verdict counts
+            tx.reordered = overtaken_commands(tx.matched)
+            tx.counts["reordered"] = len(tx.reordered)
+            tx.reordered_per_id = sum(s.frame.can_id == p.frame.can_id and s.frame.extended == p.frame.extended
+                                      for s, p in tx.reordered)
         comparison = oracle.compare(from_ecus, zenoh_frames)
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None

@@ -187,6 +187,25 @@ def test_every_command_that_overtook_one_is_looked_at_not_only_the_latest_put():
     assert checks.zenoh_to_can(written_result([0x100, 0x200, 0x300], [0, 1, 2])) == []
 
 
+def test_metrics_count_the_commands_out_of_put_order_as_the_verdict_does(tmp_path):
+    # put 6B0 then 6A0 (the bus carries 6A0 first: it won arbitration, in order), then two 6A0 that
+    # the bus carries swapped (out of order): metrics.json and the report say 1, as the verdict does
+    from synthetic import write_command_run
+
+    from canbench import analysis, scenario, wire
+    sc = scenario.load(Path(__file__).resolve().parents[2] / "scenarios" / "stale-commands.yaml")
+    t0, ms = 1_700_000_000 * 10**9, 1_000_000
+    a, b = wire.Frame(0x6A0, 1, b"\x01"), wire.Frame(0x6B0, 1, b"\x02")
+    a2, a3 = wire.Frame(0x6A0, 1, b"\x03"), wire.Frame(0x6A0, 1, b"\x04")
+    write_command_run(tmp_path, t0, 50, [(1, t0 + 100 * ms, b, t0 + 103 * ms), (2, t0 + 101 * ms, a, t0 + 102 * ms),
+                                        (3, t0 + 200 * ms, a2, t0 + 203 * ms), (4, t0 + 201 * ms, a3, t0 + 202 * ms)])
+    result = analysis.analyse(sc, "order", tmp_path, "vehicle/can", {}, None, 1.0)
+    problems = checks.zenoh_to_can(result)
+    assert len(problems) == 1 and "1 commands out of put order" in problems[0] and "6A0#03" in problems[0]
+    counts = result.metrics["zenoh_to_can"]["vcan0"]
+    assert (counts["reordered"], counts["reordered_per_id"]) == (1, 1)
+
+
 def stale_scenario_run(run_dir, write_stamped_stale: bool):
     """stale-commands.yaml analysed without its fault steps, as the host fault test runs it: an ECU
     frame every 10 ms, the 6A0 commands written 1 ms after their put, the 6B0 ones (stamped 400 ms
