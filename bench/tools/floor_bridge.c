@@ -82,12 +82,21 @@ int main(int argc, char **argv)
 		fprintf(stderr, "Usage: floor-bridge <iface[,iface...]> <count> <idle_ms>\n");
 		return 2;
 	}
-	long count = atol(argv[2]);
-	int idle_ms = atoi(argv[3]);
+	/* an idle bound of 0 (or none) would wait for ever on a bus that stopped: refused, as can-load does */
+	char *end_count, *end_idle;
+	long count = strtol(argv[2], &end_count, 10), idle_ms = strtol(argv[3], &end_idle, 10);
+	if (*end_count || count < 1 || *end_idle || idle_ms < 1 || idle_ms > 600000) {
+		fprintf(stderr, "floor-bridge: count must be >= 1 and idle_ms 1-600000 (got %s, %s)\n", argv[2], argv[3]);
+		return 2;
+	}
 	int fds[MAX_IFACES], n = 0;
-	for (char *save = NULL, *name = strtok_r(argv[1], ",", &save); name && n < MAX_IFACES;
-	     name = strtok_r(NULL, ",", &save))
+	for (char *save = NULL, *name = strtok_r(argv[1], ",", &save); name; name = strtok_r(NULL, ",", &save)) {
+		if (n == MAX_IFACES) {
+			fprintf(stderr, "floor-bridge: at most %d interfaces\n", MAX_IFACES);
+			return 2;
+		}
 		fds[n++] = open_can("floor-bridge", name);
+	}
 	pid_t child;
 	int link = connect_sink(&child);
 	/* one socket: block in recvmmsg itself (SO_RCVTIMEO bounds the wait); several: poll them */
@@ -105,7 +114,7 @@ int main(int argc, char **argv)
 	struct mmsghdr mm[BURST];
 	long got = 0;
 	while (got < count) {
-		if (n > 1 && poll(pfds, (nfds_t)n, idle_ms) < 1)
+		if (n > 1 && poll(pfds, (nfds_t)n, (int)idle_ms) < 1)
 			break;
 		int read_any = 0;
 		for (int k = 0; k < n; k++) {
