@@ -30,6 +30,7 @@ from .ros2_msgs import MESSAGE_TYPES, CdrError, decode
 __all__ = ["MESSAGE_TYPES", "CdrError", "decode"]  # re-exported: the messages live in ros2_msgs
 
 LIVELINESS_PREFIX = "@ros2_lv"
+RMW_ZENOH_DEFAULT_DEPTH = 42  # samples (rmw_zenoh_cpp/src/detail/qos.cpp): what an empty depth in a token's QoS means
 KINDS = {"NN": "node", "MP": "publisher", "MS": "subscription", "SS": "service server", "SC": "service client"}
 
 
@@ -82,12 +83,13 @@ class Entity:
     def transient_local_depth(self) -> int | None:
         """The history a TRANSIENT_LOCAL publisher keeps for late subscribers (/tf_static, /map),
         None for a VOLATILE one. rmw_zenoh's QoS field: reliability:durability:history,depth:..., a
-        default left empty (durability 1 is TRANSIENT_LOCAL; an empty depth is rmw's default 10)."""
+        value equal to rmw_zenoh's own default left empty (qos_to_keyexpr; durability 1 is
+        TRANSIENT_LOCAL; an empty depth is its RMW_ZENOH_DEFAULT_HISTORY_DEPTH, not rmw's 10)."""
         parts = self.qos.split(":")
         if len(parts) < 3 or parts[1] != "1":
             return None
         depth = parts[2].partition(",")[2]
-        return int(depth) if depth.isascii() and depth.isdigit() and int(depth) > 0 else 10
+        return int(depth) if depth.isascii() and depth.isdigit() and int(depth) > 0 else RMW_ZENOH_DEFAULT_DEPTH
 
 
 def parse_token(key: str) -> Entity:

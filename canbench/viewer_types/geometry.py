@@ -12,7 +12,8 @@ from .scalars import vector_scalars
 
 @logger("tf2_msgs/msg/TFMessage")
 def log_tf(ctx: Context, path: str, msg) -> None:
-    """Each transform at tf/<root>/.../<child>, between the named frames parent and child."""
+    """Each transform at tf/<root>/.../<child> (the tree as known when that frame first came),
+    between the named frames parent and child."""
     for ts in msg.transforms:
         parent, child = ctx.frame(ts.header.frame_id), ctx.frame(ts.child_frame_id)
         if not parent or not child or parent == child:
@@ -22,7 +23,10 @@ def log_tf(ctx: Context, path: str, msg) -> None:
         t, q = ts.transform.translation, ts.transform.rotation
         transform = rr.Transform3D(translation=[t.x, t.y, t.z], quaternion=rr.Quaternion(xyzw=[q.x, q.y, q.z, q.w]),
                                    parent_frame=parent, child_frame=child)
-        rr.log(ctx.frame_path(child), transform, rr.TransformAxes3D(0.3), static=ctx.static)
+        # on the entity of the frame's first transform, however the tree grows later (amcl's map -> odom
+        # after odom -> base_link): Rerun takes a child frame from two entities as a data error
+        entity = ctx.tf_entities.setdefault(child, ctx.frame_path(child))
+        rr.log(entity, transform, rr.TransformAxes3D(0.3), static=ctx.static)
 
 
 @logger("geometry_msgs/msg/PoseStamped")

@@ -8,17 +8,23 @@ from .registry import Context, logger, require
 
 # PointField datatype -> numpy element type (sensor_msgs/msg/PointField.msg)
 DATATYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+PACKED_COLOURS = ("rgba", "rgb")
+USED_FIELDS = ("x", "y", "z", *PACKED_COLOURS, "intensity")  # what log_point_cloud draws
 
 
 def cloud_fields(msg) -> dict[str, np.ndarray]:
-    """Field name -> one value per point (first element of each field), any offsets,
-    point_step, row_step and byte order; refuses layouts that read past the data."""
+    """Field name -> one value per point (first element of each field) of the fields the logger
+    draws (USED_FIELDS; of two of one name the first, as RViz finds them), any offsets,
+    point_step, row_step and byte order; refuses layouts that read past the data. The others
+    are passed over: PCL's padding fields all share the name '_', which one numpy layout refused."""
     require(msg.point_step > 0, "point_step 0")
     require(msg.row_step >= msg.width * msg.point_step, f"row_step {msg.row_step} < width * point_step")
     require(len(msg.data) >= msg.row_step * msg.height, f"{len(msg.data)} data bytes < row_step * height")
     order = ">" if msg.is_bigendian else "<"
     names, formats, offsets = [], [], []
     for f in msg.fields:
+        if f.name not in USED_FIELDS or f.name in names:
+            continue
         if f.datatype not in DATATYPES:
             raise ValueError(f"point field {f.name!r}: unknown datatype {f.datatype}")
         # PCL packs a colour's bits in a float32 field (0xAARRGGBB: red >= 128 is a NaN): read as
@@ -34,9 +40,6 @@ def cloud_fields(msg) -> dict[str, np.ndarray]:
     points = rows[:, :msg.width * msg.point_step].copy().view(layout).reshape(-1)
     return {n: points[n].astype(np.float64 if points[n].dtype.kind == "f" else points[n].dtype.newbyteorder("="))
             for n in names}
-
-
-PACKED_COLOURS = ("rgba", "rgb")
 
 
 def cloud_colors(fields: dict[str, np.ndarray]) -> np.ndarray | None:

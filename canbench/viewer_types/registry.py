@@ -31,6 +31,7 @@ class Context:
         self.dbc = dbc
         self.bus_dbcs = dict(bus_dbcs or {})
         self.parents: dict[str, str] = {}
+        self.tf_entities: dict[str, str] = {}  # frame -> the entity its transforms are logged at, for good
         self.frames_of: dict[str, str] = {}  # entity path -> the frame last declared for it
         self.static = False  # set per sample by the viewer
         self.t_ns = 0  # the sample's receive time, also set per sample

@@ -33,11 +33,19 @@ def vector_scalars(ctx: Context, path: str, vector) -> None:
         ctx.scalar(f"{path}/{axis}", getattr(vector, axis))
 
 
+NO_ESTIMATE = -1.0  # Imu.msg: element 0 of a covariance -1, that estimate is not given (a raw IMU's orientation)
+
+
 @logger("sensor_msgs/msg/Imu")
 def log_imu(ctx: Context, path: str, msg) -> None:
-    vector_scalars(ctx, f"{path}/angular_velocity", msg.angular_velocity)
-    vector_scalars(ctx, f"{path}/linear_acceleration", msg.linear_acceleration)
-    ctx.pose(f"{path}/orientation", ZERO, msg.orientation, msg.header.frame_id)
+    """Each estimate the IMU gives; one whose covariance starts with -1 it does not, and is left out
+    (Imu.msg: "disregard the associated estimate"; a raw IMU's orientation is all zeros)."""
+    if msg.angular_velocity_covariance[0] != NO_ESTIMATE:
+        vector_scalars(ctx, f"{path}/angular_velocity", msg.angular_velocity)
+    if msg.linear_acceleration_covariance[0] != NO_ESTIMATE:
+        vector_scalars(ctx, f"{path}/linear_acceleration", msg.linear_acceleration)
+    if msg.orientation_covariance[0] != NO_ESTIMATE:
+        ctx.pose(f"{path}/orientation", ZERO, msg.orientation, msg.header.frame_id)
 
 
 @logger("sensor_msgs/msg/MagneticField")

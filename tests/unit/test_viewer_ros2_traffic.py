@@ -112,7 +112,7 @@ def test_compressed_depth_is_refused_not_shown_as_a_broken_png(tmp_path):
                       "its transport's own header) is not shown"]
 
 
-@pytest.mark.parametrize("qos,depth", [(":1:,1:,:,:,,", 1), (":1:,:,:,:,,", 10), ("2:1:1,5:,:,:,,", 5),
+@pytest.mark.parametrize("qos,depth", [(":1:,1:,:,:,,", 1), (":1:,:,:,:,,", 42), ("2:1:1,5:,:,:,,", 5),
                                        ("::,10:,:,:,,", None), (":2:,1:,:,:,,", None)])
 def test_the_tokens_qos_says_a_transient_local_publisher_and_its_depth(qos, depth):
     token = ros2.publisher_token(0, "z", 0, 1, "/", "robot_state_publisher", "/tf_static", "tf2_msgs/msg/TFMessage",
