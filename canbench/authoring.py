@@ -5,6 +5,7 @@ statistics and proposed signal ranges and DBC cycle times, marked for review."""
 from __future__ import annotations
 
 import filecmp
+import math
 import os
 import re
 import shutil
@@ -172,9 +173,13 @@ class SignalStats:
     total: float = 0.0
     names: set[str] | None = None  # value-table names seen (None: the signal has no value table)
     unnamed: bool = False  # a value its value table has no name for was seen
+    nonfinite: int = 0  # NaN or infinite values (a float signal's bits): counted, kept out of min, max, mean
 
     def add(self, value: float, name: str | None) -> None:
         self.count += 1
+        if not math.isfinite(value):  # one NaN would make min, max and mean NaN, and no range holds it
+            self.nonfinite += 1
+            return
         self.total += value
         self.min = value if self.min is None else min(self.min, value)
         self.max = value if self.max is None else max(self.max, value)
@@ -216,12 +221,14 @@ class SignalSummary:
             lines.append(f"    {'signal':<28}  {'values':>7}  {'min':>12}  {'max':>12}  {'mean':>12}  "
                          "unit / names seen")
             for sig in (m.signals or {}).values():
-                if not sig.count:
-                    lines.append(f"    {sig.name:<28}  {0:>7}  {'-':>12}  {'-':>12}  {'-':>12}  {sig.unit}")
+                odd = f" ({sig.nonfinite} NaN or infinite)" if sig.nonfinite else ""
+                if sig.min is None or sig.max is None:
+                    dash = f"{'-':>12}"
+                    lines.append(f"    {sig.name:<28}  {sig.count:>7}  {dash}  {dash}  {dash}  {sig.unit}{odd}")
                     continue
                 names = f" {sorted(sig.names)}" if sig.names else ""
                 lines.append(f"    {sig.name:<28}  {sig.count:>7}  {sig.min:>12.6g}  {sig.max:>12.6g}  "
-                             f"{sig.total / sig.count:>12.6g}  {sig.unit}{names}")
+                             f"{sig.total / (sig.count - sig.nonfinite):>12.6g}  {sig.unit}{names}{odd}")
         return "\n".join(lines)
 
 
@@ -267,7 +274,7 @@ def summarise_signals(path: Path, dbc_path: Path, lenient: bool = False) -> Sign
                          sorted(interfaces))
 
 
-def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list], str, bool]]:
+def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list | int], str, bool]]:
     """(Message.Signal, expectation, why, usable) proposed from what the trace showed: value-table
     signals whose every value had a name as one_of those names, others a range of the observed
     min/max widened by SIGNAL_MARGIN_PCT of the span (of the value when constant), within the
@@ -275,13 +282,16 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list],
     (the scenario would refuse it; the DBC, or its decoding of this trace, is wrong)."""
     from .dbc import load_dbc, value_range
     db = load_dbc(summary.dbc)  # read (and accepted) by summarise_signals
-    out: list[tuple[str, dict[str, list], str, bool]] = []
+    out: list[tuple[str, dict[str, list | int], str, bool]] = []
     for m in summary.messages:
         message = db.get_message_by_name(m.name)
         for sig in (m.signals or {}).values():
-            if not sig.count or sig.min is None or sig.max is None:
-                continue
             key = f"{m.name}.{sig.name}"
+            if sig.min is None or sig.max is None:
+                if sig.nonfinite:
+                    out.append((key, {"present": 1}, f"not gated: its {sig.nonfinite} values were all NaN or "
+                                "infinite", False))
+                continue
             seen = f"seen {sig.min:.6g}..{sig.max:.6g}{' ' + sig.unit if sig.unit else ''} in {sig.count} values"
             if sig.names and not sig.unnamed and len(sig.names) < CHOICES_SEEN_MAX:
                 out.append((key, {"one_of": sorted(sig.names)}, f"value-table names seen in {sig.count} values", True))
@@ -299,11 +309,13 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list],
                 ("above", dbc_signal.maximum, dbc_signal.maximum is not None and sig.max > dbc_signal.maximum))
                 if out_of]
             lo, hi, _ = value_range(dbc_signal)
-            usable = not (_round(high) < lo or _round(low) > hi)
+            outside = _round(high) < lo or _round(low) > hi
             out.append((key, {"range": [_round(low), _round(high)]},
                         seen + (f" ({' and '.join(beyond)}: is the DBC right?)" if beyond else "")
-                        + ("" if usable else f"; not gated: wholly outside the [{lo:g}, {hi:g}] the DBC allows"),
-                        usable))
+                        + (f"; not gated: wholly outside the [{lo:g}, {hi:g}] the DBC allows" if outside
+                           else f"; not gated: {sig.nonfinite} NaN or infinite, which no range passes"
+                           if sig.nonfinite else ""),
+                        not outside and not sig.nonfinite))
     return out
 
 
@@ -324,7 +336,8 @@ def _signals_yaml(summary: SignalSummary) -> str:
              "  # drop what is not a requirement (counters, checksums).",
              "  signals:" if any(usable for *_, usable in proposals) else "  # signals:"]
     for key, spec, why, usable in proposals:
-        body = yaml.safe_dump(spec, default_flow_style=True, width=1000).strip()
+        # allow_unicode: a value-table name as the DBC writes it (Geöffnet, not "Ge\\xF6ffnet")
+        body = yaml.safe_dump(spec, default_flow_style=True, width=1000, allow_unicode=True).strip()
         lines.append(f"    {'' if usable else '# '}{key}: {body}  # review: {why}")
     return "\n".join(lines) + "\n"
 

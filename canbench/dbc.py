@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import struct
 import weakref
 from functools import lru_cache
@@ -40,7 +41,7 @@ def _load(path: str, mtime_ns: int):
     level = cantools_log.level
     cantools_log.setLevel(logging.ERROR)  # its warning of an overwritten duplicate: refused below, named
     try:
-        db = cantools.database.load_file(path, strict=False)
+        db = cantools.database.load_file(path, encoding=text_encoding(Path(path)), strict=False)
     finally:
         cantools_log.setLevel(level)
     if not hasattr(db, "messages"):  # cantools reads a CDD by its suffix as a diagnostics database
@@ -49,6 +50,18 @@ def _load(path: str, mtime_ns: int):
     _refuse_duplicates(db)
     _hold_to_strict(db)
     return db
+
+
+def text_encoding(path: Path) -> str | None:
+    """How to read a database file: UTF-8 (a byte-order mark dropped) when its bytes are UTF-8,
+    else None (cantools' default per format: cp1252 for a DBC or SYM). DBCs come in both, and
+    cp1252 reads UTF-8's ö as Ã¶ (a value-table name no scenario can write) and its mark as text
+    before VERSION that cantools cannot parse; a cp1252 file is almost never valid UTF-8."""
+    try:
+        path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    return "utf-8-sig"
 
 
 def _hold_to_strict(db) -> None:
@@ -177,19 +190,45 @@ def read_dbc(path: Path, lenient: bool = False):
     try:
         db = load_dbc(path)
     except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
-        raise InputError(str(path), None, load_error_text(e)) from None
+        raise InputError(str(path), None, load_error_text(e, path=Path(path))) from None
     if not lenient and (why := strict_problem(db)):
         raise InputError(str(path), None, f"cantools' strict mode refuses it: {why}; to read it as written, "
                                           "give --dbc-lenient")
     return db
 
 
-def load_error_text(error: Exception, name: str = "it") -> str:
+def load_error_text(error: Exception, name: str = "it", path: Path | None = None) -> str:
     """Why a DBC (name) cannot be used, on one line: cantools' message whole (it names what it
-    could not read on the lines after its first), or the bench's (DbcError)."""
+    could not read on the lines after its first), or the bench's (DbcError); with the DBC's
+    path:line where the message leads to one (_line_of)."""
     said = " ".join(line.strip() for line in str(error).splitlines() if line.strip())[:1000]
-    return (f"cannot use {name} as a DBC: {said}" if isinstance(error, DbcError)
-            else f"cannot load {name} as a DBC (cantools): {said}")
+    if isinstance(error, DbcError):
+        return f"cannot use {name} as a DBC: {said}"
+    line = _line_of(path, said) if path is not None else None
+    if (big := re.search(r"Standard frame id 0x([0-9a-fA-F]+) is more than 11 bits", said)) is not None:
+        said += (f" (a DBC writes a 29-bit id with 0x80000000 added: BO_ {int(big[1], 16) | 0x80000000} for "
+                 f"{int(big[1], 16):08X})")
+    if "unused VAL_ entries" in said:  # cantools refuses it even reading as written
+        said += " (a value table for a signal its message lacks: correct the signal's name, or delete the VAL_)"
+    return f"cannot load {name} as a DBC (cantools): " + (f"{path}:{line}: " if line else "") + said
+
+
+def _line_of(path: Path, said: str) -> int | None:
+    """The DBC line a cantools error is about: its `at line N`, else the BO_ of the message it
+    names, or the first VAL_ it names (unused: of no signal of that message); None if none."""
+    if (at := re.search(r"at line (\d+)", said)) is not None:
+        return int(at[1])
+    if (m := re.search(r"in message (\w+)", said)) is not None:
+        pattern = re.compile(rf"\s*BO_\s+\d+\s+{re.escape(m[1])}\s*:")
+    elif (v := re.search(r"VAL_ (\d+) (\w+)", said)) is not None:
+        pattern = re.compile(rf"\s*VAL_\s+{v[1]}\s+{re.escape(v[2])}\b")
+    else:
+        return None
+    try:
+        text = path.read_bytes().decode("utf-8" if text_encoding(path) else "cp1252", errors="replace")
+    except OSError:
+        return None
+    return next((i for i, line in enumerate(text.splitlines(), 1) if pattern.match(line)), None)
 
 
 def message_of(dbc, frame):

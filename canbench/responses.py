@@ -96,9 +96,15 @@ def condition_problems(signal, spec: dict, where: list, fail) -> bool:
     return bad
 
 
+def half_step(signal) -> float:
+    """The default tolerance: half the signal's step, of either sign (a DBC's scale may be
+    negative: -0.01 K), so the nearest value it carries meets it; none for a float signal."""
+    return 0.0 if signal.is_float else abs(signal.scale) / 2
+
+
 def condition(signal, spec: dict) -> Condition:
     """The condition of a `when`/`then` mapping (KeyError for a name not in the value table)."""
-    tol = float(spec.get("tolerance", signal.scale / 2 if not signal.is_float else 0.0))
+    tol = float(spec.get("tolerance", half_step(signal)))
     parts = []
     equals = rng = one_of = None
     if "equals" in spec:
@@ -208,7 +214,7 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
                     fail([*where, "when", "signals", name], problem)
                     bad = True
                     continue
-                carried.append((name, _numbers(s, value), s.scale / 2 if not s.is_float else 0.0))
+                carried.append((name, _numbers(s, value), half_step(s)))
             if not bad:
                 out.append(Rule(**rule, command=command, command_signals=tuple(carried)))
         else:
@@ -250,7 +256,8 @@ def stimuli(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracle
                 decoded = decode(rule.command, f.data)
             except Exception:  # noqa: BLE001
                 continue
-            if all(any(abs(decoded[s] - v) <= tol for v in vs) for s, vs, tol in rule.command_signals):
+            # a signal of a page this frame does not carry (its multiplexer selects another): not the command asked for
+            if all(s in decoded and any(abs(decoded[s] - v) <= tol for v in vs) for s, vs, tol in rule.command_signals):
                 out.append(o)
         return out
     assert rule.when is not None

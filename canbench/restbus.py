@@ -160,10 +160,11 @@ MAX_PAGES_CHECKED = 256
 
 
 def default_value(signal) -> float | str:
-    """GenSigStartValue (cantools' `initial`), else the value of raw 0."""
-    if signal.initial is not None:
-        return signal.initial
-    return signal.raw_to_scaled(0)
+    """GenSigStartValue (a raw value, scaled), else the value of raw 0: a number, not cantools'
+    `initial`, which is a value-table entry where the table names it (a multiplexer without pages
+    takes int() of it)."""
+    raw = signal.raw_initial if signal.raw_initial is not None else 0
+    return signal.conversion.raw_to_scaled(raw, decode_choices=False)
 
 
 @lru_cache(maxsize=256)
@@ -380,10 +381,14 @@ def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile,
     is a problem at its file:line (ids: a multiplexer's ids, see value_problem)."""
     times, values, ok, first = array("d"), [], True, True
     try:
-        text = path.read_text()
+        data = path.read_bytes()
     except OSError as e:
         fail_file(shown, 0, f"cannot read: {e.strerror}")
         return None
+    try:  # as a DBC is read: a spreadsheet saves UTF-8 with a byte-order mark, or cp1252
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = data.decode("cp1252", errors="replace")
     for lineno, row in enumerate(csv.reader(text.splitlines()), 1):
         if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
             continue

@@ -567,7 +567,7 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
         try:
             db = load_dbc(file)
         except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
-            fail(where, load_error_text(e, file.name))
+            fail(where, load_error_text(e, file.name, file))
             continue
         if strict and (why := strict_problem(db)):
             fail(where, f"cantools' strict mode refuses {file.name}: {why}; if the DBC is meant as written, "

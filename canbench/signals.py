@@ -156,14 +156,28 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
             continue
         for b in _named_without(wanted, on, having):
             fail([*where, "buses"], f"message {message_name} in the DBC of {b} has no signal {signal_name}")
-        signal = found[having[0]]
-        if why := past_can_20(signal):
-            fail(where, why)
-            continue
-        gate = _gate(key, message_name, signal, tuple(having), spec, where, fail)
-        if gate is not None:
-            out.append(gate)
+        # a gate per definition of the signal: equals and one_of are judged on raw values, and two
+        # buses' DBCs may scale a signal of one name differently (a gateway's 0.1 km/h for 0.01)
+        alike: dict[tuple, list[str]] = {}
+        for b in having:
+            alike.setdefault(_definition(found[b]), []).append(b)
+        for group in alike.values():
+            signal = found[group[0]]
+            said = (lambda at, text, g=group: fail(at, f"{text} (the DBC of {', '.join(g)})")) \
+                if len(alike) > 1 else fail
+            if why := past_can_20(signal):
+                said(where, why)
+                continue
+            gate = _gate(key, message_name, signal, tuple(group), spec, where, said)
+            if gate is not None:
+                out.append(gate)
     return tuple(out)
+
+
+def _definition(signal) -> tuple:
+    """What makes a signal's raw values mean the same physical values and names."""
+    return (signal.length, signal.byte_order, signal.is_signed, signal.is_float, signal.scale, signal.offset,
+            signal.minimum, signal.maximum, tuple(sorted((raw, str(n)) for raw, n in (signal.choices or {}).items())))
 
 
 def _named_without(wanted, candidates: list[str], having: list[str]) -> list[str]:
@@ -253,7 +267,7 @@ class Series:
     side: str
     bus: str
     count: int = 0
-    min: float | None = None
+    min: float | None = None   # of the finite values
     max: float | None = None
     # per sender (frame id) the last (time its rate is judged at, value): a J1939 group's senders
     # each change at their own rate (dbc.message_of), one id per message otherwise
@@ -318,8 +332,9 @@ class Series:
                 self.violate(f"{g.key} changed {g.show(last[1])} -> {g.show(value)} in {rate} {at()}",
                              t_s, value)
         self.count += 1
-        self.min = value if self.min is None else min(self.min, value)
-        self.max = value if self.max is None else max(self.max, value)
+        if math.isfinite(value):  # a float signal's NaN would hide every extreme and is not JSON (metrics.json)
+            self.min = value if self.min is None else min(self.min, value)
+            self.max = value if self.max is None else max(self.max, value)
         self.last[sender] = (rate_t, value)
         if (self.count - 1) % self.step == 0:
             self.times.append(t_s)

@@ -90,7 +90,8 @@ GOOD = "(1700000000.000000) can0 123#11\n(1700000000.010000) can0 123#22\n"
 
 
 @pytest.mark.parametrize("dbc_text,said", [
-    ("garbage\n", "cannot load it as a DBC (cantools): DBC: \"Invalid syntax at line 1, column 1: \">>!<<garbage\"\""),
+    ("garbage\n", "cannot load it as a DBC (cantools): {dbc}:1: DBC: \"Invalid syntax at line 1, column 1: "
+                   "\">>!<<garbage\"\""),
     (None, "no such DBC file"),
 ])
 @pytest.mark.parametrize("command", ["summarise", "scaffold"])
@@ -101,7 +102,7 @@ def test_a_dbc_cantools_cannot_read_is_one_line_and_exit_code_2(tmp_path, capsys
         dbc.write_text(dbc_text)
     extra = ["--name", "x", "--out", str(tmp_path / "sc" / "x.yaml")] if command == "scaffold" else []
     assert cli.main([command, str(trace), "--dbc", str(dbc), *extra]) == 2
-    assert capsys.readouterr().err == f"canbench: {dbc}: {said}\n"
+    assert capsys.readouterr().err == f"canbench: {dbc}: {said.format(dbc=dbc)}\n"
     assert not (tmp_path / "sc" / "x.yaml").exists()
 
 

@@ -219,7 +219,11 @@ def test_a_dbc_load_error_is_said_whole(tmp_path):
     path = scenario_file(tmp_path, 'BO_ 256 M: 8 GW\n SG_ A : 0|8@1+ (1,0) [0|0] "" TESTER\n\nVAL_ 999 A 1 "on";\n',
                          "ecus:\n  - {name: gw, bus: vcan0, role: restbus, dbc_node: GW, run_s: 1}\n")
     (problem,) = [str(p) for p in validate.problems(path)]
-    assert problem.endswith('cannot load v.dbc as a DBC (cantools): DBC: "unused VAL_ entries in DBC: VAL_ 999 A"')
+    dbc = path.parent / "v.dbc"
+    line = next(i for i, text in enumerate(dbc.read_text().splitlines(), 1) if text.startswith("VAL_ 999 A"))
+    assert problem.endswith(f'cannot load v.dbc as a DBC (cantools): {dbc.resolve()}:{line}: DBC: "unused VAL_ '
+                            'entries in DBC: VAL_ 999 A" (a value table for a signal its message lacks: correct the '
+                            "signal's name, or delete the VAL_)")
 
 
 def test_a_start_value_the_bits_cannot_carry_names_its_signal_on_any_page(tmp_path):
