@@ -6,7 +6,8 @@
  * without costing the rest of its batch. Waiting commands leave in CAN
  * priority order (lowest arbitration id first, FIFO among equals); a command
  * older than tx_max_age_ms is refused on arrival or when the transmitter takes
- * it, never written (tx_rejected.stale), one without a source time written
+ * it, never written (tx_rejected.stale), one stamped further ahead of the clock than
+ * that refused on arrival (tx_rejected.future), one without a source time written
  * and counted (tx_unstamped). A command's frames are written in bursts; one
  * that finds the bus free is written by the callback itself, without waiting,
  * and what the bus did not take at once goes before anything queued. */
@@ -308,6 +309,47 @@ static void test_stale_refused_on_arrival(void)
 	zn_node_stop();
 }
 
+/* A source time further ahead of the clock than the deadline would never go stale, however late
+ * the command arrives: refused on arrival (tx_rejected.future), whichever time it came from, and so
+ * is an attachment time beyond int64; one ahead by less than the deadline is written. Off at 0. */
+static void test_future_refused_on_arrival(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	cfg.tx_max_age_ms = 100;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	uint8_t w[16], att[ZN_ATTACHMENT_SIZE(1)];
+	int64_t hour = 3600 * 1000000000LL;
+	size_t n = one_frame(w, 0x10, 0, 1); /* the attachment an hour ahead */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, realtime_ns() + hour),
+				    (uint64_t)realtime_ns()) == 0);
+	n = one_frame(w, 0x10, 0, 2); /* the Zenoh time an hour ahead, no attachment */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, NULL, 0, (uint64_t)(realtime_ns() + hour)) == 0);
+	n = one_frame(w, 0x10, 0, 3); /* 2^63 as the attachment's u64: no fallback to a fresh Zenoh time */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, INT64_MIN), (uint64_t)realtime_ns()) ==
+	      0);
+	n = one_frame(w, 0x10, 0, 4); /* all ones */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, -1), (uint64_t)realtime_ns()) == 0);
+	n = one_frame(w, 0x10, 0, 5); /* ahead by less than the deadline: a clock a little ahead, written */
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, realtime_ns() + 50 * 1000000LL), 0) ==
+	      0);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1);
+	CHECK(stats_soon_has("\"tx_samples\": 5"));
+	CHECK(stats_soon_has("\"future\": 4, \"stale\": 0}"));
+	CHECK(stats_soon_has("\"tx_frames\": 1"));
+	CHECK(mock_can_tx_count("vcan0") == 1 && mock_can_tx("vcan0", 0).data[0] == 5);
+	zn_node_stop();
+
+	mock_reset(); /* tx_max_age_ms 0: times are not judged, the one an hour ahead is written */
+	cfg.tx_max_age_ms = 0;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	n = one_frame(w, 0x10, 0, 6);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", w, n, att, attachment_at(att, realtime_ns() + hour), 0) == 0);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1);
+	CHECK(stats_soon_has("\"future\": 0, \"stale\": 0}"));
+	zn_node_stop();
+}
+
 /* A command fresh on arrival that waits behind a stalled bus past its deadline is never written. */
 static void test_stale_in_queue(void)
 {
@@ -520,6 +562,7 @@ int main(int argc, char **argv)
 		{ "priority", test_priority_order },
 		{ "arbitration_key", test_arbitration_key },
 		{ "stale_arrival", test_stale_refused_on_arrival },
+		{ "future_arrival", test_future_refused_on_arrival },
 		{ "stale_queue", test_stale_in_queue },
 		{ "stale_waiting", test_stale_waiting_for_the_bus },
 		{ "direct", test_free_bus_written_by_the_callback },

@@ -93,3 +93,23 @@ def test_what_a_frozen_router_delivers_late_is_refused(bus, bridge, router, sess
     late = sum(1 for t in puts if resumed_ns - t > (MAX_AGE_MS + WRITE_SLACK_MS) * MS)
     assert stats["tx_rejected"]["stale"] + len(written) == PAUSE_PUTS, (stats, sorted(written))
     assert stats["tx_rejected"]["stale"] >= late - 1, (stats, late)  # the first may pass before the router stops
+
+
+def test_a_command_stamped_ahead_of_the_clock_is_refused(bus, bridge, session, tmp_path):
+    """A source time further ahead of the bridge's clock than the deadline would never go stale,
+    however late the command arrives (a sender's clock ahead, a forged stamp): refused on arrival,
+    counted as tx_rejected.future. So is an attachment time beyond int64, which the bridge once
+    replaced by the router's fresh Zenoh timestamp. One ahead by less than the deadline is written."""
+    bridge.start("--can", "vcan0", "--tx-max-age-ms", str(MAX_AGE_MS))
+    bridge.wait_ready(session)
+    dump, out = start_candump(bus, tmp_path / "can.log", frames=1)
+    hour_ns = 3600 * 1000 * MS
+    put(session, 0x100, b"\x01", time.time_ns() + hour_ns)
+    put(session, 0x101, b"\x02", 1 << 63)
+    put(session, 0x102, b"\x03", (1 << 64) - 1)
+    put(session, 0x103, b"\x04", time.time_ns() + MAX_AGE_MS * MS // 2)
+    stats = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and s["tx_samples"] == 4 and
+                     s["tx_frames"] + s["tx_rejected"].get("future", 0) == 4 and s, "four commands handled")
+    assert stop_candump(dump, out) == ["vcan0 103#04"]
+    assert stats["tx_rejected"]["future"] == 3 and stats["tx_rejected"]["stale"] == 0, stats
+    assert "ahead of this clock" in bridge.log.read_text()

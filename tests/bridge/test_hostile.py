@@ -13,15 +13,17 @@ valid marker frame after every MARKER_EVERY payloads. What must hold:
   against both builds.
 
 The stats queryable also gets garbage (selectors, parameters, payloads) and
-keeps answering. Everything goes to loopback; the campaign is bounded."""
+keeps answering, and a query with wildcards gets one reply per bridge, each on
+its bridge's own key. Everything goes to loopback; the campaign is bounded."""
 from __future__ import annotations
 
+import json
 import random
 import signal
 from collections import Counter
 
 import zenoh
-from conftest import wait_for
+from conftest import Bridge, wait_for
 from test_bridge_host import start_candump, stop_candump
 
 from canbench import wire
@@ -144,3 +146,23 @@ def test_hostile_commands_never_reach_the_bus_and_are_counted_by_reason(bus, bri
     rc, log = bridge.stop(signal.SIGTERM)
     assert rc == 0, log[-3000:]
     assert "ERROR: AddressSanitizer" not in log and "runtime error" not in log
+
+
+def test_a_wildcard_stats_query_gets_each_bridge_on_its_own_key(bus, bridge, router, session):
+    """The stats queryable replied on the query's key: to `vehicle/can/bridges/*/stats` (the bench's
+    own query, canbench.runkeys.bridge_stats) every bridge answered on that same wildcard key, and
+    the querier's consolidation kept one of the replies: one bridge's stats stood for all of them."""
+    bridge.start("--can", "vcan0", "--name", "alpha")
+    other = Bridge(bus, router)
+    other.log = bus.workdir / "bridge-beta.log"
+    other.start("--can", "vcan0", "--name", "beta")
+    try:
+        wait_for(lambda: len(bridge.wait_ready(session)) >= 2, "both bridges' tokens")
+        for selector in ("vehicle/can/bridges/*/stats", "vehicle/can/bridges/**", "vehicle/can/**"):
+            replies = [r.ok for r in session.get(selector) if r.ok]
+            got = sorted((str(r.key_expr), json.loads(bytes(r.payload.to_bytes()))["node"]) for r in replies)
+            assert got == [("vehicle/can/bridges/alpha/stats", "alpha"), ("vehicle/can/bridges/beta/stats", "beta")], \
+                (selector, got)
+    finally:
+        rc, log = other.stop(signal.SIGTERM)
+    assert rc == 0, log[-3000:]

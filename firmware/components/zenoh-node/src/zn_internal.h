@@ -54,6 +54,7 @@ struct bus_counters {
 	uint64_t can_reopens;
 	uint64_t direct_frames, direct_stalls; /* immediate mode: frames the reader put itself; its puts that stalled */
 	uint64_t tx_rejected_stale, tx_unstamped; /* freshness (tx_max_age_ms): refused as stale; no source time */
+	uint64_t tx_rejected_future; /* refused: stamped further ahead of this clock than tx_max_age_ms */
 	uint64_t tx_direct_frames; /* frames Zenoh's callback wrote itself (zn_tx.c, Direct writes) */
 };
 

@@ -52,7 +52,8 @@ size_t zn_node_stats_json(char *buf, size_t cap)
 		for (int r = 1; r < ZN_WIRE_REASONS; r++)
 			off = append(buf, cap, off, "%s\"%s\": %" PRIu64, r > 1 ? ", " : "",
 				     zn_wire_reason((zn_wire_result_t)-r), READ(b->n.tx_rejected[r]));
-		off = append(buf, cap, off, ", \"stale\": %" PRIu64, READ(b->n.tx_rejected_stale));
+		off = append(buf, cap, off, ", \"future\": %" PRIu64 ", \"stale\": %" PRIu64,
+			     READ(b->n.tx_rejected_future), READ(b->n.tx_rejected_stale));
 		off = append(buf, cap, off, "}");
 		/* a QoS table: each class's own count (the totals above hold all classes) */
 		for (size_t c = 0; b->qos.class_count > 1 && c < b->qos.class_count; c++) {

@@ -2,7 +2,7 @@
  * Zenoh's thread and must never wait for the bus: it validates a command
  * whole and queues all of its frames, or refuses it whole (an invalid frame or
  * attachment: tx_rejected.<reason>; older than tx_max_age_ms: tx_rejected.stale;
- * no room for every frame: tx_queue_full). The transmitter thread takes the
+ * stamped further ahead than that: tx_rejected.future; no room for every frame: tx_queue_full). The transmitter thread takes the
  * waiting command of highest CAN priority (lowest arbitration key of its first
  * frame, FIFO among equals), checks its age again (it may have gone stale
  * behind a stalled bus) and writes its frames onto the CAN port. When a frame
@@ -30,7 +30,9 @@
  * A command's source time: its attachment's first frame time when it carries
  * an attachment (and that time is not 0), else the sample's Zenoh timestamp,
  * else none (accepted, counted tx_unstamped). Ages are CLOCK_REALTIME now minus
- * the source time (docs/bridge.md, Freshness); a time ahead of now is age 0.
+ * the source time (docs/bridge.md, Freshness); a time ahead of now is age 0, but
+ * one further ahead than tx_max_age_ms would never go stale: refused on arrival
+ * (tx_rejected.future), as is an attachment time beyond int64 (year 2262).
  *
  * Shutdown: zn_tx_close shuts a gate the callback passes on entry, then
  * undeclares the subscriber and waits until no callback is inside; a callback
@@ -145,8 +147,8 @@ static int64_t source_time(const uint8_t *attachment, size_t att_len, uint64_t z
 		uint64_t t = 0;
 		for (int i = 7; i >= 0; i--)
 			t = t << 8 | attachment[ZN_ATTACHMENT_HEADER + i];
-		if (t && t <= INT64_MAX)
-			return (int64_t)t;
+		if (t) /* beyond int64: later than any clock reads, so refused as ahead when judged */
+			return t <= INT64_MAX ? (int64_t)t : INT64_MAX;
 	}
 	return zenoh_ns <= INT64_MAX ? (int64_t)zenoh_ns : 0;
 }
@@ -160,6 +162,19 @@ static int stale(int64_t source_ns, int64_t *age_ms)
 	int64_t age = zn_realtime_ns() - source_ns;
 	*age_ms = age / 1000000;
 	return age > (int64_t)max_age_ms * 1000000;
+}
+
+/* Is a command's source time further ahead of the bridge's clock than the deadline? Such a
+ * command would never go stale however late it arrives (a sender's clock ahead, or a forged
+ * stamp), so it is refused on arrival. (0 = freshness off, or no time) */
+static int ahead(int64_t source_ns, int64_t *ahead_ms)
+{
+	uint32_t max_age_ms = zn_node.cfg.tx_max_age_ms;
+	if (!max_age_ms || !source_ns)
+		return 0;
+	int64_t lead = source_ns - zn_realtime_ns(); /* both positive: no overflow */
+	*ahead_ms = lead / 1000000;
+	return lead > (int64_t)max_age_ms * 1000000;
 }
 
 static void refuse_stale(struct bus *b, int64_t age_ms, uint32_t frames, const char *where)
@@ -225,6 +240,14 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 		COUNT(b->n.tx_unstamped);
 	if (stale(source_ns, &age_ms)) {
 		refuse_stale(b, age_ms, (uint32_t)count, "on arrival");
+		return;
+	}
+	if (ahead(source_ns, &age_ms)) {
+		if (COUNT(b->n.tx_rejected_future) == 0)
+			zn_log("W",
+			       "%s: refused a command on %s stamped %" PRId64 " ms ahead of this clock (> tx_max_age_ms %" PRIu32
+			       ", %zu frames): it would never go stale; further refusals only counted (tx_rejected.future)",
+			       b->name, b->tx_key, age_ms, zn_node.cfg.tx_max_age_ms, count);
 		return;
 	}
 	zn_mutex_lock(b->tx_lock);

@@ -11,6 +11,7 @@ use std::slice;
 use std::sync::Arc;
 
 use zenoh::bytes::ZBytes;
+use zenoh::key_expr::KeyExpr;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority, Reliability};
@@ -467,12 +468,23 @@ pub extern "C" fn zn_declare_queryable(
         return ERR;
     };
     let ctx = Ctx(ctx);
+    // Replies go out on the queryable's own key, never the query's: a query with wildcards
+    // (`vehicle/can/bridges/*/stats`, as the bench asks) then gets one reply per bridge, each
+    // naming its bridge, where replies that all carried the query's wildcard key were merged
+    // into one by the querier's consolidation (one bridge's stats standing for all of them).
+    let reply_key = match KeyExpr::try_from(key.to_owned()) {
+        Ok(k) => k,
+        Err(e) => {
+            eprintln!("zenoh-node: declare queryable {key}: {e}");
+            return ERR;
+        }
+    };
     let result = s
         .0
-        .declare_queryable(key.to_owned())
+        .declare_queryable(reply_key.clone())
         .callback(move |query| {
             let ctx = ctx;
-            let _ = query.reply(query.key_expr().clone(), reply_text(cb, ctx.0)).wait();
+            let _ = query.reply(reply_key.clone(), reply_text(cb, ctx.0)).wait();
         })
         .wait();
     match result {
