@@ -125,6 +125,7 @@ struct node {
 	zn_node_config_t cfg;
 	zn_session_t *session;
 	zn_queryable_t *stats_q;
+	int stats_inflight, stats_closed; /* atomics: stats callbacks inside the gate; gate shut (release) */
 	char stats_key[ZN_KEY_MAX];
 	struct bus buses[ZN_MAX_BUSES];
 	zn_thread_t *monitor;
