@@ -312,19 +312,6 @@ class _Copies:
         identical frames the earliest one: nothing tells them apart). If no copy was sent by
         t_ns, the next one ahead if it was sent at most STAMP_SLACK_NS later: the match shows as
         a negative latency, a bench error. Returns the copy's position (frames[position])."""
-        best = self._find(frontier, t_ns, oldest, None)
-        if best is not None:
-            self.hold(best)
-        return best
-
-    def peek(self, frontier: int, t_ns: int, oldest: int, taken: set[int]) -> int | None:
-        """take() on another story of the look-ahead: the copies tentatively matched are free,
-        those in `taken` (the story's own) are not, and nothing is marked."""
-        return self._find(frontier, t_ns, oldest, taken)
-
-    def _find(self, frontier: int, t_ns: int, oldest: int, taken: set[int] | None) -> int | None:
-        """take()'s choice. taken None: every copy used, decided or tentative, is out of reach (the
-        greedy path); else the decided ones and those in `taken`."""
         n = len(self.indices)
         indices, used, times = self.indices, self.used, self.times
         lo = self.start
@@ -332,17 +319,8 @@ class _Copies:
             lo = bisect.bisect_left(times, oldest, lo)
         ahead_at = bisect.bisect_right(indices, frontier, lo)
         ahead = ahead_at
-        if taken is None:
-            while ahead < n and used[ahead]:
-                ahead += 1
-            head = self.head
-        else:
-            while ahead < n and (used[ahead] == 1 or ahead in taken):
-                ahead += 1
-            head = self.chead
-            while head < n and used[head] == 1:
-                head += 1
-            self.chead = head
+        while ahead < n and used[ahead]:
+            ahead += 1
         best = None
         best_distance = None
         if ahead < n and times[ahead] <= t_ns:
@@ -351,13 +329,57 @@ class _Copies:
         behind_at = bisect.bisect_left(indices, frontier, lo, ahead_at)
         behind = behind_at - 1
         scanned = 0
+        head = self.head
         stop = max(head, lo)
         while behind >= stop and scanned < BEHIND_SCAN:
             distance = (frontier - indices[behind]) - (behind_at - 1 - behind)
             if best_distance is not None and distance >= best_distance:
                 break
-            free = not used[behind] if taken is None else used[behind] != 1 and behind not in taken
-            if free and times[behind] <= t_ns:
+            if not used[behind] and times[behind] <= t_ns:
+                best = behind
+                break
+            behind -= 1
+            scanned += 1
+        if best is None and ahead < n and times[ahead] <= t_ns + STAMP_SLACK_NS:
+            best = ahead
+        if best is None:
+            return None
+        used[best] = 2
+        while head < n and used[head]:
+            head += 1
+        self.head = head
+        return best
+
+    def peek(self, frontier: int, t_ns: int, oldest: int, taken: set[int]) -> int | None:
+        """take() on another story of the look-ahead: the copies tentatively matched are free,
+        those in `taken` (the story's own) are not, and nothing is marked."""
+        n = len(self.indices)
+        indices, used, times = self.indices, self.used, self.times
+        lo = self.start
+        if lo < n and times[lo] < oldest:
+            lo = bisect.bisect_left(times, oldest, lo)
+        ahead_at = bisect.bisect_right(indices, frontier, lo)
+        ahead = ahead_at
+        while ahead < n and (used[ahead] == 1 or ahead in taken):
+            ahead += 1
+        best = None
+        best_distance = None
+        if ahead < n and times[ahead] <= t_ns:
+            best = ahead
+            best_distance = (indices[ahead] - frontier) - (ahead - ahead_at)
+        behind_at = bisect.bisect_left(indices, frontier, lo, ahead_at)
+        behind = behind_at - 1
+        scanned = 0
+        chead = self.chead
+        while chead < n and used[chead] == 1:
+            chead += 1
+        self.chead = chead
+        stop = max(chead, lo)
+        while behind >= stop and scanned < BEHIND_SCAN:
+            distance = (frontier - indices[behind]) - (behind_at - 1 - behind)
+            if best_distance is not None and distance >= best_distance:
+                break
+            if used[behind] != 1 and behind not in taken and times[behind] <= t_ns:
                 best = behind
                 break
             behind -= 1
