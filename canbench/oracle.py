@@ -273,7 +273,6 @@ _COMPACT = 16                # evicted copies a _Copies may keep at its front (a
 LOOKAHEAD = 32               # received frames matched tentatively before the oldest is decided (reconsider)
 PLACES = 8                   # later runs of its copies a frame of the look-ahead may take instead (reconsider)
 UNMATCHED = 2                # a frame matched to nothing weighs two order breaks (it leaves a copy lost too)
-RECENT = 4 * LOOKAHEAD       # decided frames whose median latency is the bar for trying other stories (settle)
 
 
 class _Copies:
@@ -744,7 +743,6 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             tentative(q)
 
     values = latency.values
-    recent: deque[int] = deque(maxlen=RECENT)  # the latencies (ns) of the latest frames decided matched
 
     def settle() -> None:
         """Decides the oldest frame of the look-ahead."""
@@ -755,21 +753,15 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         if lookahead:
             _, copies, ref, weight, _, _ = pending[0]
             if ref >= 0:
-                # another story only if the greedy match breaks order, or a later copy was sent by
-                # then and the match is later than twice the median of the frames decided before it
-                # (an outage's gap; behind a batching bridge every constant frame has later copies
-                # sent by its arrival, and trying stories for each cost 20x the greedy rule; a median,
-                # so the few frames an outage may still shift do not raise the bar for the rest)
+                # another story only if the greedy match breaks order or a later copy was sent by then
                 at = ref - copies.base + 1
-                if weight or (at < len(copies.times) and copies.times[at] <= r.t_ns
-                              and (len(recent) < RECENT // 2 or pending[0][4] > 2 * sorted(recent)[len(recent) // 2])):
+                if weight or (at < len(copies.times) and copies.times[at] <= r.t_ns):
                     reconsider()
         r, copies, ref, weight, late, reach = pending.popleft()
         open_weight -= weight
         open_latency -= late
         c.received += 1
         if ref >= 0:
-            recent.append(late)
             at = ref - copies.base
             copies.used[at] = 1
             s = copies.frames[at]
