@@ -11,12 +11,7 @@ frame matched so far), the earlier one on a tie. Real traffic repeats
 contents (a status frame every 10 ms, counters that wrap), so "the n-th Zenoh
 frame with a key is the n-th CAN frame with it" is wrong as soon as one copy
 is lost: every later copy would shift onto its predecessor and the loss would
-show up at the end of the run instead of where it happened. That greedy choice
-is a tentative one: each Zenoh frame is decided only once LOOKAHEAD more have
-arrived, and takes a later copy (or none) instead if that story of the
-look-ahead breaks order less, or as little with less latency (after an outage
-the frames that follow would otherwise take the lost copies in it; a
-duplicate of a fast constant frame the next copy). Frames left on
+show up at the end of the run instead of where it happened. Frames left on
 the CAN side are lost; Zenoh frames with a key the CAN side had are
 duplicates; Zenoh frames with a key it never had are paired with the lost
 frame at the same place in the stream, if that one has the same id and length
@@ -248,10 +243,7 @@ def compare_commands(commands: list[Observed], bus: list[Observed],
     """Zenoh -> CAN: commands in put order against the bus in bus order. Bus frames that
     other nodes (ECUs) say they sent are theirs and returned; any other bus frame came from
     the bridge: a duplicate of a command, a corrupted command, or unexpected."""
-    # no look-ahead: a frame an ECU sent is set apart only once no command takes it, so a story
-    # without the command's match would read an ECU's frame of its content, sent after a lost
-    # command, as the command (docs/bench.md, "Known limits of the matching")
-    return _classify(commands, bus, Counter(sent_by_others), lookahead=0)
+    return _classify(commands, bus, Counter(sent_by_others))
 
 
 def match_subset(expected: list[Observed], observed: list[Observed], window_ns: int | None = None) -> Comparison:
@@ -259,8 +251,7 @@ def match_subset(expected: list[Observed], observed: list[Observed], window_ns: 
     echo answers among everything on the rx key). Only matched and lost are meaningful.
     No window by default: both lists are in memory, and a caller may match by order alone
     (every expected frame stamped 0, as validity's send-order check does)."""
-    # no look-ahead: the expected frames may all be stamped 0, where latency means nothing
-    c, _ = _classify(expected, observed, _everything(), window_ns=window_ns, lookahead=0)
+    c, _ = _classify(expected, observed, _everything(), window_ns=window_ns)
     c.received = c.counts["matched"]
     return c
 
@@ -270,19 +261,13 @@ BEHIND_SCAN = 4096           # matched copies looked past for a late one (a late
 LOAD_TRIM_NS = 1_000_000_000  # how far past its window a frame may stay while the bus capture is read ahead
 _END = 1 << 62               # a time after every stamp: the end of both streams
 _COMPACT = 16                # evicted copies a _Copies may keep at its front (and at most as many as live ones)
-LOOKAHEAD = 32               # received frames matched tentatively before the oldest is decided (reconsider)
-PLACES = 8                   # later runs of its copies a frame of the look-ahead may take instead (reconsider)
-UNMATCHED = 2                # a frame matched to nothing weighs two order breaks (it leaves a copy lost too)
 
 
 class _Copies:
     """The sent frames with one key still in the window, in stream order, and which of them
-    are matched: used 1 by a decided frame (or evicted), 2 by a frame of the look-ahead (the
-    greedy path, still open to revision), 0 not. Positions before `start` are evicted (gone
-    from the window); `base` counts the positions compaction removed, so base + position
-    names a copy for good."""
+    are matched. Positions before `start` are evicted (gone from the window)."""
 
-    __slots__ = ("key", "frames", "indices", "times", "ranks", "used", "head", "chead", "start", "base")
+    __slots__ = ("key", "frames", "indices", "times", "ranks", "used", "head", "start")
 
     def __init__(self, key: tuple) -> None:
         self.key = key
@@ -291,10 +276,8 @@ class _Copies:
         self.times: list[int] = []
         self.ranks: list[int] = []  # position in the sent stream (index: position on the bus)
         self.used = bytearray()
-        self.head = 0   # every copy before it is used (decided, tentative or evicted)
-        self.chead = 0  # every copy before it is decided or evicted (moved on by peek only: a copy decided stays so)
+        self.head = 0   # every copy before it is matched or evicted
         self.start = 0  # every copy before it is evicted
-        self.base = 0
 
     def add(self, o: Observed, rank: int) -> None:
         self.frames.append(o)
@@ -303,20 +286,17 @@ class _Copies:
         self.ranks.append(rank)
         self.used.append(0)
 
-    def take(self, frontier: int, t_ns: int, oldest: int) -> int | None:
-        """The copy a frame received at t_ns is, marked tentatively matched (None: it is none of
-        them). Only a copy sent by t_ns (and not before `oldest`: out of its window) can be it.
-        Of those, the one with the fewest frames of other contents between it and the frontier;
-        on a tie the one ahead (a loss is the simpler story than a late frame; within a run of
-        identical frames the earliest one: nothing tells them apart). If no copy was sent by
-        t_ns, the next one ahead if it was sent at most STAMP_SLACK_NS later: the match shows as
-        a negative latency, a bench error. Returns the copy's position (frames[position])."""
+    def take(self, frontier: int, t_ns: int) -> int | None:
+        """The copy a frame received at t_ns is, marked matched (None: it is none of them).
+        Only a copy sent by t_ns can be it. Of those, the one with the fewest frames of other
+        contents between it and the frontier; on a tie the one ahead (a loss is the simpler
+        story than a late frame; within a run of identical frames the earliest one: nothing
+        tells them apart). If no copy was sent by t_ns, the next one ahead if it was sent at
+        most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error.
+        Returns the copy's position (frames[position])."""
         n = len(self.indices)
         indices, used, times = self.indices, self.used, self.times
-        lo = self.start
-        if lo < n and times[lo] < oldest:
-            lo = bisect.bisect_left(times, oldest, lo)
-        ahead_at = bisect.bisect_right(indices, frontier, lo)
+        ahead_at = bisect.bisect_right(indices, frontier, self.start)
         ahead = ahead_at
         while ahead < n and used[ahead]:
             ahead += 1
@@ -325,12 +305,11 @@ class _Copies:
         if ahead < n and times[ahead] <= t_ns:
             best = ahead
             best_distance = (indices[ahead] - frontier) - (ahead - ahead_at)
-        behind_at = bisect.bisect_left(indices, frontier, lo, ahead_at)
+        behind_at = bisect.bisect_left(indices, frontier, self.start, ahead_at)
         behind = behind_at - 1
         scanned = 0
         head = self.head
-        stop = max(head, lo)
-        while behind >= stop and scanned < BEHIND_SCAN:
+        while behind >= head and scanned < BEHIND_SCAN:
             distance = (frontier - indices[behind]) - (behind_at - 1 - behind)
             if best_distance is not None and distance >= best_distance:
                 break
@@ -343,86 +322,11 @@ class _Copies:
             best = ahead
         if best is None:
             return None
-        used[best] = 2
+        used[best] = 1
         while head < n and used[head]:
             head += 1
         self.head = head
         return best
-
-    def peek(self, frontier: int, t_ns: int, oldest: int, taken: set[int]) -> int | None:
-        """take() on another story of the look-ahead: the copies tentatively matched are free,
-        those in `taken` (the story's own) are not, and nothing is marked."""
-        n = len(self.indices)
-        indices, used, times = self.indices, self.used, self.times
-        lo = self.start
-        if lo < n and times[lo] < oldest:
-            lo = bisect.bisect_left(times, oldest, lo)
-        ahead_at = bisect.bisect_right(indices, frontier, lo)
-        ahead = ahead_at
-        while ahead < n and (used[ahead] == 1 or ahead in taken):
-            ahead += 1
-        best = None
-        best_distance = None
-        if ahead < n and times[ahead] <= t_ns:
-            best = ahead
-            best_distance = (indices[ahead] - frontier) - (ahead - ahead_at)
-        behind_at = bisect.bisect_left(indices, frontier, lo, ahead_at)
-        behind = behind_at - 1
-        scanned = 0
-        chead = self.chead
-        while chead < n and used[chead] == 1:
-            chead += 1
-        self.chead = chead
-        stop = max(chead, lo)
-        while behind >= stop and scanned < BEHIND_SCAN:
-            distance = (frontier - indices[behind]) - (behind_at - 1 - behind)
-            if best_distance is not None and distance >= best_distance:
-                break
-            if used[behind] != 1 and behind not in taken and times[behind] <= t_ns:
-                best = behind
-                break
-            behind -= 1
-            scanned += 1
-        if best is None and ahead < n and times[ahead] <= t_ns + STAMP_SLACK_NS:
-            best = ahead
-        return best
-
-    def later_places(self, at: int, t_ns: int) -> list[tuple[int, int]]:
-        """Up to PLACES runs of identical frames after the one of the copy at `at` with a copy sent
-        by t_ns, the latest first: per run its first copy not decided and its last copy sent by
-        then (least latency: the other stories of an outage)."""
-        out: list[tuple[int, int]] = []
-        last = bisect.bisect_right(self.times, t_ns, at) - 1
-        indices, used = self.indices, self.used
-        while last > at and len(out) < PLACES:
-            first = last
-            while first > at and indices[first - 1] == indices[first] - 1:
-                first -= 1
-            if first == at:
-                break  # the run of the copy at `at`
-            free = first
-            while free <= last and used[free] == 1:
-                free += 1
-            if free <= last:
-                out.append((free, last))
-            last = first - 1
-        return out
-
-    def hold(self, at: int) -> None:
-        """Marks the copy at `at` tentatively matched."""
-        used = self.used
-        used[at] = 2
-        head, n = self.head, len(used)
-        while head < n and used[head]:
-            head += 1
-        self.head = head
-
-    def free(self, at: int) -> None:
-        """A tentative match is withdrawn (the look-ahead chose another story)."""
-        if at >= self.start and self.used[at] == 2:
-            self.used[at] = 0
-            if at < self.head:
-                self.head = at
 
     def evict(self) -> Observed | None:
         """Drops the oldest copy from the window; returns it if it was never matched (lost)."""
@@ -441,8 +345,6 @@ class _Copies:
             for column in (self.frames, self.indices, self.times, self.ranks, self.used):
                 del column[:at]
             self.head -= at
-            self.chead = max(self.chead - at, 0)
-            self.base += at
             self.start = 0
         return o if lost else None
 
@@ -515,14 +417,11 @@ def _note(c: Comparison, where: list, item, kind: str, keep: int | None) -> None
 def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained: Counter | None, *,
               windows: list[tuple[int, int]] | None = None, attachment: bool = False, keep: int | None = None,
               keep_matched: bool = True, on_match: Callable[[Observed, Observed], None] | None = None,
-              window_ns: int | None = MATCH_WINDOW_NS,
-              lookahead: int = LOOKAHEAD) -> tuple[Comparison, list[Observed]]:
+              window_ns: int | None = MATCH_WINDOW_NS) -> tuple[Comparison, list[Observed]]:
     """One pass in time order: a sent frame enters the window when the received stream gets to
     STAMP_SLACK_NS before its stamp, leaves it window_ns after its stamp (lost if unmatched);
-    a received frame is matched tentatively on arrival and decided `lookahead` frames later (0:
-    at once, the greedy rule alone); one no copy in the window matches waits until every lost
-    frame it could be a corruption of is final (corrupted or unexpected), a lost frame until no
-    such frame waits."""
+    a received frame no copy in the window matches waits until every lost frame it could be a
+    corruption of is final (corrupted or unexpected), a lost frame until no such frame waits."""
     c = Comparison()
     slack = STAMP_SLACK_NS
     waiting: dict[tuple, _Copies] = {}
@@ -611,8 +510,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         nonlocal nxt, rank
         while nxt is not None and nxt.t_ns <= until:
             if window_ns is not None and nxt.t_ns - lag > horizon:
-                # not past the window of the look-ahead's oldest frame: it may still take them
-                advance(min(nxt.t_ns - slack, pending[0][0].t_ns) if pending else nxt.t_ns - slack)
+                advance(nxt.t_ns - slack)
             k = _key(nxt.frame)
             copies = waiting.get(k)
             if copies is None:
@@ -623,151 +521,21 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             rank += 1
             nxt = next(sent_it, None)
 
-    # the look-ahead: the latest `lookahead` received frames, matched tentatively by the greedy
-    # rule (the copy marked 2); the oldest is decided once the frames after it are in, in case
-    # another story of it keeps order better or, as well, with less latency (reconsider)
-    # [frame, copies, base + position or -1, weight, latency ns, the bus index it moves the frontier to]
-    pending: deque[list] = deque()
-    tip = -1  # the greedy path's frontier, after the look-ahead's last frame
-    open_weight = open_latency = 0  # the look-ahead's sums
-    never = -_END
-
-    def tentative(r: Observed) -> None:
-        nonlocal tip, open_weight, open_latency
-        copies = waiting.get(_key(r.frame))
-        at = copies.take(tip, r.t_ns, r.t_ns - window_ns if window_ns is not None else never) if copies else None
-        if at is None:
-            pending.append([r, copies, -1, UNMATCHED, 0, -1])
-            open_weight += UNMATCHED
-            return
-        s = copies.frames[at]  # type: ignore[union-attr]
-        assert s is not None
-        index = s.index
-        weight = 1 if index < tip or s.t_ns > r.t_ns else 0
-        late = r.t_ns - s.t_ns if r.t_ns > s.t_ns else 0
-        if index > tip:
-            tip = index
-        pending.append([r, copies, copies.base + at, weight, late, index])  # type: ignore[union-attr]
-        open_weight += weight
-        open_latency += late
-
-    def story(copies: _Copies, at: int | None, reach: int, bound: tuple[int, int]) -> tuple[int, int] | None:
-        """The score (order breaks, latency ns) of the look-ahead if its oldest frame is the copy
-        at `at` (None: no copy, a duplicate), the frontier then at least `reach`, and the rest
-        follow the greedy rule; None if it is not below `bound` (scores only grow frame by frame:
-        stopped as soon as it is not)."""
-        r = pending[0][0]
-        f = frontier
-        taken: dict[_Copies, set[int]] = {}
-        if at is None:
-            weight, late = UNMATCHED, 0
-        else:
-            s = copies.frames[at]
-            assert s is not None
-            weight = 1 if s.index < f else 0
-            late = r.t_ns - s.t_ns if r.t_ns > s.t_ns else 0
-            f = max(f, reach)
-            taken[copies] = {at}
-        if (weight, late) >= bound:
-            return None
-        for i in range(1, len(pending)):
-            q = pending[i][0]
-            qc = waiting.get(_key(q.frame))
-            if qc is None:
-                weight += UNMATCHED
-            else:
-                mine = taken.get(qc)
-                if mine is None:
-                    mine = taken[qc] = set()
-                got = qc.peek(f, q.t_ns, q.t_ns - window_ns if window_ns is not None else never, mine)
-                if got is None:
-                    weight += UNMATCHED
-                else:
-                    mine.add(got)
-                    s = qc.frames[got]
-                    assert s is not None
-                    if s.index < f or s.t_ns > q.t_ns:
-                        weight += 1
-                    if q.t_ns > s.t_ns:
-                        late += q.t_ns - s.t_ns
-                    if s.index > f:
-                        f = s.index
-            if (weight, late) >= bound:
-                return None
-        return weight, late
-
-    def reconsider() -> None:
-        """The oldest frame of the look-ahead takes another copy, or none, if that story of the
-        look-ahead has fewer order breaks (frames matched behind the frontier or before they were
-        sent, UNMATCHED for one matched to nothing), or as few and less latency. The other
-        stories: the last PLACES runs of its copies sent by its arrival (least latency: after an
-        outage, where the greedy rule took a lost copy in it), and none when the greedy match
-        breaks order (a duplicate that took the next copy)."""
-        nonlocal tip, open_weight, open_latency
-        r, copies, ref, weight, _, _ = pending[0]
-        if ref < 0:
-            return
-        best = (open_weight, open_latency)
-        choice: int | None = -1
-        reach = -1
-        for first, last in copies.later_places(ref - copies.base, r.t_ns):
-            # the run's first copy (its lost copies are named its last ones, as everywhere), the
-            # frontier at the run's last copy sent by then (a frame after the run is not behind)
-            score = story(copies, first, copies.indices[last], best)
-            if score is not None:
-                best, choice, reach = score, first, copies.indices[last]
-        if weight and story(copies, None, -1, best) is not None:
-            choice = None
-        if choice == -1:
-            return
-        redo = [p[0] for p in pending]
-        for p in pending:
-            if p[2] >= 0:
-                p[1].free(p[2] - p[1].base)
-        pending.clear()
-        open_weight = open_latency = 0
-        tip = frontier
-        if choice is None:
-            pending.append([r, copies, -1, UNMATCHED, 0, -1])
-            open_weight = UNMATCHED
-        else:
-            copies.hold(choice)
-            s = copies.frames[choice]
-            assert s is not None
-            late = r.t_ns - s.t_ns if r.t_ns > s.t_ns else 0
-            weight = 1 if s.index < frontier else 0
-            tip = max(frontier, reach)
-            pending.append([r, copies, copies.base + choice, weight, late, reach])
-            open_weight, open_latency = weight, late
-        for q in redo[1:]:
-            tentative(q)
-
     values = latency.values
-
-    def settle() -> None:
-        """Decides the oldest frame of the look-ahead."""
-        nonlocal frontier, previous, stamp_count, stamp_max_ns, seq_count, previous_seq, open_weight, open_latency
-        r = pending[0][0]
+    for r in received:
+        if nxt is not None and nxt.t_ns <= r.t_ns + slack:
+            load(r.t_ns + slack)
         if window_ns is not None and r.t_ns - window_ns > horizon:
             advance(r.t_ns)
-        if lookahead:
-            _, copies, ref, weight, _, _ = pending[0]
-            if ref >= 0:
-                # another story only if the greedy match breaks order or a later copy was sent by then
-                at = ref - copies.base + 1
-                if weight or (at < len(copies.times) and copies.times[at] <= r.t_ns):
-                    reconsider()
-        r, copies, ref, weight, late, reach = pending.popleft()
-        open_weight -= weight
-        open_latency -= late
         c.received += 1
-        if ref >= 0:
-            at = ref - copies.base
-            copies.used[at] = 1
-            s = copies.frames[at]
+        k = _key(r.frame)
+        copies = waiting.get(k)
+        at = copies.take(frontier, r.t_ns) if copies else None
+        if at is not None:
+            s = copies.frames[at]  # type: ignore[union-attr]
             assert s is not None
-            if reach > frontier:
-                frontier = reach
+            if s.index > frontier:
+                frontier = s.index
             counts["matched"] += 1
             if keep_matched:
                 c.matched.append((s, r))
@@ -802,7 +570,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                     if len(stamps) < EXAMPLES:
                         stamps.append(f"{describe(s)}: bridge stamp {(r.bridge_rx_ns - s.t_ns) / 1000:+.3f} us off")
                 if r.seq >= 0:
-                    s_rank = copies.ranks[at]
+                    s_rank = copies.ranks[at]  # type: ignore[union-attr]
                     if previous_seq is not None:
                         s0, r0, rank0 = previous_seq
                         if r.seq - r0.seq != s_rank - rank0:
@@ -811,28 +579,14 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                                 seqs.append(f"seq {r0.seq} -> {r.seq} for {describe(s0)} -> {describe(s)} "
                                             f"({s_rank - rank0:+d} on the bus)")
                     previous_seq = (s, r, s_rank)
-            return
-        k = _key(r.frame)
-        copies = waiting.get(k)
-        if explained is not None and explained[k] > 0:
+        elif explained is not None and explained[k] > 0:
             explained[k] -= 1
             c.received -= 1
             others.append(r)
-        elif copies is not None and copies.times[copies.start] <= r.t_ns + slack:
-            # a copy of its content is in the window (copies loaded for the look-ahead's later
-            # frames, sent after r arrived, do not count)
+        elif k in waiting:
             _note(c, c.duplicates, r, "duplicates", keep)
         else:
             leftovers.append((r, frontier))
-
-    for r in received:
-        if nxt is not None and nxt.t_ns <= r.t_ns + slack:
-            load(r.t_ns + slack)
-        tentative(r)
-        if len(pending) > lookahead:
-            settle()
-    while pending:
-        settle()
     load(_END)
     advance(_END)
     c.sent = rank
