@@ -313,6 +313,23 @@ def _classic_in_fd_line(text: str, msg: can.Message) -> can.Message:
                        data=None if msg.is_remote_frame else msg.data, channel=msg.channel, is_rx=msg.is_rx)
 
 
+def _asc_dlc_code(text: str, msg: can.Message, base: str) -> can.Message:
+    """A classic ASC line's frame with the DLC code 9..F the line has and 8 data bytes ('d D 55 AA ..',
+    CANalyzer's record of a raw DLC above 8): the frame with that dlc, not CAN FD's length for the code
+    that python-can reads (D as 32). Grammar: <time> <ch> <id> <dir> d <dlc> <data bytes> ... Else unchanged."""
+    tokens = text.split()
+    try:
+        code = int(tokens[5], 10 if base == "dec" else 16)
+    except (IndexError, ValueError):
+        return msg
+    data = tokens[6:6 + 9]
+    length = next((n for n, byte in enumerate(data) if not re.fullmatch(r"[0-9A-Fa-f]{1,3}", byte)), len(data))
+    if tokens[4].lower() != "d" or not 8 < code <= 15 or length != 8:
+        return msg
+    return can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id, is_extended_id=msg.is_extended_id,
+                       dlc=code, data=msg.data, channel=msg.channel, is_rx=msg.is_rx)
+
+
 def _csv_problem(text: str) -> str | None:
     """Why a python-can CSV row's flags are not its 0/1 (it reads 'true' as 0: a 29-bit frame as 11-bit)."""
     fields = text.strip().split(",")
@@ -380,6 +397,8 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
                     continue  # a transmit request is no frame on the bus
                 if suffix == ".asc" and msg.is_fd and not msg.is_error_frame:
                     msg = _classic_in_fd_line(counter.text, msg)
+                elif suffix == ".asc" and msg.dlc > 8 and not msg.is_remote_frame:
+                    msg = _asc_dlc_code(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
                 problem = _csv_problem(counter.text) if suffix == ".csv" else None
                 if problem:
                     fail(line, problem)
@@ -493,6 +512,9 @@ def _frame_of_message(msg: can.Message) -> Frame:
     if not 0 <= can_id <= (EXT_ID_MAX if extended else STD_ID_MAX):
         raise ValueError(f"{'29' if extended else '11'}-bit id {can_id:X} is above "
                          f"{EXT_ID_MAX if extended else STD_ID_MAX:X}")
+    if not msg.is_remote_frame and 8 < msg.dlc <= 15 and len(msg.data) == 8:
+        raise ValueError(f"DLC {msg.dlc:X} ({msg.dlc}) with 8 data bytes (a CAN 2.0 frame's DLC 9..F carries 8, "
+                         "as a logger records the raw code): the bench sends DLC 0..8; set the frame's DLC to 8")
     if not 0 <= msg.dlc <= 8:
         raise ValueError(f"dlc {msg.dlc}: classic CAN's is 0..8 (a CAN FD frame? the bridge carries CAN 2.0 only)")
     if msg.is_remote_frame:

@@ -136,6 +136,23 @@ def test_a_remote_frame_of_dlc_nine_is_refused(tmp_path):
     assert problems(path) == [f"{path}:3: remote frame dlc 9: classic CAN's is 0..8"]
 
 
+ASC_HEAD = "date Thu Apr 28 10:44:52.480 am 2022\nbase hex  timestamps absolute\ninternal events logged\n"
+
+
+def test_a_classic_frame_of_a_raw_dlc_above_eight_is_refused_with_the_dlc_the_file_has(tmp_path):
+    # CANalyzer records a classic frame's raw DLC code (D: 8 bytes); python-can reads the code as
+    # CAN FD's length for it (32), which the bench said as 'dlc 32 ... a CAN FD frame?'
+    asc = tmp_path / "dlc.asc"
+    asc.write_text(ASC_HEAD + "  13.258199 1  180             Tx   d 8 6A 00 00 00 00 00 00 00  Length = 244016\n"
+                   "  13.258671 1  3FF             Tx   d D 55 AA 01 02 03 04 05 06  Length = 232016 ID = 1023\n")
+    blf = written(tmp_path / "dlc.blf", [*classic(2), can.Message(
+        timestamp=T0 + 0.1, arbitration_id=0x3FF, is_extended_id=False, dlc=13, data=bytes(8), channel=0)])
+    said = ("DLC D (13) with 8 data bytes (a CAN 2.0 frame's DLC 9..F carries 8, as a logger records the raw "
+            "code): the bench sends DLC 0..8; set the frame's DLC to 8")
+    assert problems(asc) == [f"{asc}:5: {said}"]
+    assert problems(blf) == [f"{blf}: frame 3: {said}"]
+
+
 def test_an_unknown_suffix_names_the_formats_and_spots_candump(tmp_path, capsys):
     path = tmp_path / "drive.txt"
     path.write_text(GOOD)
