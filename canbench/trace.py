@@ -177,10 +177,13 @@ def iter_candump(path: str | Path, interface: str | None = None, drops: dict[str
                 if parsed is None and strict and not DROPCOUNT.match(raw) and raw.strip() \
                         and not raw.lstrip().startswith("#"):
                     raise TraceError(str(path), lineno, not_candump_l(raw))
-            except TraceError as e:
+            except TraceError as error:
+                problem = error if raw.endswith(("\n", "\r")) else TraceError(  # the last line, unended: a cut,
+                    str(path), lineno,                                              # as the other text formats say
+                    f"the file ends inside this line: a recording cut there ({raw.strip()[:60]!r})")
                 if on_error is None:
-                    raise
-                on_error(e)
+                    raise problem from None
+                on_error(problem)
                 continue
             if parsed is None:
                 if drops is not None and (m := DROPCOUNT.match(raw)):

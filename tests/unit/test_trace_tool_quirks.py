@@ -1,6 +1,6 @@
 """Recordings as other tools leave them, where python-can's readers alone would read them wrong
 without a word: ASC files with relative stamps, transmit requests or no 'internal events
-logged' line, a text trace cut inside its last line (whatever its line ends), python-can CSV
+logged' line, a text trace cut inside its last line (whatever its line ends, candump -L too), python-can CSV
 without its header or with 'true' flags, a compressed trace, a BLF its logger never closed, a
 candump -d recording with DROPCOUNT lines; and `canbench scaffold` beside another scenario's files or
 with a DBC whose limits the trace is outside. Each case read a frame wrong, twice or not at all
@@ -95,6 +95,19 @@ def test_a_trc_cut_inside_a_byte_is_said_and_a_whole_unended_line_is_read(tmp_pa
     whole = tmp_path / "whole.trc"
     whole.write_text(TRC + "     2)        11.0  Rx         0123  2  01 03")  # no end of line, nothing missing
     assert [(line, data) for line, _, data in frames(whole)] == [(4, "0102"), (5, "0103")]
+
+
+def test_a_candump_log_cut_inside_its_last_line_is_said_there(tmp_path):
+    # a real car log ends '(1606770' with no newline: said as a cut, not as a line that is no frame
+    cut = tmp_path / "cut.log"
+    cut.write_text("(1606770000.000000) can0 123#DEAD\n(1606770")
+    assert problems(cut) == [f"{cut}:2: the file ends inside this line: a recording cut there ('(1606770')"]
+    ended = tmp_path / "ended.log"  # the same line ended: a line that is no frame, as before
+    ended.write_text("(1606770000.000000) can0 123#DEAD\n(1606770\n")
+    assert problems(ended) == [f"{ended}:2: not a candump -L frame: '(1606770'"]
+    whole = tmp_path / "whole.log"  # a whole frame without its newline is read
+    whole.write_text("(1606770000.000000) can0 123#DEAD\n(1606770000.010000) can0 123#BEEF")
+    assert [(line, data) for line, _, data in frames(whole)] == [(1, "dead"), (2, "beef")]
 
 
 def test_python_can_csv_needs_its_header_and_flags_of_0_or_1(tmp_path):
