@@ -215,8 +215,9 @@ class _AscLines(_LineCounter):
     """An ASC file as python-can's ASCReader takes it. Its header reader stops at the first line
     that is not a date, base, comment or 'internal events logged' line and drops that line: in a
     file without the events line, the first frame. That line is given here when missing (not
-    counted: lines stay the file's). 'timestamps relative' is refused at its line: the reader
-    takes every stamp as absolute."""
+    counted: lines stay the file's). Blank lines in the header are passed over (at one the reader
+    stopped, and read a 'base dec' after it as hex). 'timestamps relative' is refused at its line:
+    the reader takes every stamp as absolute."""
 
     def __init__(self, f, path: Path):
         super().__init__(f)
@@ -230,6 +231,8 @@ class _AscLines(_LineCounter):
         text = super().__next__()
         if not self.header:
             return text
+        while not text.strip():  # python-can's header reader stops at a blank line: a base line after it went unread
+            text = super().__next__()
         line = text.strip()
         if ASC_RELATIVE.match(line):
             raise TraceError(str(self.path), self.line, "timestamps relative: the bench reads absolute ASC stamps "

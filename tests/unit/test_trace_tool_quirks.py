@@ -61,6 +61,15 @@ def test_an_asc_without_the_events_line_keeps_its_first_frame(tmp_path, head):
     assert frames(path) == [(first, 0, "01"), (first + 1, 10_000_000, "02"), (first + 2, 20_000_000, "03")]
 
 
+def test_a_blank_line_in_an_asc_header_does_not_hide_its_base(tmp_path):
+    # python-can's header reader stopped at the blank line, so 'base dec' after it went unread and
+    # the decimal id 291 and byte 17 were read as hex 0x291 and 0x17
+    head = "date Mon Nov 13 10:00:00.000 am 2023\n\nbase dec  timestamps absolute\n\ninternal events logged\n"
+    path = asc(tmp_path, "   0.010000 1  291  Rx   d 1 17\n", head=head)
+    [(line, _, iface, frame)] = list(iter_trace(path))
+    assert (line, frame.can_id, frame.data) == (7, 0x123, b"\x11")
+
+
 @pytest.mark.parametrize("last,said", [
     ("   0.020000 1  123  Rx   d 8 01 02 03 04 05 06 07 0", "read as 07 00, not the 08 recorded"),
     ("   0.020000 1  12", "dropped by python-can"),
