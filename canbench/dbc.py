@@ -64,6 +64,15 @@ def text_encoding(path: Path) -> str | None:
     return "utf-8-sig"
 
 
+def saved_text(data: bytes) -> str:
+    """A text file as a tool or spreadsheet saved it, by text_encoding's rule: UTF-8 (its byte-order
+    mark dropped) when the bytes are UTF-8, else cp1252 (DBCs, signal-trace CSVs)."""
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("cp1252", errors="replace")
+
+
 def _hold_to_strict(db) -> None:
     """Note each message cantools' strict mode refuses, with why, and the parts it is decoded by."""
     for message in db.messages:
@@ -225,7 +234,7 @@ def _line_of(path: Path, said: str) -> int | None:
     else:
         return None
     try:
-        text = path.read_bytes().decode("utf-8" if text_encoding(path) else "cp1252", errors="replace")
+        text = saved_text(path.read_bytes())
     except OSError:
         return None
     return next((i for i, line in enumerate(text.splitlines(), 1) if pattern.match(line)), None)

@@ -47,6 +47,7 @@ from .dbc import (
     group_read,
     name_problem,
     range_problem,
+    saved_text,
     send_type_cyclic,
     too_long_for_can_20,
 )
@@ -380,15 +381,11 @@ def read_signal_trace(path: Path, shown: Path, signal, fail_file: FailFile,
     """A CSV signal trace (`time_s,value`, an optional header line, # comments); each bad line
     is a problem at its file:line (ids: a multiplexer's ids, see value_problem)."""
     times, values, ok, first = array("d"), [], True, True
-    try:
-        data = path.read_bytes()
+    try:  # as a DBC is read: a spreadsheet saves UTF-8 with a byte-order mark, or cp1252
+        text = saved_text(path.read_bytes())
     except OSError as e:
         fail_file(shown, 0, f"cannot read: {e.strerror}")
         return None
-    try:  # as a DBC is read: a spreadsheet saves UTF-8 with a byte-order mark, or cp1252
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = data.decode("cp1252", errors="replace")
     for lineno, row in enumerate(csv.reader(text.splitlines()), 1):
         if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
             continue
