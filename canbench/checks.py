@@ -14,7 +14,6 @@ from .commands import explained_refusals, stale_at_put, stamp_ages_ns
 from .dbc import cycle_of_id, load_dbc, send_type_at_most
 from .faults import disruptive, last_bridge_restart_ns
 from .oracle import FAULT_LEAD_NS, FAULT_SETTLE_NS, describe
-from .put_order import arbitration_key, overtaken_commands  # noqa: F401 (arbitration_key: the checks' API)
 
 SHOW = 10  # frames listed per problem
 # The bridge judges a command's age when its transmitter takes it; the bus stamps the frame when the
@@ -163,7 +162,7 @@ def zenoh_to_can(result: RunResult) -> list[str] | None:
             if c.unexpected:
                 problems.append(f"{b.bus}: {len(c.unexpected)} frames on the bus that neither a command nor an ECU "
                                 f"explains: {_frames(c.unexpected)}")
-        reordered = overtaken_commands(c.matched)
+        reordered = c.reordered  # by the bridge's order (canbench.put_order), as analysis counted them
         if _expect(result, "ordering", True) and reordered:
             listed = "; ".join(f"{describe(s)} after {describe(p)}" for s, p in reordered[:SHOW])
             problems.append(f"{b.bus}: {len(reordered)} commands out of put order: {listed}")

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from canbench import checks
+from canbench import checks, put_order
 from canbench import faults as faults_mod
 
 pytestmark = pytest.mark.unit
@@ -157,8 +157,9 @@ def written_result(put: list[int], written: list[int]) -> SimpleNamespace:
     """zenoh_to_can's input: commands of these ids put in this order, carried by the bus in the order
     of their put positions in `written`."""
     commands = [obs(can_id, i) for i, can_id in enumerate(put)]
-    c = SimpleNamespace(lost=[], duplicates=[], corrupted=[], unexpected=[],
-                        matched=[(commands[i], commands[i]) for i in written])
+    matched = [(commands[i], commands[i]) for i in written]
+    c = SimpleNamespace(lost=[], duplicates=[], corrupted=[], unexpected=[], matched=matched,
+                        reordered=put_order.overtaken_commands(matched))  # as analysis sets it
     return SimpleNamespace(scenario=SimpleNamespace(commands=[object()], expect={}),
                            buses=[SimpleNamespace(bus="vcan0", zenoh_to_can=c, commands=[object()])])
 
@@ -175,8 +176,8 @@ def test_a_command_overtaken_by_a_higher_priority_one_is_in_order():
     for pairs in ([(0x100, 0x200)], [(0x100, 0x100)]):  # lower priority first, or one id out of order
         problems = checks.zenoh_to_can(reorder_result(pairs))
         assert problems and "1 commands out of put order" in problems[0], pairs
-    assert checks.arbitration_key(SimpleNamespace(can_id=0x100, extended=False, remote=True)) < \
-        checks.arbitration_key(SimpleNamespace(can_id=0x100 << 18, extended=True, remote=False))
+    assert put_order.arbitration_key(SimpleNamespace(can_id=0x100, extended=False, remote=True)) < \
+        put_order.arbitration_key(SimpleNamespace(can_id=0x100 << 18, extended=True, remote=False))
 
 
 def test_every_command_that_overtook_one_is_looked_at_not_only_the_latest_put():
