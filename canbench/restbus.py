@@ -9,7 +9,8 @@ A multiplexer the scenario does not set selects its message's pages in turn, one
 (ascending ids, nested multiplexers within the pages that carry them), as an ECU sending every
 page does; its GenSigStartValue or raw 0 need not be one of its ids. Signals the scenario names
 as counters count 0, 1, ... per frame that carries them (each frame of their message; of their
-pages for a signal of some pages only) and wrap after their largest value; a checksum signal (one
+pages for a signal of some pages only) and wrap after their largest value (within the DBC range
+where the signal has one: [1|15] counts 1 to 15); a checksum signal (one
 whole byte, raw = physical) carries, in the frames that carry it, over the other bytes of the
 payload in order:
 
@@ -129,8 +130,8 @@ class MessagePlan:
             values.update(allowed[n % len(allowed)])
         page = allowed[n % len(allowed)]
         if self.counter:
-            values[self.counter] = carried_count(m, self.counter, allowed, n) \
-                % counter_modulo(m.get_signal_by_name(self.counter))
+            counts = counter_values(m.get_signal_by_name(self.counter))
+            values[self.counter] = counts[carried_count(m, self.counter, allowed, n) % len(counts)]
         checksum = self.checksum if self.checksum and on_page(m, self.checksum[0], page) else None
         if checksum:
             values[checksum[0]] = 0
@@ -229,11 +230,16 @@ def mux_ids(message, name: str) -> list[int] | None:
     return multiplexer_ids(message, name) if name in multiplexers(message) else None
 
 
-def counter_modulo(signal) -> int:
-    top = 2 ** signal.length - 1
+def counter_values(signal) -> range:
+    """What a counter signal counts through: its DBC range where it has one ([1|15] counts 1 to
+    15 and wraps to 1, as AUTOSAR E2E counters that keep 0 for "not valid" do), else all its
+    bits can hold. Empty where the range holds no value its bits can carry."""
+    low, top = 0, 2 ** signal.length - 1
+    if signal.minimum is not None:
+        low = max(low, math.ceil(signal.minimum))
     if signal.maximum is not None:
-        top = min(top, int(signal.maximum))
-    return top + 1
+        top = min(top, math.floor(signal.maximum))
+    return range(low, top + 1)
 
 
 def checksum_byte(message, name: str) -> int:
@@ -487,6 +493,9 @@ def message_plan(message, spec: dict, where: list, base: Path, fail: Fail, fail_
         elif s.is_signed or s.is_float or s.scale != 1 or s.offset != 0:
             fail([*where, "counters", i], f"{message.name}.{name}: a counter is an unsigned integer signal "
                  "(scale 1, offset 0)")
+        elif not counter_values(s):
+            fail([*where, "counters", i], f"{message.name}.{name}: its DBC range [{s.minimum}|{s.maximum}] "
+                 f"holds no value its {s.length} bits carry")
         elif counter is not None:
             fail([*where, "counters", i], f"{message.name} has a counter already ({counter})")
         elif name in sources:

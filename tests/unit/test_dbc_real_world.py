@@ -250,3 +250,30 @@ def test_a_value_one_buses_dbc_cannot_carry_is_said_for_that_bus(tmp_path):
     with pytest.raises(InputError, match=r"two\.yaml:10: expect\.signals\.Speed\.VehSpeed\.equals: 300 is outside "
                                          r"VehSpeed's range \[0, 255\] km/h .*\(the DBC of vcan1\)$"):
         scenario.load(path)
+
+
+E2E = DOOR.replace(' SG_ Temp : 8|8@1+ (1,-40) [-40|215] "°C" GW\n',
+                   ' SG_ Temp : 8|8@1+ (1,-40) [-40|215] "°C" GW\n SG_ Alive : 16|4@1+ (1,0) [1|14] "" GW\n')
+
+
+def test_a_counter_counts_within_its_dbc_range(tmp_path):
+    # AUTOSAR E2E and many OEM counters keep 0 (and 15) for "not valid": counting 0..15 sent
+    # invalid frames on a bus whose receivers check the counter
+    (tmp_path / "door.dbc").write_text(E2E, encoding="utf-8")
+    path = tmp_path / "door.yaml"
+    path.write_text(RESTBUS.replace("SIGNAL", "Geöffnet").replace("run_s: 1", "run_s: 2").replace(
+        "    signals:", "    counters: [Door.Alive]\n    signals:"), encoding="utf-8")
+    sc = scenario.load(path)
+    door = dbc.load_dbc(tmp_path / "door.dbc").get_message_by_name("Door")
+    counts = [door.decode(f.data)["Alive"] for _, f in plans.schedule(sc.ecus[0], sc).frames()][:16]
+    assert counts == [*range(1, 15), 1, 2]
+
+
+def test_a_counter_whose_dbc_range_its_bits_cannot_hold_is_a_problem_at_its_line(tmp_path):
+    (tmp_path / "door.dbc").write_text(E2E.replace("[1|14]", "[16|30]"), encoding="utf-8")
+    path = tmp_path / "door.yaml"
+    path.write_text(RESTBUS.replace("SIGNAL", "Geöffnet").replace("    signals:", "    counters: [Door.Alive]\n"
+                                                                   "    signals:"), encoding="utf-8")
+    with pytest.raises(InputError) as e:
+        scenario.load(path)
+    assert f"{path}:11:" in str(e.value) and "Door.Alive: its DBC range [16|30] holds no value" in str(e.value)
