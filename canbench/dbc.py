@@ -35,13 +35,26 @@ _PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _J1939: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # per database, its J1939 messages by group
 
 
+# GenMsgSendType defined as a number (some tools do; Vector's DBCs make it an ENUM): cantools refuses
+# the whole file ("Expected str, got int: 1", no line). It is read under another name, so the
+# message has no send type and its cycle time decides (send_type_cyclic), as for a DBC without one.
+_NUMERIC_SEND_TYPE = re.compile(r'^\s*BA_DEF_\s+BO_\s+"GenMsgSendType"\s+(INT|HEX|FLOAT)\b', re.MULTILINE)
+
+
 @lru_cache(maxsize=16)
 def _load(path: str, mtime_ns: int):
     cantools_log = logging.getLogger("cantools")
     level = cantools_log.level
     cantools_log.setLevel(logging.ERROR)  # its warning of an overwritten duplicate: refused below, named
     try:
-        db = cantools.database.load_file(path, encoding=text_encoding(Path(path)), strict=False)
+        try:
+            db = cantools.database.load_file(path, encoding=text_encoding(Path(path)), strict=False)
+        except Exception as e:  # noqa: BLE001 - re-raised unless it is the one refusal read around
+            text = saved_text(Path(path).read_bytes())
+            if "Expected str, got int" not in str(e) or not _NUMERIC_SEND_TYPE.search(text):
+                raise
+            db = cantools.database.load_string(text.replace('"GenMsgSendType"', '"GenMsgSendTypeNumber"'),
+                                               "dbc", strict=False)
     finally:
         cantools_log.setLevel(level)
     if not hasattr(db, "messages"):  # cantools reads a CDD by its suffix as a diagnostics database

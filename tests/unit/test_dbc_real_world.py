@@ -277,3 +277,17 @@ def test_a_counter_whose_dbc_range_its_bits_cannot_hold_is_a_problem_at_its_line
     with pytest.raises(InputError) as e:
         scenario.load(path)
     assert f"{path}:11:" in str(e.value) and "Door.Alive: its DBC range [16|30] holds no value" in str(e.value)
+
+
+def test_a_dbc_that_defines_its_send_type_as_a_number_is_read_and_its_cycle_decides(tmp_path):
+    # some tools write GenMsgSendType as INT (Vector's own DBCs: an ENUM); cantools refused the
+    # whole file with "Expected str, got int: 1" and no line
+    text = DOOR + 'BA_DEF_ BO_ "GenMsgSendType" INT 0 10;\nBA_DEF_DEF_ "GenMsgSendType" 0;\n' \
+                  'BA_ "GenMsgSendType" BO_ 256 1;\n'
+    (tmp_path / "door.dbc").write_text(text, encoding="utf-8")
+    door = dbc.load_dbc(tmp_path / "door.dbc").get_message_by_name("Door")
+    assert dbc.cycle_time_ms(door) == 100.0 and door.decode(bytes([1, 60, 0, 0, 0, 0, 0, 0]))["Temp"] == 20
+    (tmp_path / "other.dbc").write_text(text.replace("BA_ \"GenMsgSendType\" BO_ 256 1;", "BA_ \"Nope\" BO_ 256 1;"),
+                                        encoding="utf-8")
+    with pytest.raises(Exception, match="Nope"):  # any other refusal is still cantools'
+        dbc.load_dbc(tmp_path / "other.dbc")
