@@ -13,27 +13,7 @@ from canbench import ros2_msgs as m
 pytestmark = pytest.mark.unit
 rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip install -e '.[viewer]')")
 
-from canbench.viewer import read_rrd_columns  # noqa: E402
-from canbench.viewer_types import LOGGERS, Context  # noqa: E402
-
-
-def logged(tmp_path, messages: list[tuple[str, str, bytes]]) -> tuple[dict, list[str]]:
-    """(type, topic path, CDR payload) decoded and logged into an .rrd: its columns, and the
-    errors the viewer would count."""
-    path = tmp_path / "t.rrd"
-    rec = rr.RecordingStream("canbench-test-conventions")
-    rec.save(str(path))
-    ctx, errors = Context(), []
-    with rec:
-        for i, (type_name, topic, payload) in enumerate(messages):
-            rr.set_time("time", timestamp=1_700_000_000 + i)
-            try:
-                LOGGERS[type_name](ctx, topic, m.decode(type_name, payload))
-            except ValueError as e:
-                errors.append(str(e))
-    rec.flush()
-    rec.disconnect()
-    return read_rrd_columns(path), errors
+from rrd_logged import logged  # noqa: E402
 
 
 def tf(parent: str, child: str, x: float) -> bytes:

@@ -16,28 +16,10 @@ from canbench import ros2_msgs as m
 pytestmark = pytest.mark.unit
 rr = pytest.importorskip("rerun", reason="the viewer needs rerun-sdk (pip install -e '.[viewer]')")
 
+from rrd_logged import logged  # noqa: E402
+
 from canbench.viewer import read_rrd_columns  # noqa: E402
-from canbench.viewer_types import LOGGERS, Context  # noqa: E402
 from canbench.viewer_types.points import cloud_colors, cloud_fields  # noqa: E402
-
-
-def logged(tmp_path, messages: list[tuple[str, str, object]]) -> tuple[dict, list[str]]:
-    """(type, topic path, message) through CDR and the loggers into an .rrd: its columns, and the
-    errors the viewer would count (one per message a logger refused)."""
-    path = tmp_path / "t.rrd"
-    rec = rr.RecordingStream("canbench-test-traffic")
-    rec.save(str(path))
-    ctx, errors = Context(), []
-    with rec:
-        for i, (type_name, topic, msg) in enumerate(messages):
-            rr.set_time("time", timestamp=1_700_000_000 + i)
-            try:
-                LOGGERS[type_name](ctx, topic, m.decode(type_name, msg.serialize()))  # type: ignore[attr-defined]
-            except ValueError as e:
-                errors.append(str(e))
-    rec.flush()
-    rec.disconnect()
-    return read_rrd_columns(path), errors
 
 
 @pytest.mark.parametrize("red", [0x00, 0x7F, 0x80, 0xBF, 0xC0, 0xFF])
