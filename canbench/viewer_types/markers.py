@@ -76,12 +76,14 @@ def expire(ctx: Context, until_ns: int | None = None) -> None:
 
 def log_one(ctx: Context, path: str, m) -> None:
     if m.action == DELETEALL:  # of the marker's ns when it has one, else of the topic (Marker.msg, RViz)
-        scope = f"{path}/{m.ns}" if m.ns else path
+        scope = f"{path}/{rr.escape_entity_path_part(m.ns)}" if m.ns else path
         for entity in [e for e in ctx.expiries if e.startswith(scope + "/")]:
             del ctx.expiries[entity]
         rr.log(scope, rr.Clear(recursive=True))
         return
-    entity = f"{path}/{m.ns or '_'}/{m.id}"
+    # one entity part per ns, whatever it holds: ns 'arm/left' nested under 'arm' would be cleared
+    # by DELETEALL of 'arm' (RViz's namespaces are flat)
+    entity = f"{path}/{rr.escape_entity_path_part(m.ns or '_')}/{m.id}"
     if m.action == DELETE:
         ctx.expiries.pop(entity, None)
         rr.log(entity, rr.Clear(recursive=True))

@@ -325,3 +325,15 @@ def test_a_particle_is_an_arrow_as_long_as_its_weight_says_and_one_with_nan_is_l
     assert close_to(cloud["Arrows3D:origins"], [[[1, 2, 0], [0, 0, 0], [0, 0, 0]]])
     assert close_to(cloud["Arrows3D:vectors"], [[[0.02, 0, 0], [0, 0.16, 0], [0.3, 0, 0]]])
     assert cloud["CoordinateFrame:frame"] == [["map"]]
+
+
+def test_a_namespace_with_a_slash_is_not_inside_another(tmp_path):
+    # RViz's namespaces are flat: DELETEALL of 'arm' leaves 'arm/left' (MoveIt names them so)
+    columns, errors = logged(tmp_path, [("visualization_msgs/msg/Marker", "ros2/viz", marker("arm", 1)),
+                                        ("visualization_msgs/msg/Marker", "ros2/viz", marker("arm/left", 1)),
+                                        ("visualization_msgs/msg/Marker", "ros2/viz", marker("arm", 0, action=3))])
+    cleared = sorted(e for e, values in columns.items() if "Clear:is_recursive" in values)
+    drawn = sorted(e for e, values in columns.items() if any(k.startswith("Cube") or k.startswith("Box")
+                                                               for k in values))
+    assert errors == [] and cleared == ["/ros2/viz/arm"]
+    assert len(drawn) == 2 and not any(e.startswith("/ros2/viz/arm/") for e in drawn if "left" in e), drawn
