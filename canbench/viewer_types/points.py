@@ -53,8 +53,11 @@ def cloud_colors(fields: dict[str, np.ndarray]) -> np.ndarray | None:
             return np.column_stack([rgb, alpha]).astype(np.uint8)
     if "intensity" in fields and len(fields["intensity"]):
         i = fields["intensity"].astype(np.float64)
-        span = i.max() - i.min()
-        grey = ((i - i.min()) / span * 255 if span > 0 else np.full(len(i), 255.0)).astype(np.uint8)
+        finite = np.isfinite(i)  # a NaN made the span NaN and the whole cloud one grey; it is black alone
+        low, high = (i[finite].min(), i[finite].max()) if finite.any() else (0.0, 0.0)
+        span = high - low
+        grey = np.where(finite, (i - low) / span * 255 if span > 0 else 255.0, 0.0)
+        grey = np.clip(np.nan_to_num(grey), 0, 255).astype(np.uint8)
         return np.stack([grey, grey, grey], axis=1)
     return None
 

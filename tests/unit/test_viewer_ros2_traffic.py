@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import struct
 
+import numpy as np
 import pytest
 
 from canbench import ros2
@@ -337,3 +338,10 @@ def test_a_namespace_with_a_slash_is_not_inside_another(tmp_path):
                                                                for k in values))
     assert errors == [] and cleared == ["/ros2/viz/arm"]
     assert len(drawn) == 2 and not any(e.startswith("/ros2/viz/arm/") for e in drawn if "left" in e), drawn
+
+
+def test_a_nan_intensity_greys_its_own_point_only():
+    # a lidar driver marks a return without intensity NaN: the span was NaN and every point one grey
+    colours = cloud_colors({"intensity": np.array([0.0, 5.0, math.nan, 10.0, math.inf], dtype=np.float32)})
+    assert colours is not None and [int(c[0]) for c in colours] == [0, 127, 0, 255, 0]
+    assert [int(c[0]) for c in cloud_colors({"intensity": np.array([math.nan, 3.0])})] == [0, 255]
