@@ -5,6 +5,7 @@
 
 #include <stdint.h>
 
+#include "zn_gate.h"
 #include "zn_node.h"
 #include "zn_port_can.h"
 #include "zn_port_os.h"
@@ -117,7 +118,7 @@ struct bus {
 	struct tx_cmd tx_rest;
 	int tx_failed; /* the transmitter's last command failed and no frame went since: at stop, give up */
 	zn_thread_t *transmitter;
-	int cb_inflight, cb_closed; /* atomics: callbacks inside the gate; gate closed (zn_tx_close) */
+	struct zn_gate cb_gate; /* the command callback's (zn_tx_close shuts it) */
 	struct bus_counters n;
 };
 
@@ -125,7 +126,7 @@ struct node {
 	zn_node_config_t cfg;
 	zn_session_t *session;
 	zn_queryable_t *stats_q;
-	int stats_inflight, stats_closed; /* atomics: stats callbacks inside the gate; gate shut (release) */
+	struct zn_gate stats_gate; /* the stats callback's (release shuts it) */
 	char stats_key[ZN_KEY_MAX];
 	struct bus buses[ZN_MAX_BUSES];
 	zn_thread_t *monitor;

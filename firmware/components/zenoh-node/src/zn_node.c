@@ -81,18 +81,6 @@ static void withdraw(void)
 		zn_tx_close(&zn_node.buses[i]);
 }
 
-/* Until no stats callback is inside its gate (zn_stats_on_query): one Zenoh started before the
- * gate shut may still read the buses' locks. It does not signal: re-read every STATS_RECHECK_MS. */
-static void wait_stats_callbacks(void)
-{
-	if (!zn_node.stop_lock || !zn_node.stop_cond)
-		return; /* init failed before them, so before the queryable */
-	zn_mutex_lock(zn_node.stop_lock);
-	while (__atomic_load_n(&zn_node.stats_inflight, __ATOMIC_SEQ_CST) > 0)
-		zn_cond_wait(zn_node.stop_cond, zn_node.stop_lock, STATS_RECHECK_MS);
-	zn_mutex_unlock(zn_node.stop_lock);
-}
-
 /* Undeclares, closes and frees whatever init took (all of it after a stop, part of it after
  * a failed init: every handle may be NULL). The threads are stopped. */
 static void release(int final_stats)
@@ -104,9 +92,10 @@ static void release(int final_stats)
 		if (b->ros_pub)
 			zn_undeclare_publisher(b->ros_pub);
 	}
-	__atomic_store_n(&zn_node.stats_closed, 1, __ATOMIC_SEQ_CST);
+	zn_gate_shut(&zn_node.stats_gate);
 	zn_undeclare_queryable(zn_node.stats_q);
-	wait_stats_callbacks();
+	/* one Zenoh started before the gate shut may still read the buses' locks */
+	zn_gate_wait(&zn_node.stats_gate, zn_node.stop_lock, zn_node.stop_cond, STATS_RECHECK_MS);
 	char *stats = final_stats ? zn_stats_json_alloc() : NULL;
 	if (stats)
 		zn_log("I", "final stats: %s", stats);
@@ -134,8 +123,8 @@ static void release(int final_stats)
 	zn_mutex_free(zn_node.stop_lock);
 	memset(&zn_node, 0, sizeof(zn_node));
 	for (size_t i = 0; i < ZN_MAX_BUSES; i++) /* a callback Zenoh starts this late finds the gate shut */
-		zn_node.buses[i].cb_closed = 1;
-	zn_node.stats_closed = 1;
+		zn_gate_shut(&zn_node.buses[i].cb_gate);
+	zn_gate_shut(&zn_node.stats_gate);
 }
 
 /* Everything init does once the configuration is valid; on failure, what it took is released by the caller. */

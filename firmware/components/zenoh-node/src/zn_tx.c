@@ -303,32 +303,20 @@ void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachm
 	struct bus *b = ctx;
 	(void)source_time_ns; /* freshness is judged from it (docs/bridge.md) */
 	/* the gate: b lives in static storage, the queue and its lock only until zn_tx_close returns */
-	__atomic_add_fetch(&b->cb_inflight, 1, __ATOMIC_SEQ_CST);
-	if (__atomic_load_n(&b->cb_closed, __ATOMIC_SEQ_CST)) {
-		__atomic_sub_fetch(&b->cb_inflight, 1, __ATOMIC_SEQ_CST);
+	if (!zn_gate_enter(&b->cb_gate))
 		return;
-	}
 	accept(b, payload, len, attachment, attachment_len, source_time_ns);
-	zn_mutex_lock(b->tx_lock);
-	__atomic_sub_fetch(&b->cb_inflight, 1, __ATOMIC_SEQ_CST);
-	zn_cond_signal(b->tx_idle);
-	zn_mutex_unlock(b->tx_lock);
+	zn_gate_leave(&b->cb_gate, b->tx_lock, b->tx_idle);
 }
 
 void zn_tx_close(struct bus *b)
 {
-	__atomic_store_n(&b->cb_closed, 1, __ATOMIC_SEQ_CST);
+	zn_gate_shut(&b->cb_gate);
 	if (b->sub) {
 		zn_undeclare_subscriber(b->sub);
 		b->sub = NULL;
 	}
-	if (!b->tx_lock)
-		return;
-	zn_mutex_lock(b->tx_lock);
-	/* a callback turned away at the gate does not signal: re-read the count meanwhile */
-	while (__atomic_load_n(&b->cb_inflight, __ATOMIC_SEQ_CST) > 0)
-		zn_cond_wait(b->tx_idle, b->tx_lock, CLOSE_RECHECK_MS);
-	zn_mutex_unlock(b->tx_lock);
+	zn_gate_wait(&b->cb_gate, b->tx_lock, b->tx_idle, CLOSE_RECHECK_MS);
 }
 
 /* What is left of a command's deadline (ms, at least 1), or -1 when it has none. */
