@@ -212,18 +212,24 @@ VAL_ 256 Lock 0 "Unlocked" 1 "Locked" ;
     assert restbus.default_value(sc.ecus[0].restbus[0].message.get_signal_by_name("Lock")) == 1
 
 
-def test_one_signal_name_scaled_differently_by_two_buses_is_judged_by_each_buses_dbc(tmp_path):
-    # a gateway's bus carries VehSpeed at 0.1 km/h, the powertrain's at 0.01: equals was judged on
-    # the first DBC's raw value, so vcan1's exact 50 km/h failed as "= 50 km/h, expected 50 km/h"
-    for name, scale in (("a", "0.01"), ("b", "0.1")):
+def two_buses(tmp_path: Path, layouts: tuple[str, str], expectation: str) -> Path:
+    """A scenario of two buses, vcan0 with a.dbc and vcan1 with b.dbc, each DBC's Speed.VehSpeed laid
+    out as given ('start|length@order+ (scale,offset)'), and one expectation of that signal."""
+    for name, layout in zip(("a", "b"), layouts, strict=True):
         (tmp_path / f"{name}.dbc").write_text(f'VERSION ""\nNS_ :\nBS_:\nBU_: ECU\nBO_ 256 Speed: 8 ECU\n'
-                                              f' SG_ VehSpeed : 0|16@1+ ({scale},0) [0|0] "km/h" Vector__XXX\n')
+                                              f' SG_ VehSpeed : {layout} [0|0] "km/h" Vector__XXX\n')
     (tmp_path / "t.log").write_text(f"({T0 / 1e9:.6f}) vcan0 100#0000000000000000\n")
     path = tmp_path / "two.yaml"
     path.write_text("name: two\nduration_s: 10\nbuses:\n  - {name: vcan0, dbc: a.dbc}\n  - {name: vcan1, dbc: b.dbc}\n"
                     "ecus:\n  - {name: e, bus: vcan0, trace: t.log}\n"
-                    "expect:\n  signals:\n    Speed.VehSpeed: {equals: 50, one_of: [50]}\n")
-    sc = scenario.load(path)
+                    f"expect:\n  signals:\n    Speed.VehSpeed: {expectation}\n")
+    return path
+
+
+def test_one_signal_name_scaled_differently_by_two_buses_is_judged_by_each_buses_dbc(tmp_path):
+    # a gateway's bus carries VehSpeed at 0.1 km/h, the powertrain's at 0.01: equals was judged on
+    # the first DBC's raw value, so vcan1's exact 50 km/h failed as "= 50 km/h, expected 50 km/h"
+    sc = scenario.load(two_buses(tmp_path, ("0|16@1+ (0.01,0)", "0|16@1+ (0.1,0)"), "{equals: 50, one_of: [50]}"))
 
     def bus(name: str, speed: float) -> SimpleNamespace:
         m = dbc.load_dbc(tmp_path / f"{'a' if name == 'vcan0' else 'b'}.dbc").get_message_by_name("Speed")
@@ -239,14 +245,7 @@ def test_one_signal_name_scaled_differently_by_two_buses_is_judged_by_each_buses
 
 
 def test_a_value_one_buses_dbc_cannot_carry_is_said_for_that_bus(tmp_path):
-    for name, length in (("a", 16), ("b", 8)):
-        (tmp_path / f"{name}.dbc").write_text(f'VERSION ""\nNS_ :\nBS_:\nBU_: ECU\nBO_ 256 Speed: 8 ECU\n'
-                                              f' SG_ VehSpeed : 0|{length}@1+ (1,0) [0|0] "km/h" Vector__XXX\n')
-    (tmp_path / "t.log").write_text(f"({T0 / 1e9:.6f}) vcan0 100#0000000000000000\n")
-    path = tmp_path / "two.yaml"
-    path.write_text("name: two\nduration_s: 10\nbuses:\n  - {name: vcan0, dbc: a.dbc}\n  - {name: vcan1, dbc: b.dbc}\n"
-                    "ecus:\n  - {name: e, bus: vcan0, trace: t.log}\n"
-                    "expect:\n  signals:\n    Speed.VehSpeed: {equals: 300}\n")
+    path = two_buses(tmp_path, ("0|16@1+ (1,0)", "0|8@1+ (1,0)"), "{equals: 300}")
     with pytest.raises(InputError, match=r"two\.yaml:10: expect\.signals\.Speed\.VehSpeed\.equals: 300 is outside "
                                          r"VehSpeed's range \[0, 255\] km/h .*\(the DBC of vcan1\)$"):
         scenario.load(path)
