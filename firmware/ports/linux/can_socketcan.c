@@ -11,6 +11,7 @@
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/time.h>
+#include <time.h>
 #include <unistd.h>
 #include <linux/can.h>
 #include <linux/can/raw.h>
@@ -135,15 +136,47 @@ static int64_t stamp_of(struct msghdr *mh, int64_t fallback)
 	return fallback;
 }
 
-/* The tx queue is full: waits for room until deadline (monotonic ns); 0 once it has passed. */
-static int wait_writable(int fd, int64_t deadline)
+/* How a writer waits out a full tx queue. On a real interface ENOBUFS means the device's queue
+ * (txqueuelen) is full, e.g. a bus without an ACK or bus-off, and poll() says the socket is
+ * writable all the while (its own buffer has room): retrying at once would spin a core until the
+ * deadline. So once a send fails again right after poll said writable, the writer sleeps, 50 us
+ * doubling to 1 ms. The userspace bus's poll does wait for room: it never gets that far. */
+#define TX_BACKOFF_MIN_US 50
+#define TX_BACKOFF_MAX_US 1000
+
+struct tx_wait {
+	int64_t deadline;  /* monotonic ns */
+	int polled;	   /* the last wait was a poll that said writable */
+	int backoff_us;	   /* the next sleep (0: none yet) */
+};
+
+/* The tx queue is full: waits for room until the deadline; 0 once it has passed. */
+static int wait_writable(int fd, struct tx_wait *w)
 {
-	int left_ms = (int)((deadline - zn_monotonic_ns()) / 1000000);
-	if (left_ms <= 0)
+	int64_t left_ns = w->deadline - zn_monotonic_ns();
+	if (left_ns <= 0)
 		return 0;
+	if (w->polled) { /* poll said writable, yet the queue was still full: it cannot tell */
+		w->backoff_us = w->backoff_us ? w->backoff_us * 2 : TX_BACKOFF_MIN_US;
+		if (w->backoff_us > TX_BACKOFF_MAX_US)
+			w->backoff_us = TX_BACKOFF_MAX_US;
+		int64_t sleep_ns = (int64_t)w->backoff_us * 1000 < left_ns ? (int64_t)w->backoff_us * 1000 : left_ns;
+		struct timespec ts = { .tv_sec = 0, .tv_nsec = (long)sleep_ns };
+		nanosleep(&ts, NULL);
+		w->polled = 0;
+		return 1;
+	}
+	int left_ms = (int)((left_ns + 999999) / 1000000);
 	struct pollfd pfd = { .fd = fd, .events = POLLOUT };
-	poll(&pfd, 1, left_ms);
+	w->polled = poll(&pfd, 1, left_ms) > 0;
 	return 1;
+}
+
+static void sent_some(struct tx_wait *w, int timeout_ms)
+{
+	w->deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000; /* per frame */
+	w->polled = 0;
+	w->backoff_us = 0;
 }
 
 /* Sets the socket's receive timeout for the blocking read that follows (0: none, just a
@@ -239,7 +272,7 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 	struct can_frame frames[ZN_CAN_BURST_MAX];
 	struct iovec iov[ZN_CAN_BURST_MAX];
 	struct mmsghdr mm[ZN_CAN_BURST_MAX];
-	int64_t deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000;
+	struct tx_wait w = { .deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000 };
 	*sent = 0;
 	while (*sent < n) {
 		size_t k = n - *sent < ZN_CAN_BURST_MAX ? n - *sent : ZN_CAN_BURST_MAX;
@@ -251,12 +284,12 @@ esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, 
 		int r = sendmmsg(can->fd, mm, (unsigned)k, MSG_DONTWAIT);
 		if (r > 0) {
 			*sent += (size_t)r;
-			deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000; /* per frame, as zn_can_transmit */
+			sent_some(&w, timeout_ms); /* the deadline per frame, as zn_can_transmit */
 			continue;
 		}
 		if (r < 0 && errno != ENOBUFS && errno != EAGAIN)
 			return ESP_FAIL;
-		if (!wait_writable(can->fd, deadline))
+		if (!wait_writable(can->fd, &w))
 			return ESP_ERR_TIMEOUT;
 	}
 	return ESP_OK;
@@ -266,14 +299,14 @@ esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_m
 {
 	struct can_frame frame;
 	to_frame(msg, &frame);
-	int64_t deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000;
+	struct tx_wait w = { .deadline = zn_monotonic_ns() + (int64_t)timeout_ms * 1000000 };
 	for (;;) {
 		ssize_t n = send(can->fd, &frame, sizeof(frame), MSG_DONTWAIT);
 		if (n == sizeof(frame))
 			return ESP_OK;
 		if (n < 0 && errno != ENOBUFS && errno != EAGAIN)
 			return ESP_FAIL;
-		if (!wait_writable(can->fd, deadline))
+		if (!wait_writable(can->fd, &w))
 			return ESP_ERR_TIMEOUT;
 	}
 }
