@@ -267,7 +267,7 @@ class _Copies:
     """The sent frames with one key still in the window, in stream order, and which of them
     are matched. Positions before `start` are evicted (gone from the window)."""
 
-    __slots__ = ("key", "frames", "indices", "times", "ranks", "used", "head", "start")
+    __slots__ = ("key", "frames", "indices", "times", "ranks", "used", "head", "start", "arrived")
 
     def __init__(self, key: tuple) -> None:
         self.key = key
@@ -278,6 +278,7 @@ class _Copies:
         self.used = bytearray()
         self.head = 0   # every copy before it is matched or evicted
         self.start = 0  # every copy before it is evicted
+        self.arrived: int | None = None  # when the last received frame with this key arrived
 
     def add(self, o: Observed, rank: int) -> None:
         self.frames.append(o)
@@ -292,8 +293,12 @@ class _Copies:
         contents between it and the frontier; on a tie the one ahead (a loss is the simpler
         story than a late frame; within a run of identical frames the earliest one: nothing
         tells them apart). If no copy was sent by t_ns, the next one ahead if it was sent at
-        most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error.
+        most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error; but not
+        when the frame came less than half that copy's cycle after the last one with this key:
+        a frame published twice (a duplicate), which taking the next copy would shift every
+        later copy onto its predecessor (a fast constant frame: all reordered, all "early").
         Returns the copy's position (frames[position])."""
+        arrived, self.arrived = self.arrived, t_ns
         n = len(self.indices)
         indices, used, times = self.indices, self.used, self.times
         ahead_at = bisect.bisect_right(indices, frontier, self.start)
@@ -318,7 +323,9 @@ class _Copies:
                 break
             behind -= 1
             scanned += 1
-        if best is None and ahead < n and times[ahead] <= t_ns + STAMP_SLACK_NS:
+        if best is None and ahead < n and times[ahead] <= t_ns + STAMP_SLACK_NS and \
+                not (arrived is not None and ahead > self.start and
+                     2 * (t_ns - arrived) < times[ahead] - times[ahead - 1]):
             best = ahead
         if best is None:
             return None

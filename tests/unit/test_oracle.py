@@ -173,3 +173,34 @@ def test_a_late_copy_of_a_repeated_frame_is_still_reordering():
     c = compare(sent, received(frames))
     assert [(a.index, b.index) for a, b in c.reordered] == [(20, 21)]
     assert not c.lost and not c.duplicates
+
+
+def fast_constant_and_counter(n: int = 500) -> list[Observed]:
+    """A constant 0C0 every 2 ms with a counter 1A0 between: a fast frame whose copies only time
+    tells apart."""
+    frames = [(k * 2_000_000 + half * 1_000_000, wire.Frame(0x0C0, 2, b"\x00\x10") if not half
+               else wire.Frame(0x1A0, 1, bytes([k % 256]))) for k in range(n) for half in (0, 1)]
+    return [Observed(f, t, i, line=i + 1) for i, (t, f) in enumerate(frames)]
+
+
+def test_a_duplicate_of_a_fast_constant_frame_is_one_duplicate():
+    # published twice, 1 us apart: the second copy has no copy sent before it; it took the next
+    # one (sent 2 ms later, within the stamp slack), every later 0C0 shifted onto its predecessor:
+    # 399 reordered, negative latencies, and the run called a bench error for one duplicate
+    sent = fast_constant_and_counter()
+    got = [Observed(s.frame, s.t_ns + 300_000 + copy * 1000, 0, key="vehicle/can/rx")
+           for s in sent for copy in range(2 if s.index == 200 else 1)]
+    c = compare(sent, got)
+    s = c.summary()
+    assert (s["duplicates"], s["reordered"], s["lost"], len(c.negative)) == (1, 0, 0, 0)
+    assert [r.t_ns for r in c.duplicates] == [sent[200].t_ns + 301_000]
+
+
+def test_a_capture_clock_ahead_of_the_bus_is_still_negative_latency_not_duplicates():
+    # every frame received 1 ms "before" it was sent (a bench's clocks apart): no frame came within
+    # half a cycle of the one before it with its key, so none is a duplicate; all are early
+    sent = fast_constant_and_counter()
+    c = compare(sent, [Observed(o.frame, o.t_ns - 1_000_000, 0, key="vehicle/can/rx") for o in sent])
+    s = c.summary()
+    assert (s["duplicates"], s["lost"], s["matched"], s["reordered"]) == (0, 0, len(sent), 0)
+    assert len(c.negative) == len(sent)
