@@ -28,6 +28,12 @@ from .wire import id_hex
 # (gaps 1, 9, 1, 9 ms) or in bursts, and a gate on such a median flips with one frame.
 STEADY_PCT = 10  # a gap within +-10 % of the cycle is steady
 PERIODIC_STEADY_PCT = 90  # ... and an id with at least 90 % steady gaps is periodic
+# A logger's jitter (a USB adapter's stamps: 10 ms gaps spread over 7.6..12.4 ms) puts a fifth to a
+# half of a periodic id's gaps beyond +-STEADY_PCT, while every one stays near the cycle: such an id
+# is periodic too when at least PERIODIC_STEADY_PCT of its gaps are within +-NEAR_PCT (the scaffold's
+# tolerance) and at least half within +-STEADY_PCT (so its median is not the edge of two clusters:
+# 8 and 12 ms alternating, 1 and 9 ms interleaved, stay out)
+NEAR_PCT = 20
 
 
 def frame_bits_worst(dlc: int, extended: bool, remote: bool = False) -> int:
@@ -48,6 +54,8 @@ class IdSummary:
     remote: int
     steady_pct: float | None = None  # share of the gaps within STEADY_PCT of the cycle
     interface: str | None = None  # the trace's interface (channel) it was recorded on
+    near_pct: float | None = None  # share of the gaps within NEAR_PCT of the cycle
+    max_gap_ms: float | None = None  # the longest gap
 
 
 @dataclass
@@ -116,6 +124,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
     interface. One pass over the trace, state per id only (not its frames)."""
     by_id: dict[tuple[str | None, int, bool], _IdState] = defaultdict(_IdState)
     bits: dict[str | None, int] = defaultdict(int)
+    spans: dict[str | None, list[int]] = {}  # per interface: its first and last frame's stamp
     frames = 0
     first_ns = last_ns = None
     gap_ns, gap_line = 0, 0
@@ -131,6 +140,8 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         state.dlc = max(state.dlc, frame.dlc)
         state.remote += frame.remote
         bits[iface] += frame_bits_worst(frame.dlc, frame.extended, frame.remote)
+        own = spans.setdefault(iface, [t_ns, t_ns])
+        own[0], own[1] = min(own[0], t_ns), max(own[1], t_ns)
         # the span and gaps of the merged timeline: a log of several interfaces is in time order
         # per interface only, so its first and last lines need not be its first and last frames
         if last_ns is not None and t_ns - last_ns > gap_ns:
@@ -148,10 +159,16 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         jitter = statistics.median(abs(g - cycle) for g in gaps) if gaps and cycle is not None else None
         steady = (100 * sum(abs(g - cycle) <= cycle * STEADY_PCT / 100 for g in gaps) / len(gaps)
                   if gaps and cycle else None)
+        near = (100 * sum(abs(g - cycle) <= cycle * NEAR_PCT / 100 for g in gaps) / len(gaps)
+                if gaps and cycle else None)
         ids.append(IdSummary(id_hex(can_id, extended), extended, state.count, state.dlc,
-                             None if cycle is None else round(cycle, 6), jitter, state.remote, steady, iface))
-    loads = {str(i): 100 * b / bitrate / span if span > 0 else 0.0 for i, b in sorted(bits.items(), key=str)
-             if i is not None}
+                             None if cycle is None else round(cycle, 6), jitter, state.remote, steady, iface,
+                             near, max(gaps) if gaps else None))
+    # each interface's load over its own span: one recorded from later on (or stopped earlier) is
+    # not diluted by the time the other interfaces were recorded alone
+    own_span = {i: (last - first) / 1e9 for i, (first, last) in spans.items()}
+    loads = {str(i): 100 * b / bitrate / own_span[i] if own_span[i] > 0 else 0.0
+             for i, b in sorted(bits.items(), key=str) if i is not None}
     total_load = 100 * sum(bits.values()) / bitrate / span if span > 0 else 0.0
     return TraceSummary(path, frames, span, sorted(loads), ids, max(loads.values(), default=total_load), bitrate,
                         loads, gap_ns / 1e9, gap_line, drops, left_out)
@@ -415,22 +432,46 @@ def dbc_cycles_of(s: TraceSummary, dbc_path: Path) -> dict[str, float]:
     return {i.ident: found[1] for i in s.ids if (found := cycle_of_id(db, int(i.ident, 16), i.extended))}
 
 
+def dbc_at_most_of(s: TraceSummary, dbc_path: Path) -> set[str]:
+    """The trace's ids of a cyclic message of the DBC that also sends on events (EventPeriodic,
+    ...): cycle_time.from_dbc judges their longest gap on the bus against the DBC's cycle."""
+    from .dbc import cycle_of_id, load_dbc, send_type_at_most
+    db = load_dbc(dbc_path)
+    return {i.ident for i in s.ids if (found := cycle_of_id(db, int(i.ident, 16), i.extended))
+            and send_type_at_most(found[0].send_type)}
+
+
 def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float],
-                    tolerance_pct: float) -> dict[str, tuple[float, float]]:
+                    tolerance_pct: float, at_most: frozenset[str] | set[str] = frozenset()) -> dict[str, tuple[float, float]]:
     """id -> (the trace's median cycle, the DBC's) for the trace's ids of a cyclic message of the
     DBC (dbc_cycles) that it sends at another cycle (beyond tolerance_pct; the median over its
-    interfaces)."""
+    interfaces), and for those of an event-periodic message (at_most) whose longest gap in the
+    trace is beyond the DBC's cycle + tolerance_pct (a frame the car or its logger missed): the
+    gate from_dbc writes for them would fail the trace itself."""
     seen: dict[str, list[float]] = {}
+    longest: dict[str, float] = {}
     for i in s.ids:
         if i.cycle_ms:
             seen.setdefault(i.ident, []).append(i.cycle_ms)
+        if i.max_gap_ms is not None:
+            longest[i.ident] = max(longest.get(i.ident, 0.0), i.max_gap_ms)
     out = {}
     for ident, cycle in dbc_cycles.items():
         if ident in seen:
             median = statistics.median(seen[ident])
-            if abs(median - cycle) > cycle * tolerance_pct / 100:
+            if abs(median - cycle) > cycle * tolerance_pct / 100 or (
+                    ident in at_most and longest.get(ident, 0.0) > cycle * (1 + tolerance_pct / 100)):
                 out[ident] = (round(median, 3), cycle)
     return out
+
+
+def periodic(i: IdSummary) -> bool:
+    """Whether an id's gaps show one cycle: PERIODIC_STEADY_PCT of them within +-STEADY_PCT of
+    it, or (a logger's jitter) within +-NEAR_PCT with half of them within +-STEADY_PCT."""
+    if i.steady_pct is None:
+        return False
+    return i.steady_pct >= PERIODIC_STEADY_PCT or (
+        i.near_pct is not None and i.near_pct >= PERIODIC_STEADY_PCT and i.steady_pct >= 50)
 
 
 def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
@@ -444,7 +485,7 @@ def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
     cycles: dict[str, float] = {}
     disagree: list[str] = []
     for ident, on in judged.items():
-        steady = [i for i in on if i.cycle_ms and i.steady_pct is not None and i.steady_pct >= PERIODIC_STEADY_PCT]
+        steady = [i for i in on if i.cycle_ms and periodic(i)]
         if not steady:
             continue
         first = steady[0].cycle_ms or 0.0
@@ -520,7 +561,8 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
               f"#   make test SCENARIO={scenario_path}\n"
               f"{notes}"
               f"# Periodic ids (cycle inferred from the trace, >= {PERIODIC_STEADY_PCT}% of the gaps within "
-              f"+-{STEADY_PCT}% of it) are gated in cycle_time.ids.\n")
+              f"+-{STEADY_PCT}% of it, or within +-{NEAR_PCT}% with half within +-{STEADY_PCT}%: a logger's "
+              "jitter) are gated in cycle_time.ids.\n")
     if dbc is not None and signal_summary is not None:
         from .dbc import load_dbc, strict_problem
         as_written = strict_problem(load_dbc(dbc))
@@ -539,7 +581,7 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
             # where the recorded car sends a message at another cycle than its DBC says (another
             # variant, an event-periodic message's events), the trace's cycle: the gate judges the
             # bridge against the bus, and the car is what the bus replays
-            overridden = _dbc_cycles_off(s, dbc_cycles, tolerance)
+            overridden = _dbc_cycles_off(s, dbc_cycles, tolerance, dbc_at_most_of(s, dbc))
             ids |= {ident: trace_cycle for ident, (trace_cycle, _) in overridden.items()}
             expect["cycle_time"] = {"from_dbc": True, "tolerance_pct": tolerance} | ({"ids": ids} if ids else {})
             header += (f"# cycle_time.from_dbc: the DBC's GenMsgCycleTime for the trace's {len(from_dbc)} ids of its "

@@ -645,7 +645,7 @@ class CycleTimes:
         f = o.frame
         seen = self.ids.get((f.can_id, f.extended))
         if seen is None:
-            self.ids[(f.can_id, f.extended)] = [o.t_ns, Distribution(CYCLE_EXACT, sample=False)]
+            self.ids[(f.can_id, f.extended)] = [o.t_ns, Distribution(CYCLE_EXACT, sample=False), o.t_ns]
             return
         gaps = seen[1]
         gap = (o.t_ns - seen[0]) / 1e6
@@ -657,10 +657,13 @@ class CycleTimes:
 
     def result(self) -> dict[str, dict]:
         out = {}
-        for (can_id, extended), (_, gaps) in self.ids.items():
+        for (can_id, extended), (last, gaps, first) in self.ids.items():
             stats = gaps.stats()
             out[wire.id_hex(can_id, extended)] = {"count": len(gaps) + 1, "cycle_p50_ms": stats["p50_ms"],
-                                                  "cycle_min_ms": stats["min_ms"], "cycle_max_ms": stats["max_ms"]}
+                                                  "cycle_min_ms": stats["min_ms"], "cycle_max_ms": stats["max_ms"],
+                                                  # its frames' rate: the cycle of an id sent in bursts
+                                                  "cycle_mean_ms": (last - first) / 1e6 / len(gaps) if len(gaps)
+                                                  else None}
         return dict(sorted(out.items()))
 
 

@@ -1,0 +1,58 @@
+"""Scaffolded cycle gates judged on a faithful replay and on seeded faults, on traffic as real cars
+and loggers make it: an id the gate names that never comes, an id sent twice a cycle under one
+stamp."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from canbench import analysis, checks, cli, scenario, wire
+from canbench.capture import Sample, format_sample_line
+from canbench.trace import iter_candump
+
+pytestmark = pytest.mark.unit
+T0 = 1_700_000_000_000_000_000
+
+
+def judged(sc, tmp: Path, frames, latency=lambda i: 400_000) -> list[str]:
+    """cycle_time on a run whose bus carried frames [(t_ns, candump id#data)] on vcan0 and whose
+    bridge forwarded each in order after latency(i) (never before the one before it)."""
+    at, zen = 0, []
+    with open(tmp / "can.log", "w") as bus:
+        for i, (t, text) in enumerate(frames):
+            bus.write(f"({t // 10**9}.{t % 10**9 // 1000:06d}) vcan0 {text}\n")
+            at = max(at, t + latency(i))
+            zen.append((at, i, t, text))
+    parsed = [f for _, _, _, f in iter_candump(tmp / "can.log")]
+    with open(tmp / "zenoh.tsv", "w") as out:
+        for (a, i, t, _), f in zip(zen, parsed, strict=True):
+            out.write(format_sample_line(Sample(a, "vehicle/can/rx", wire.encode(f), wire.encode_attachment(i, [t]))))
+    return checks.cycle_time(analysis.analyse(sc, "r", tmp, "vehicle/can", {}, None, 5.0))
+
+
+def scaffolded(tmp: Path, frames) -> scenario.Scenario:
+    trace = tmp / "rec.log"
+    trace.write_text("".join(f"({t // 10**9}.{t % 10**9 // 1000:06d}) can0 {x}\n" for t, x in frames))
+    assert cli.main(["scaffold", str(trace), "--name", "rec", "--out", str(tmp / "rec.yaml")]) == 0
+    return scenario.load(tmp / "rec.yaml")
+
+
+def test_a_gated_id_that_never_comes_fails_cycle_time(tmp_path):
+    rec = sorted([(T0 + i * 10_000_000, "100#00") for i in range(200)]
+                 + [(T0 + i * 20_000_000 + 1_000_000, "200#00") for i in range(100)])
+    sc = scaffolded(tmp_path, rec)
+    assert sc.expect["cycle_time"]["ids"] == {"100": 10.0, "200": 20.0}
+    assert judged(sc, tmp_path, rec) == []
+    # the seeded fault: 200 never on the bus (its ECU silent), so never on Zenoh either
+    assert judged(sc, tmp_path, [f for f in rec if not f[1].startswith("200#")]) != []
+
+
+def test_an_id_sent_twice_per_cycle_with_one_stamp_passes_a_faithful_replay(tmp_path):
+    # a logger's one stamp for the frames it took together: 300 twice every 10 ms, 100 every 10 ms
+    rec = sorted([(T0 + i * 10_000_000, "100#00") for i in range(200)]
+                 + [(T0 + i * 10_000_000 + 2_000_000, f"300#{k:02X}") for i in range(200) for k in (0, 1)])
+    sc = scaffolded(tmp_path, rec)
+    assert "300" not in sc.expect["cycle_time"]["ids"]  # not periodic: not gated ...
+    jitter = [200_000 + (i * 7919) % 400_000 for i in range(len(rec))]  # 0.2 .. 0.6 ms, in order
+    assert judged(sc, tmp_path, rec, latency=lambda i: jitter[i]) == []  # ... nor failed on its median 0
