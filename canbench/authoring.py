@@ -441,8 +441,8 @@ def dbc_at_most_of(s: TraceSummary, dbc_path: Path) -> set[str]:
             and send_type_at_most(found[0].send_type)}
 
 
-def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float],
-                    tolerance_pct: float, at_most: frozenset[str] | set[str] = frozenset()) -> dict[str, tuple[float, float]]:
+def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float], tolerance_pct: float,
+                    at_most: frozenset[str] | set[str] = frozenset()) -> dict[str, tuple[float, float]]:
     """id -> (the trace's median cycle, the DBC's) for the trace's ids of a cyclic message of the
     DBC (dbc_cycles) that it sends at another cycle (beyond tolerance_pct; the median over its
     interfaces), and for those of an event-periodic message (at_most) whose longest gap in the

@@ -184,15 +184,27 @@ def round_trip(result: RunResult) -> list[str] | None:
     return problems
 
 
+def _jitter_added(can: dict, zen: dict) -> float | None:
+    """How much wider an id's gaps spread on Zenoh than on the bus, 10th to 90th percentile (None
+    for metrics of a run before these percentiles were kept)."""
+    can_p10, can_p90 = can.get("cycle_p10_ms"), can.get("cycle_p90_ms")
+    zen_p10, zen_p90 = zen.get("cycle_p10_ms"), zen.get("cycle_p90_ms")
+    if can_p10 is None or can_p90 is None or zen_p10 is None or zen_p90 is None:
+        return None
+    return (zen_p90 - zen_p10) - (can_p90 - can_p10)
+
+
 def cycle_time(result: RunResult) -> list[str] | None:
     """Per id, the cycle time a Zenoh consumer sees matches the bus (median within
     tolerance_pct; the bridge widens no gap by more than (max_gap_factor - 1) x the expected cycle,
-    so on a bus that keeps its cycle no gap on Zenoh is above max_gap_factor x the cycle)."""
+    so on a bus that keeps its cycle no gap on Zenoh is above max_gap_factor x the cycle; it
+    spreads the gaps, 10th to 90th percentile, by no more than max_jitter_added_ms)."""
     gate = _expect(result, "cycle_time")
     if not gate:
         return None
     tolerance = gate.get("tolerance_pct")
     factor = gate.get("max_gap_factor")
+    jitter = gate.get("max_jitter_added_ms")
     explicit = {wire.id_key(k): v for k, v in gate.get("ids", {}).items()}  # as the cycles are keyed: 11/29-bit apart
     problems = []
     seen: set[str] = set()
@@ -245,6 +257,11 @@ def cycle_time(result: RunResult) -> list[str] | None:
             if factor is not None and added > expected * (factor - 1):
                 problems.append(f"{b.bus} id {ident}: a gap {added:.2f} ms longer on Zenoh than on the bus (longest on "
                                 f"Zenoh {zen['cycle_max_ms']:.2f} ms), more than ({factor} - 1) x {expected:.2f} ms")
+            if jitter is not None and (spread := _jitter_added(can, zen)) is not None and spread > jitter:
+                problems.append(f"{b.bus} id {ident}: its gaps spread {spread:.2f} ms more on Zenoh than on the bus "
+                                f"(10th to 90th percentile: {zen['cycle_p10_ms']:.2f} to {zen['cycle_p90_ms']:.2f} ms "
+                                f"against {can['cycle_p10_ms']:.2f} to {can['cycle_p90_ms']:.2f}), more than "
+                                f"max_jitter_added_ms {jitter:g}")
     # an id cycle_time.ids names that no bus carried: its cycle was never judged (a silent sender)
     for ident in sorted(set(explicit) - seen):
         problems.append(f"id {ident}: cycle_time.ids expects it every {explicit[ident]:g} ms, but no bus carried "

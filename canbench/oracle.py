@@ -639,7 +639,7 @@ class CycleTimes:
     per id in a Distribution of CYCLE_EXACT values (then its sketch)."""
 
     def __init__(self) -> None:
-        self.ids: dict[tuple, list] = {}  # (id, ext) -> [last stamp, gaps]
+        self.ids: dict[tuple, list] = {}  # (id, ext) -> [last stamp, gaps, first stamp]
 
     def add(self, o: Observed) -> None:
         f = o.frame
@@ -661,6 +661,9 @@ class CycleTimes:
             stats = gaps.stats()
             out[wire.id_hex(can_id, extended)] = {"count": len(gaps) + 1, "cycle_p50_ms": stats["p50_ms"],
                                                   "cycle_min_ms": stats["min_ms"], "cycle_max_ms": stats["max_ms"],
+                                                  # the gaps' spread without a tenth at each end (jitter)
+                                                  "cycle_p10_ms": gaps.percentile(0.1),
+                                                  "cycle_p90_ms": gaps.percentile(0.9),
                                                   # its frames' rate: the cycle of an id sent in bursts
                                                   "cycle_mean_ms": (last - first) / 1e6 / len(gaps) if len(gaps)
                                                   else None}

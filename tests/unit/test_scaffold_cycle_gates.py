@@ -1,8 +1,10 @@
 """Scaffolded cycle gates judged on a faithful replay and on seeded faults, on traffic as real cars
 and loggers make it: an id the gate names that never comes, an id sent twice a cycle under one
-stamp."""
+stamp, a bridge that holds one id back at random (jitter)."""
 from __future__ import annotations
 
+import dataclasses
+import random
 from pathlib import Path
 
 import pytest
@@ -56,3 +58,20 @@ def test_an_id_sent_twice_per_cycle_with_one_stamp_passes_a_faithful_replay(tmp_
     assert "300" not in sc.expect["cycle_time"]["ids"]  # not periodic: not gated ...
     jitter = [200_000 + (i * 7919) % 400_000 for i in range(len(rec))]  # 0.2 .. 0.6 ms, in order
     assert judged(sc, tmp_path, rec, latency=lambda i: jitter[i]) == []  # ... nor failed on its median 0
+
+
+def test_max_jitter_added_ms_fails_a_bridge_that_holds_one_id_back_at_random(tmp_path):
+    # id 100 held back 0.4 to 4.9 ms at random, in order: its gaps 5.5 to 14.5 ms on Zenoh against
+    # 10.0 on the bus, nothing lost or reordered, its median cycle and the median latency as before
+    rec = sorted([(T0 + i * 10_000_000, "100#00") for i in range(300)]
+                 + [(T0 + i * 10_000_000 + 5_000_000, "200#11") for i in range(300)])
+    sc = scaffolded(tmp_path, rec)
+    gated = dataclasses.replace(sc, expect={**sc.expect, "cycle_time": {**sc.expect["cycle_time"],
+                                                                       "max_jitter_added_ms": 1.0}})
+    rng = random.Random(0)
+    held = [400_000 + (rng.randrange(4_500_000) if text.startswith("100#") else 0) for _, text in rec]
+    assert judged(sc, tmp_path, rec, latency=lambda i: held[i]) == []  # the median gates see nothing
+    [problem] = judged(gated, tmp_path, rec, latency=lambda i: held[i])
+    assert problem.startswith("vcan0 id 100: its gaps spread ") and "more than max_jitter_added_ms 1" in problem
+    faithful = [200_000 + (i * 7919) % 400_000 for i in range(len(rec))]  # 0.2 .. 0.6 ms, in order
+    assert judged(gated, tmp_path, rec, latency=lambda i: faithful[i]) == []
