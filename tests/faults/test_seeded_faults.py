@@ -5,7 +5,7 @@ Zenoh, round-trip for Zenoh -> CAN and back) through the real orchestrator
 exactly the checks that guard against that fault must fail, naming the
 affected frames. The same binary without a fault must pass everything. Beside the
 shipped scenarios, small ones of this directory: signal-flip.yaml (signal gates for a
-flip inside EngineSpeed) and restbus-cycle.yaml / restbus-wrong-cycle.yaml (a restbus
+flip inside EngineSpeed), cycle-jitter.yaml (the cycle-time jitter gate) and restbus-cycle.yaml / restbus-wrong-cycle.yaml (a restbus
 ECU at the DBC's cycles, and the same ECU with a wrong one: the ECU's fault)."""
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ SIGNALS = REPO / "scenarios" / "signals.yaml"
 SIGNAL_FLIP = Path(__file__).with_name("signal-flip.yaml")  # EngineSpeed and three other signals gated
 RESTBUS = Path(__file__).with_name("restbus-cycle.yaml")    # a restbus BODY node, cycle times from the DBC
 RESTBUS_WRONG = Path(__file__).with_name("restbus-wrong-cycle.yaml")  # the same, BodyStatus 80 ms (DBC: 50)
+JITTER = Path(__file__).with_name("cycle-jitter.yaml")  # smoke's replay with cycle_time.max_jitter_added_ms 2
 
 # (scenario, fault, extra bridge options) -> the checks that must fail (and only those)
 CASES = {
@@ -54,6 +55,9 @@ CASES = {
     (SIGNAL_FLIP, "", ()): set(),
     # bit 7 of byte 2 (EngineSpeed's top bit) in every 5th frame: that signal's Zenoh-side gate, and integrity
     (SIGNAL_FLIP, "flip:5@2.7", ()): {"integrity", "signals_zenoh"},
+    (JITTER, "", ()): set(),
+    # every sample held 0..6 ms at random, in order: the gaps spread, medians hold
+    (JITTER, "jitter:6", ()): {"cycle_time"},
     (RESTBUS, "", ()): set(),
     # the ECU's fault, not the bridge's: BodyStatus every 80 ms where the DBC says 50
     (RESTBUS_WRONG, "", ()): {"cycle_time"},

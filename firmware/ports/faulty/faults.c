@@ -14,6 +14,9 @@
  *            frame by frame through batches, per publisher: one bit inside one
  *            signal, which a signal check can see (byte 0 bit 0 is often a counter's)
  *   delay:MS hold every sample MS ms        wrongkey publish on <rx key>_misrouted
+ *   jitter:MS hold every sample 0..MS ms past its CAN receive time, a different hold each
+ *            (pseudo-random, the same sequence every run), in order: the gaps a consumer
+ *            sees spread while the median cycle and latency barely move
  * and on the Zenoh -> CAN path:
  *   txdrop:N never write every Nth command (reported written)
  *   txflip:N flip the lowest bit of data byte 0 of every Nth
@@ -48,9 +51,9 @@ void __wrap_zn_undeclare_publisher(zn_publisher_t *pub);
 esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
 int __wrap_zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 
-enum kind { NONE, DROP, DUP, SWAP, FLIP, DELAY, WRONGKEY, TXDROP, TXFLIP, NOFRESH, KINDS };
+enum kind { NONE, DROP, DUP, SWAP, FLIP, DELAY, WRONGKEY, TXDROP, TXFLIP, NOFRESH, JITTER, KINDS };
 static const char *const names[KINDS] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey", "txdrop", "txflip",
-					  "no-freshness" };
+					  "no-freshness", "jitter" };
 
 static struct {
 	pthread_once_t once;
@@ -115,7 +118,8 @@ static void parse_fault(void)
 		}
 	}
 	zn_log("E",
-	       "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|txdrop|txflip:N, flip:N@BYTE.BIT, wrongkey or no-freshness; "
+	       "ZN_FAULT='%s' is not drop|dup|swap|flip|delay|jitter|txdrop|txflip:N, flip:N@BYTE.BIT, wrongkey or "
+	       "no-freshness; "
 	       "no fault seeded",
 	       spec);
 }
@@ -161,15 +165,15 @@ void __wrap_zn_undeclare_publisher(zn_publisher_t *pub)
 	free(p);
 }
 
-/* A pipeline delay, not a throughput cap: hold until CAN receive time + n ms. */
-static void delay_until_due(const uint8_t *att, size_t att_len)
+/* A pipeline delay, not a throughput cap: hold until CAN receive time + hold_us. */
+static void delay_until_due(const uint8_t *att, size_t att_len, int64_t hold_us)
 {
 	if (att_len < ZN_ATTACHMENT_SIZE(1))
 		return;
 	int64_t rx_ns = 0;
 	for (int i = 7; i >= 0; i--)
 		rx_ns = rx_ns << 8 | att[ZN_ATTACHMENT_HEADER + i];
-	int64_t due = rx_ns + (int64_t)fault.n * 1000000;
+	int64_t due = rx_ns + hold_us * 1000;
 	struct timespec ts = { .tv_sec = due / 1000000000, .tv_nsec = due % 1000000000 };
 	while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, NULL) != 0)
 		;
@@ -216,8 +220,15 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 			p->copy[8] ^= 0x01;
 		return __real_zn_put(p->real, p->copy, len, att, att_len);
 	case DELAY:
-		delay_until_due(att, att_len);
+		delay_until_due(att, att_len, (int64_t)fault.n * 1000);
 		return __real_zn_put(p->real, payload, len, att, att_len);
+	case JITTER: {
+		uint64_t x = p->count * 0x9E3779B97F4A7C15ull; /* splitmix64 of the sample's number */
+		x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+		x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+		delay_until_due(att, att_len, (int64_t)((x ^ (x >> 31)) % ((uint64_t)fault.n * 1000 + 1)));
+		return __real_zn_put(p->real, payload, len, att, att_len);
+	}
 	case WRONGKEY:
 		return __real_zn_put(p->misrouted, payload, len, att, att_len);
 	case NONE:
