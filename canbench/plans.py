@@ -43,7 +43,7 @@ def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
 
 def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
                id_remap: dict[int, int], t0: float | None = None) -> Plan:
-    """A trace's frames (canbench.trace.TraceFrame) looped `loops` times at `speed`; t0: the time
+    """A trace's frames (canbench.trace_frames.TraceFrame) looped `loops` times at `speed`; t0: the time
     they are sent relative to (default their first: an interface of a trace, the trace's first)."""
     if not frames:
         return Plan(frames=lambda: iter(()), count=0, last=None, last_id_count=0)

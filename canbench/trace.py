@@ -12,12 +12,12 @@ import re
 import string
 import struct
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import can
 
 from .errors import NotClassicFrame, TraceError
+from .trace_frames import TraceFrames
 from .wire import EXT_ID_MAX, STD_ID_MAX, Frame
 
 # candump -L grammar (can-utils lib.h), e.g. "(1700000000.123456) vcan0 123#DEADBEEF":
@@ -64,12 +64,6 @@ def fd_refusal(size: int, brs: bool, esi: bool) -> str:
     flags = "".join(f", {name}" for name, on in (("BRS", brs), ("ESI", esi)) if on)
     return (f"a CAN FD frame ({size} data bytes{flags}): the bridge carries CAN 2.0 frames only "
             "(remove FD frames from the trace: canbench scaffold leaves them out of the trace it writes)")
-
-
-@dataclass(frozen=True)
-class TraceFrame:
-    line: int  # 1-based line in the trace file (index + 1 for binary formats)
-    message: can.Message
 
 
 def _frame(m: re.Match, path: str, lineno: int | None) -> Frame:
@@ -646,15 +640,16 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
 
 
 def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str | None = None,
-               starts: dict[str | None, int] | None = None) -> list[TraceFrame]:
+               starts: dict[str | None, int] | None = None) -> TraceFrames:
     """All frames of a trace, in order, each with the line it came from (iter_trace's checks).
     interfaces: names the trace may use (None: any). only: the one interface to keep (a bus
     carries one); None: the trace must have one, since merging several would put two buses'
     frames on one, out of time order (candump's lines are in order per interface only). starts:
-    filled with each interface's first stamp (ns), the others' too."""
-    frames: list[TraceFrame] = []
+    filled with each interface's first stamp (ns), the others' too. The frames are held compactly
+    (canbench.trace_frames): about 31 bytes each."""
+    frames: TraceFrames | None = None
     seen: dict[str | None, int] = {}  # interface -> its first line
-    for line, t_ns, iface, frame in iter_trace(path, interfaces):
+    for line, t_ns, iface, frame in iter_trace(path, interfaces, cache_size=STREAM_CACHE):  # stored as columns
         seen.setdefault(iface, line)
         if starts is not None:
             starts.setdefault(iface, t_ns)
@@ -662,11 +657,11 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
             continue
         if only is None and len(seen) > 1:
             raise TraceError(str(path), line, several_interfaces(seen))
+        if frames is None:
+            frames = TraceFrames(iface)
         if len(frames) >= MAX_TRACE_FRAMES:
             raise TraceError(str(path), line, too_many_frames())
-        frames.append(TraceFrame(line, can.Message(
-            timestamp=t_ns / 1e9, arbitration_id=frame.can_id, is_extended_id=frame.extended,
-            is_remote_frame=frame.remote, dlc=frame.dlc, data=frame.data, channel=iface)))
+        frames.append(line, t_ns, frame)
     if only is not None and seen and only not in seen:
         raise TraceError(str(path), None, f"no frames on interface '{only}' ({interfaces_said(seen)})")
     if not frames:
@@ -674,7 +669,7 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
     return frames
 
 
-def read_replay(path: str | Path, only: str | None) -> tuple[list[TraceFrame], float | None]:
+def read_replay(path: str | Path, only: str | None) -> tuple[TraceFrames, float | None]:
     """What a replay of the trace sends (of one interface, `only`, or of its only one), and the time
     (s) its frames are sent relative to: their own first for a trace's only interface (None); for
     one interface of several, the trace's start, so its first frame 3 s after the trace's is sent

@@ -5,8 +5,9 @@ Zenoh, round-trip for Zenoh -> CAN and back) through the real orchestrator
 exactly the checks that guard against that fault must fail, naming the
 affected frames. The same binary without a fault must pass everything. Beside the
 shipped scenarios, small ones of this directory: signal-flip.yaml (signal gates for a
-flip inside EngineSpeed), cycle-jitter.yaml (the cycle-time jitter gate) and restbus-cycle.yaml / restbus-wrong-cycle.yaml (a restbus
-ECU at the DBC's cycles, and the same ECU with a wrong one: the ECU's fault)."""
+flip inside EngineSpeed), cycle-jitter.yaml (the cycle-time jitter gate) and
+restbus-cycle.yaml / restbus-wrong-cycle.yaml (a restbus ECU at the DBC's cycles, and the
+same ECU with a wrong one: the ECU's fault)."""
 from __future__ import annotations
 
 import json

@@ -11,7 +11,7 @@ import pytest
 
 from canbench import commands, periodic, plans
 from canbench.scenario import Commands, Ecu, Message
-from canbench.trace import TraceFrame
+from canbench.trace_frames import TraceFrame
 
 pytestmark = pytest.mark.unit
 

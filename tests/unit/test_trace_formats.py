@@ -226,3 +226,23 @@ def test_an_empty_file_has_no_frames_in_every_format(tmp_path, suffix):
     with pytest.raises(TraceError) as err:
         read_trace(path)
     assert str(err.value) == f"{path}: no frames in trace"
+
+
+def test_a_read_trace_holds_its_frames_in_tens_of_bytes_each(tmp_path):
+    # what a replay ECU reads before it starts: as TraceFrames of python-can Messages a 1M-frame trace
+    # took 900 MB (canbench validate, the ECU's container), and the 10M-frame limit would need 9 GB
+    import tracemalloc
+    path = tmp_path / "drive.log"
+    n = 50_000
+    path.write_text("".join(f"({1_700_000_000 + k / 1000:.6f}) vcan0 {k % 2048:03X}#{k * 7919:016X}\n"
+                            for k in range(n)))
+    tracemalloc.start()
+    try:
+        frames = read_trace(path)
+        held, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(frames) == n and held < 64 * n, f"{held / n:.0f} bytes a frame"
+    last = frames[-1]
+    assert (last.line, last.message.arbitration_id, bytes(last.message.data)) == (
+        n, (n - 1) % 2048, ((n - 1) * 7919).to_bytes(8, "big"))
