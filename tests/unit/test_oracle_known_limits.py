@@ -10,6 +10,7 @@ import pytest
 
 from canbench import checks, run, scenario, wire
 from canbench.capture import Sample, format_sample_line
+from canbench.oracle import Observed, compare, compare_stream
 
 pytestmark = [pytest.mark.unit, pytest.mark.xfail(strict=True, reason="a known limit of the matching")]
 REPO = Path(__file__).resolve().parents[2]
@@ -52,3 +53,32 @@ def test_a_command_of_the_same_content_as_an_ecus_frame_is_told_apart(tmp_path):
     sc = dataclasses.replace(scenario.load(REPO / "scenarios" / "round-trip.yaml"), ecus=[])
     r = run.analyse(sc, "seeded", tmp_path, "vehicle/can", {"engine": {"sent": 100}}, None, 2.0)
     assert checks.valid_run(r) == [] and checks.zenoh_to_can(r) == []
+
+
+def constant_status_frames() -> list[Observed]:
+    """Three constant status frames every 10 ms (as a real car sends most of its ids), 300 ms."""
+    ids = ((0x0C0, 0, b"\x00\x10"), (0x1A0, 3300, b"\x7d\x00"), (0x2C4, 6600, b"\x00\x00\x00\x1b"))
+    ev = sorted((BASE + k * 10 * MS + ph * 1000, i, d) for k in range(30) for i, ph, d in ids)
+    return [Observed(wire.Frame(i, len(d), d), t, n, line=n + 1) for n, (t, i, d) in enumerate(ev)]
+
+
+@pytest.mark.parametrize("how", ["stall", "batching"])
+def test_one_duplicate_in_a_backlog_is_one_duplicate(how):
+    # a frame of a backlog published twice, its next copy (10 ms later) already sent when the
+    # duplicate arrives: the duplicate takes that copy, and the frames between the two are called
+    # reordered (a real Civic's trace: 85 reordered for one duplicate after a 100 ms stall)
+    sent = constant_status_frames()
+    if how == "stall":  # the link stalls 100 ms, then delivers what it held at once, in order
+        def arrival(t):
+            return BASE + 200 * MS if BASE + 100 * MS <= t < BASE + 200 * MS else t + 300_000
+    else:  # the bridge publishes every 50 ms what it received 300 us before
+        def arrival(t):
+            return (t + 300_000) // (50 * MS) * (50 * MS) + 50 * MS
+    dup_of = next(s.index for s in sent if s.t_ns >= BASE + 120 * MS)
+    received: list[Observed] = []
+    for s in sent:
+        for _ in range(2 if s.index == dup_of else 1):
+            received.append(Observed(s.frame, arrival(s.t_ns) + len(received) * 1000, len(received),
+                                     key="vehicle/can/rx"))
+    for c in (compare(sent, received), compare_stream(iter(sent), iter(received), keep=10_000)):
+        assert (c.counts["duplicates"], c.counts["lost"], c.counts["reordered"], len(c.negative)) == (1, 0, 0, 0)
