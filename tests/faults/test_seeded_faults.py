@@ -29,7 +29,7 @@ SIGNALS = REPO / "scenarios" / "signals.yaml"
 SIGNAL_FLIP = Path(__file__).with_name("signal-flip.yaml")  # EngineSpeed and three other signals gated
 RESTBUS = Path(__file__).with_name("restbus-cycle.yaml")    # a restbus BODY node, cycle times from the DBC
 RESTBUS_WRONG = Path(__file__).with_name("restbus-wrong-cycle.yaml")  # the same, BodyStatus 80 ms (DBC: 50)
-JITTER = Path(__file__).with_name("cycle-jitter.yaml")  # smoke's replay with cycle_time.max_jitter_added_ms 2
+JITTER = Path(__file__).with_name("cycle-jitter.yaml")  # smoke's replay with cycle_time.max_jitter_added_ms 3
 
 # (scenario, fault, extra bridge options) -> the checks that must fail (and only those)
 CASES = {
@@ -57,8 +57,8 @@ CASES = {
     # bit 7 of byte 2 (EngineSpeed's top bit) in every 5th frame: that signal's Zenoh-side gate, and integrity
     (SIGNAL_FLIP, "flip:5@2.7", ()): {"integrity", "signals_zenoh"},
     (JITTER, "", ()): set(),
-    # every sample held 0..6 ms at random, in order: the gaps spread, medians hold
-    (JITTER, "jitter:6", ()): {"cycle_time"},
+    # every sample held 0..10 ms at random, in order: the gaps spread, the median cycle holds
+    (JITTER, "jitter:10", ()): {"cycle_time"},
     (RESTBUS, "", ()): set(),
     # the ECU's fault, not the bridge's: BodyStatus every 80 ms where the DBC says 50
     (RESTBUS_WRONG, "", ()): {"cycle_time"},
