@@ -86,7 +86,10 @@ def integrity(result: RunResult) -> list[str] | None:
             problems.append(f"{b.bus}: {len(c.corrupted)} corrupted: {listed}")
         if c.unexpected:
             problems.append(f"{b.bus}: {len(c.unexpected)} frames never sent: {_frames(c.unexpected)}")
-        problems += [f"{b.bus}: {p}" for p in b.problems]
+        problems += [f"{b.bus}: {p}" for p in b.problems[:SHOW]]  # undecodable samples: one each, bounded
+        if len(b.problems) > SHOW:
+            problems.append(f"{b.bus}: ... ({len(b.problems) - SHOW} more undecodable samples, "
+                            f"{len(b.problems)} in all)")
     return problems
 
 
@@ -404,7 +407,11 @@ def bridge_fds(result: RunResult) -> list[str] | None:
 
 def only_expected_keys(result: RunResult) -> list[str] | None:
     """The bridge published on its own keys only."""
-    return [f"samples on unexpected keys: {result.unexpected_keys}"] if result.unexpected_keys else []
+    keys = result.unexpected_keys  # all of them in metrics.json unexpected_keys
+    if not keys:
+        return []
+    listed = ", ".join(repr(k) for k in keys[:SHOW]) + (f", ... ({len(keys) - SHOW} more)" if len(keys) > SHOW else "")
+    return [f"samples on {len(keys)} unexpected keys: {listed}"]
 
 
 def ecus_sent_their_traces(result: RunResult) -> list[str] | None:

@@ -63,7 +63,10 @@ class Ros2McapWriter:
             if ros_type not in self.schemas:
                 self.schemas[ros_type] = self.writer.register_schema(
                     ros_type, "ros2msg", ros2.msg_definition(ros_type).encode())
-            self.channels[topic] = self.writer.register_channel(topic, "cdr", self.schemas[ros_type])
+            # the ros2 profile's required channel user data (MCAP spec, profiles/ros2.md); empty: no
+            # publisher offered a QoS to the bench's recording (rosbag2 then plays with its default)
+            self.channels[topic] = self.writer.register_channel(topic, "cdr", self.schemas[ros_type],
+                                                                metadata={"offered_qos_profiles": ""})
         self.seqs[topic] = self.seqs.get(topic, 0) + 1
         self.writer.add_message(self.channels[topic], log_time=t_ns, publish_time=t_ns, sequence=self.seqs[topic],
                                 data=msg.serialize())

@@ -19,6 +19,8 @@ if TYPE_CHECKING:
 
 
 SIGNAL_PLOTS = 40  # gated signals plotted (those with violations first); the table lists every one
+ID_ROWS = 1000  # rows of the per-id table (ids with lost frames first); metrics.json cycle_times has every id
+TIMELINE_BINS = 2000  # at most, however long the run: 100 ms bins up to 200 s of traffic, wider beyond
 
 # ---- HTML ----
 
@@ -62,14 +64,16 @@ def _timeline(result: RunResult) -> str:
     if not starts:
         return "<p>No traffic.</p>"
     t0 = min(starts)
+    series = [(name, [(o.t_ns - t0) / 1e9 for o in frames]) for b in result.buses
+              for name, frames in ((f"{b.bus} bus", b.can_frames), (f"{b.bus} Zenoh", b.zenoh_frames),
+                                   (f"{b.bus} commands", b.commands)) if frames]
+    span = max(max(times) - min(times) for _, times in series) if series else 0.0
+    width = max(0.1, span / TIMELINE_BINS)  # 100 ms bins, wider on a long run (a 24 h soak: 864 001 of them)
     fig, ax = plt.subplots(figsize=(11, 3))
+    for name, times in series:
+        bins = max(1, min(TIMELINE_BINS, int((max(times) - min(times)) / width) + 1))
+        ax.hist(times, bins=bins, histtype="step", label=name)
     for b in result.buses:
-        for name, frames in ((f"{b.bus} bus", b.can_frames), (f"{b.bus} Zenoh", b.zenoh_frames),
-                             (f"{b.bus} commands", b.commands)):
-            if frames:
-                times = [(o.t_ns - t0) / 1e9 for o in frames]
-                bins = max(1, int((max(times) - min(times)) / 0.1) + 1)
-                ax.hist(times, bins=bins, histtype="step", label=name)
         lost = b.comparison.lost + (b.zenoh_to_can.lost if b.zenoh_to_can else [])
         if lost:
             ax.plot([(o.t_ns - t0) / 1e9 for o in lost], [0] * len(lost), "rx", label=f"{b.bus} lost")
@@ -77,7 +81,7 @@ def _timeline(result: RunResult) -> str:
         ax.axvspan((window["start_ns"] - t0) / 1e9, (window["end_ns"] - t0) / 1e9, color="orange", alpha=0.25)
         ax.annotate(window["action"], ((window["start_ns"] - t0) / 1e9, 0), fontsize=7, rotation=90)
     ax.set_xlabel("s since first frame")
-    ax.set_ylabel("frames per 100 ms")
+    ax.set_ylabel("frames per 100 ms" if width == 0.1 else f"frames per {width:.3g} s")
     ax.legend(fontsize=8)
     return _png(fig)
 
@@ -147,9 +151,12 @@ def _signal_section(result: RunResult) -> str:
         if gate.one_of is not None or (gate.equals is not None and gate.names):
             values = sorted(set(gate.names) | set(gate.one_of or ())
                             | ({gate.equals} if gate.equals is not None else set()))
+            # the DBC's text as written: matplotlib reads what is between two '$' as mathtext
+            # (a value table of $, $$, $$$ failed the whole report; US$ 1 to US$ 9 showed as math)
             ax.set_yticks(values, [f"{gate.names[v]} ({v:g})" if v in gate.names else f"{v:g}" for v in values],
-                          fontsize=7)
-        ax.set_title(f"{bus} {key}{' (' + gate.unit + ')' if gate.unit else ''}: {gate.limits()}", fontsize=9)
+                          fontsize=7, parse_math=False)
+        ax.set_title(f"{bus} {key}{' (' + gate.unit + ')' if gate.unit else ''}: {gate.limits()}", fontsize=9,
+                     parse_math=False)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("s since the first bus frame")
@@ -218,6 +225,11 @@ def write_html(result: RunResult, path: Path) -> None:
             can, zen = sides["can"], sides["zenoh"] or {}
             id_rows.append([b.bus, ident, can["count"], zen.get("count", 0), lost_by_id.get(ident, 0),
                             _ms(can["cycle_p50_ms"]), _ms(zen.get("cycle_p50_ms")), _ms(zen.get("cycle_max_ms"))])
+    left_out: list[list] = []
+    if len(id_rows) > ID_ROWS:  # the ids with lost frames first, each bus's in its order otherwise
+        id_rows = sorted(id_rows, key=lambda row: row[4] == 0)
+        id_rows, left_out = id_rows[:ID_ROWS], id_rows[ID_ROWS:]
+    lossy_left_out = sum(1 for row in left_out if row[4])
     ecu_rows = []
     for name, e in sorted(m.get("ecus", {}).items()):
         fid = e.get("fidelity_ms") or e.get("turnaround_ms") or {}
@@ -248,6 +260,8 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
 <h2>Per id</h2>
 {_table(["bus", "id", "on bus", "on Zenoh", "lost", "bus cycle p50 ms", "Zenoh cycle p50 ms", "Zenoh max gap ms"],
         id_rows)}
+{f"<p>{len(left_out)} more ids ({lossy_left_out} of them with lost frames) are in metrics.json cycle_times.</p>"
+  if left_out else ""}
 {_signal_section(result)}
 {_response_section(m)}
 <h2>Emulated ECUs</h2><p>Send-time error against the trace (echo: turnaround), so a verdict never blames the
@@ -255,5 +269,5 @@ bridge for the emulator's jitter.</p>
 {_table(["ECU", "role", "bus", "sent", "p50 ms", "p99 ms", "max ms"], ecu_rows)}
 </body></html>"""
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(page)
+    tmp.write_text(page, encoding="utf-8")  # as its <meta charset> says, whatever the locale
     tmp.replace(path)

@@ -325,6 +325,9 @@ def evaluate(rule: Rule, commands: list[oracle.Observed], bus_frames: list[oracl
             if early:
                 instead += f"; a matching one came before the stimulus: {_seen(early[-1:], t0)}"
             problems.append(f"{what}: no {rule.response_text()} within {rule.within_ms:g} ms; {instead}")
+    if len(problems) > SHOW:  # one per stimulus: bounded as every check's list (metrics.json, junit.xml, report)
+        problems[SHOW:] = [f"{rule.name}: ... ({len(problems) - SHOW} more stimuli with a problem; in all {late} "
+                           f"late, {missing} missing, {duplicates} duplicated responses)"]
     if rule.count is not None and len(starts) != rule.count:
         listed = ", ".join(_where(s) for s in starts[:SHOW]) + (" ..." if len(starts) > SHOW else "")
         problems.insert(0, f"{rule.name}: {len(starts)} stimuli ({rule.stimulus_text()}), {rule.count} expected"

@@ -162,3 +162,18 @@ def test_a_stimulus_signal_the_command_lacks_is_a_problem():
     assert problems == [("expect.responses.0.when.signals.Torque",
                          "TorqueRequest has no signal 'Torque' (it has ['RequestChecksum', 'RequestCounter', "
                          "'TorqueRequested'])")]
+
+
+def test_an_infinite_within_ms_is_a_problem_at_its_line(tmp_path):
+    # the schema took YAML's .inf; the analysis then stopped on int(inf) and wrote no report at all
+    from canbench import scenario
+    from canbench.errors import ScenarioError
+    (tmp_path / "t.log").write_text("(1700000000.000000) vcan0 123#00\n")
+    path = tmp_path / "r.yaml"
+    path.write_text(f"name: r\nduration_s: 5\ndbc: {DBC}\nbuses: [{{name: vcan0}}]\n"
+                    "ecus: [{name: e, bus: vcan0, trace: t.log}]\n"
+                    "commands: [{bus: vcan0, message: TorqueRequest, run_s: 1}]\n"
+                    "expect:\n  responses:\n    - when: {command: TorqueRequest}\n"
+                    "      then: {signal: TorqueResponse.TorqueActual}\n      within_ms: .inf\n")
+    with pytest.raises(ScenarioError, match=rf"{path}:11: expect.responses.0.within_ms: inf is greater than"):
+        scenario.load(path)
