@@ -124,7 +124,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
     interface. One pass over the trace, state per id only (not its frames)."""
     by_id: dict[tuple[str | None, int, bool], _IdState] = defaultdict(_IdState)
     bits: dict[str | None, int] = defaultdict(int)
-    spans: dict[str | None, list[int]] = {}  # per interface: its first and last frame's stamp
+    spans: dict[str | None, list[int]] = {}  # per interface: its first and last stamp, the first frame's bits
     frames = 0
     first_ns = last_ns = None
     gap_ns, gap_line = 0, 0
@@ -139,9 +139,12 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         state.count += 1
         state.dlc = max(state.dlc, frame.dlc)
         state.remote += frame.remote
-        bits[iface] += frame_bits_worst(frame.dlc, frame.extended, frame.remote)
-        own = spans.setdefault(iface, [t_ns, t_ns])
-        own[0], own[1] = min(own[0], t_ns), max(own[1], t_ns)
+        frame_bits = frame_bits_worst(frame.dlc, frame.extended, frame.remote)
+        bits[iface] += frame_bits
+        own = spans.setdefault(iface, [t_ns, t_ns, frame_bits])
+        if t_ns < own[0]:
+            own[0], own[2] = t_ns, frame_bits
+        own[1] = max(own[1], t_ns)
         # the span and gaps of the merged timeline: a log of several interfaces is in time order
         # per interface only, so its first and last lines need not be its first and last frames
         if last_ns is not None and t_ns - last_ns > gap_ns:
@@ -166,7 +169,9 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
                              near, max(gaps) if gaps else None))
     # each interface's load over its own span: one recorded from later on (or stopped earlier) is
     # not diluted by the time the other interfaces were recorded alone
-    own_span = {i: (last - first) / 1e9 for i, (first, last) in spans.items()}
+    # (a frame is stamped as it ends: the span holds the first frame's time on the wire too, so three
+    # frames back to back are a full bus, not 162 %)
+    own_span = {i: (last - first) / 1e9 + first_bits / bitrate for i, (first, last, first_bits) in spans.items()}
     loads = {str(i): 100 * b / bitrate / own_span[i] if own_span[i] > 0 else 0.0
              for i, b in sorted(bits.items(), key=str) if i is not None}
     total_load = 100 * sum(bits.values()) / bitrate / span if span > 0 else 0.0

@@ -257,6 +257,7 @@ def match_subset(expected: list[Observed], observed: list[Observed], window_ns: 
 
 
 STAMP_SLACK_NS = 5_000_000  # a frame this much "before it was sent" is matched anyway: a bench error, not a loss
+DUPLICATE_PACE = 10  # ... unless it came within 1/this of its copies' cycle after the last one (_Copies.take)
 BEHIND_SCAN = 4096           # matched copies looked past for a late one (a later frame is a duplicate + a loss)
 LOAD_TRIM_NS = 1_000_000_000  # how far past its window a frame may stay while the bus capture is read ahead
 _END = 1 << 62               # a time after every stamp: the end of both streams
@@ -294,10 +295,12 @@ class _Copies:
         story than a late frame; within a run of identical frames the earliest one: nothing
         tells them apart). If no copy was sent by t_ns, the next one ahead if it was sent at
         most STAMP_SLACK_NS later: the match shows as a negative latency, a bench error; but not
-        when the frame came less than half that copy's cycle after the last one with this key:
-        a frame published twice (a duplicate), which taking the next copy would shift every
-        later copy onto its predecessor (a fast constant frame: all reordered, all "early").
-        Returns the copy's position (frames[position])."""
+        when the frame came within a tenth of that copy's cycle after the last one with this key
+        and that one was not early itself: a frame published twice (a duplicate), which taking
+        the next copy would shift every later copy onto its predecessor (a fast constant frame:
+        all reordered, all "early"). A frame early by its stamp alone arrives at the pace its
+        copies were sent, and frames of one early sample follow an early one: both stay bench
+        errors. Returns the copy's position (frames[position])."""
         arrived, self.arrived = self.arrived, t_ns
         n = len(self.indices)
         indices, used, times = self.indices, self.used, self.times
@@ -325,8 +328,9 @@ class _Copies:
             scanned += 1
         if best is None and ahead < n and times[ahead] <= t_ns + STAMP_SLACK_NS and \
                 not (arrived is not None and ahead > self.start and
-                     2 * (t_ns - arrived) < times[ahead] - times[ahead - 1]):
+                     DUPLICATE_PACE * (t_ns - arrived) < times[ahead] - times[ahead - 1]):
             best = ahead
+            self.arrived = None  # early: its arrival says nothing of the pace
         if best is None:
             return None
         used[best] = 1

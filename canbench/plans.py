@@ -4,6 +4,7 @@ the periodic engine's frames; and the send log both write (ecu-<name>.sent.tsv, 
 trace line, send time, the frame in candump form), which the oracle reads back."""
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -12,6 +13,7 @@ import can
 from . import periodic, restbus
 from .scenario import Ecu, Scenario
 from .trace import read_replay
+from .trace_frames import TraceFrames
 from .wire import Frame
 
 
@@ -37,33 +39,34 @@ def schedule(ecu: Ecu, scenario: Scenario) -> Plan:
                     last_id_count=sum(periodic.periodic_count(m, run_s) for m in msgs
                                       if last and (m.can_id, m.extended) == (last.arbitration_id,
                                                                              last.is_extended_id)))
-    frames, t0 = read_replay(ecu.trace, ecu.interface) if ecu.trace else ([], None)
+    frames, t0 = read_replay(ecu.trace, ecu.interface) if ecu.trace else (TraceFrames(), None)
     return timed_plan(frames, ecu.speed, ecu.loops, ecu.start_offset_s, ecu.bus, ecu.id_remap, t0)
 
 
-def timed_plan(frames, speed: float, loops: int, start_offset_s: float, bus: str,
+def timed_plan(frames: TraceFrames, speed: float, loops: int, start_offset_s: float, bus: str,
                id_remap: dict[int, int], t0: float | None = None) -> Plan:
-    """A trace's frames (canbench.trace_frames.TraceFrame) looped `loops` times at `speed`; t0: the time
-    they are sent relative to (default their first: an interface of a trace, the trace's first)."""
+    """A trace's frames looped `loops` times at `speed`; t0: the time they are sent relative to
+    (default their first: an interface of a trace, the trace's first). Each Message is made from
+    the frames' columns as it is sent."""
     if not frames:
         return Plan(frames=lambda: iter(()), count=0, last=None, last_id_count=0)
-    first = frames[0].message.timestamp
-    t0 = first if t0 is None else t0
-    span = frames[-1].message.timestamp - first  # a loop: the frames' own span and first gap
-    period = span + (frames[1].message.timestamp - first if len(frames) > 1 else 0.001)
+    first_ns = frames.t_ns(0)
+    t0_ns = first_ns if t0 is None else round(t0 * 1e9)
+    span_s = (frames.t_ns(len(frames) - 1) - first_ns) / 1e9  # a loop: the frames' own span and first gap
+    period = span_s + ((frames.t_ns(1) - first_ns) / 1e9 if len(frames) > 1 else 0.001)
 
-    def timed(tf, loop: int) -> can.Message:
-        m = tf.message
-        return can.Message(timestamp=start_offset_s + (m.timestamp - t0 + loop * period) / speed,
-                           arbitration_id=id_remap.get(m.arbitration_id, m.arbitration_id),
-                           is_extended_id=m.is_extended_id, is_remote_frame=m.is_remote_frame, dlc=m.dlc,
-                           data=b"" if m.is_remote_frame else m.data, channel=bus)
+    def sent() -> Iterator[tuple[int, can.Message]]:
+        for loop in range(loops):  # at start_offset_s + (t - t0 + loop * period) / speed
+            yield from frames.sent(t0_ns, start_offset_s + loop * period / speed, 1 / speed, id_remap, bus)
 
-    last = timed(frames[-1], loops - 1)
-    per_loop = sum(1 for tf in frames if (id_remap.get(tf.message.arbitration_id, tf.message.arbitration_id),
-                                          tf.message.is_extended_id) == (last.arbitration_id, last.is_extended_id))
-    return Plan(frames=lambda: ((tf.line, timed(tf, loop)) for loop in range(loops) for tf in frames),
-                count=loops * len(frames), last=last, last_id_count=loops * per_loop)
+    last_at = len(frames) - 1
+    can_id = frames.key(last_at)[0]
+    last = frames.message(last_at, start_offset_s + ((frames.t_ns(last_at) - t0_ns) / 1e9 + (loops - 1) * period)
+                          / speed, id_remap.get(can_id, can_id), bus)
+    wanted = (last.arbitration_id, last.is_extended_id)
+    per_loop = sum(n for (can_id, extended), n in Counter(frames.keys()).items()
+                   if (id_remap.get(can_id, can_id), extended) == wanted)
+    return Plan(frames=sent, count=loops * len(frames), last=last, last_id_count=loops * per_loop)
 
 
 def frame_of(msg: can.Message) -> Frame:

@@ -204,3 +204,27 @@ def test_a_capture_clock_ahead_of_the_bus_is_still_negative_latency_not_duplicat
     s = c.summary()
     assert (s["duplicates"], s["lost"], s["matched"], s["reordered"]) == (0, 0, len(sent), 0)
     assert len(c.negative) == len(sent)
+
+
+def constant_every(n: int, cycle_ms: float) -> list[Observed]:
+    f = wire.Frame(0x0C0, 2, b"\x00\x10")
+    return [Observed(f, int(k * cycle_ms * 1_000_000), k, line=k + 1) for k in range(n)]
+
+
+def test_one_bus_stamp_late_by_3_ms_is_still_a_bench_error_not_a_duplicate():
+    # a 5 ms constant frame, each arriving 0.5 ms after its stamp but one stamped 3 ms late (within
+    # the stamp slack): it arrives 1.5 ms after the one before, not at a duplicate's pace
+    sent = constant_every(100, 5)
+    got = [Observed(s.frame, s.t_ns + (-3_000_000 if s.index == 50 else 500_000), 0, key="vehicle/can/rx")
+           for s in sent]
+    c = compare(sent, got)
+    assert (c.counts["duplicates"], c.counts["lost"], c.counts["reordered"], len(c.negative)) == (0, 0, 0, 1)
+
+
+def test_batched_frames_with_a_capture_clock_ahead_are_still_bench_errors():
+    # two copies of a 1 ms constant frame per 2 ms sample, both at the sample's time, the capture's
+    # clock 3 ms ahead: the second of a sample follows an early first one, so it is early too
+    sent = constant_every(200, 1)
+    got = [Observed(s.frame, s.t_ns - s.t_ns % 2_000_000 - 700_000, 0, key="vehicle/can/rx") for s in sent]
+    c = compare(sent, got)
+    assert (c.counts["duplicates"], c.counts["lost"]) == (0, 0) and len(c.negative) == len(sent)

@@ -11,7 +11,8 @@ import pytest
 
 from canbench import commands, periodic, plans
 from canbench.scenario import Commands, Ecu, Message
-from canbench.trace_frames import TraceFrame
+from canbench.trace_frames import TraceFrames
+from canbench.wire import Frame
 
 pytestmark = pytest.mark.unit
 
@@ -52,9 +53,9 @@ def test_ecu_schedule_counts_the_own_copies_of_the_last_id():
 
 
 def test_timed_plan_loops_remaps_and_knows_its_last_frame():
-    trace = [TraceFrame(line=i + 1, message=can.Message(timestamp=100 + i * 0.01, arbitration_id=id_, dlc=1,
-                                                        data=bytes([i])))
-             for i, id_ in enumerate([0x10, 0x20, 0x10, 0x30])]
+    trace = TraceFrames("can0")
+    for i, id_ in enumerate([0x10, 0x20, 0x10, 0x30]):
+        trace.append(i + 1, 100_000_000_000 + i * 10_000_000, Frame(id_, 1, bytes([i])))  # 100 s + i * 10 ms
     plan = plans.timed_plan(trace, 2.0, 3, 1.0, "vcan1", {0x30: 0x10})
     frames = list(plan.frames())
     assert plan.count == len(frames) == 12

@@ -75,3 +75,34 @@ def test_max_jitter_added_ms_fails_a_bridge_that_holds_one_id_back_at_random(tmp
     assert problem.startswith("vcan0 id 100: its gaps spread ") and "more than max_jitter_added_ms 1" in problem
     faithful = [200_000 + (i * 7919) % 400_000 for i in range(len(rec))]  # 0.2 .. 0.6 ms, in order
     assert judged(gated, tmp_path, rec, latency=lambda i: faithful[i]) == []
+
+
+def test_a_bridge_that_delivers_each_burst_of_a_bursty_id_at_once_fails_cycle_time(tmp_path):
+    # 300 in bursts of 5 frames 10 ms apart every 500 ms: not periodic, held to the bus's median
+    # 10 ms (its mean gap 100 ms must not widen the tolerance); the bridge holds each burst and
+    # publishes it at once: Zenoh's median gap 0, nothing lost or reordered
+    ms = 1_000_000
+    rec = sorted([(T0 + i * 10 * ms, "100#00") for i in range(500)]
+                 + [(T0 + b * 500 * ms + k * 10 * ms + 3 * ms, f"300#{k:02X}") for b in range(10) for k in range(5)])
+    sc = scaffolded(tmp_path, rec)
+    assert "300" not in sc.expect["cycle_time"]["ids"]
+    assert judged(sc, tmp_path, rec) == []
+
+    def held(i: int) -> int:
+        t, text = rec[i]
+        return 400_000 if not text.startswith("300#") else \
+            T0 + (t - T0) // (500 * ms) * 500 * ms + 43 * ms - t + 400_000
+    assert any(p.startswith("vcan0 id 300: median cycle") for p in judged(sc, tmp_path, rec, latency=held))
+
+
+def test_one_late_wakeup_on_an_id_of_few_gaps_does_not_fail_the_jitter_gate(tmp_path):
+    # 200 once a second for 6 s: 5 gaps, whose 10th and 90th percentiles are their min and max
+    ms = 1_000_000
+    rec = sorted([(T0 + i * 10 * ms, "100#00") for i in range(600)]
+                 + [(T0 + i * 1000 * ms + 5 * ms, "200#00") for i in range(6)])
+    sc = scaffolded(tmp_path, rec)
+    gated = dataclasses.replace(sc, expect={**sc.expect, "cycle_time": {**sc.expect["cycle_time"],
+                                                                       "max_jitter_added_ms": 3.0}})
+    late = next(i for i, (_, x) in enumerate(rec) if x.startswith("200#") and i > len(rec) // 2)
+    faithful = [200_000 + (i * 7919) % 400_000 + (4 * ms if i == late else 0) for i in range(len(rec))]
+    assert judged(gated, tmp_path, rec, latency=lambda i: faithful[i]) == []

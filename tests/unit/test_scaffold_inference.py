@@ -61,3 +61,12 @@ def test_an_event_periodic_message_with_one_frame_the_logger_missed_passes_its_o
     run = SimpleNamespace(scenario=sc, buses=[SimpleNamespace(bus="vcan0", cycle_times={
         "100": {"can": side, "zenoh": dict(side)}})])
     assert checks.cycle_time(run) == []
+
+
+def test_an_interface_with_a_short_burst_is_not_loaded_beyond_100_pct(tmp_path):
+    # can1: three 8-byte frames back to back at 500 kbit/s (0.27 ms each, the worst-case stuffing
+    # the load is counted with) and nothing else; first to last stamp left out a frame's time: 150 %
+    frames = [(1700000000 + i * 0.01, "can0", "100#0011223344556677") for i in range(1000)]
+    frames += [(1700000005 + k * 0.00027, "can1", "200#0011223344556677") for k in range(3)]
+    s = authoring.summarise(write(tmp_path / "rec.log", frames))
+    assert round(s.loads["can1"], 6) <= 100.0 and round(s.load_pct, 6) <= 100.0, s.loads
