@@ -646,7 +646,7 @@ def read_trace(path: str | Path, interfaces: set[str] | None = None, only: str |
     carries one); None: the trace must have one, since merging several would put two buses'
     frames on one, out of time order (candump's lines are in order per interface only). starts:
     filled with each interface's first stamp (ns), the others' too. The frames are held compactly
-    (canbench.trace_frames): about 31 bytes each."""
+    (canbench.trace_frames): about 35 bytes each."""
     frames: TraceFrames | None = None
     seen: dict[str | None, int] = {}  # interface -> its first line
     for line, t_ns, iface, frame in iter_trace(path, interfaces, cache_size=STREAM_CACHE):  # stored as columns
