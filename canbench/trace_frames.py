@@ -70,22 +70,21 @@ class TraceFrames(Sequence[TraceFrame]):
         kind, at = self._kinds[i], i * _SLOT
         return can.Message(timestamp=timestamp, arbitration_id=arbitration_id, is_extended_id=bool(kind & _EXTENDED),
                            is_remote_frame=bool(kind & _REMOTE), dlc=self._dlcs[i],
-                           data=bytes(self._data[at:at + self._lens[i]]), channel=channel)
+                           data=self._data[at:at + self._lens[i]], channel=channel)
 
     def sent(self, origin_ns: int, offset_s: float, scale: float, id_remap: dict[int, int],
              channel: str | None) -> Iterator[tuple[int, can.Message]]:
         """(line, Message) of every frame as a replay sends it: at offset_s + (its stamp - origin_ns)
         in s x scale (the difference taken in integer ns: epoch stamps as floats are 0.2 us apart),
         its id remapped, on channel; made from the columns as it goes (the replay's hot path)."""
-        lines, stamps, ids, kinds, dlcs, lens, data = (self._lines, self._t_ns, self._ids, self._kinds, self._dlcs,
-                                                       self._lens, self._data)
-        message = can.Message
-        for i in range(len(lines)):
-            kind, at, can_id = kinds[i], i * _SLOT, ids[i]
-            yield lines[i], message(timestamp=offset_s + (stamps[i] - origin_ns) / 1e9 * scale,
-                                    arbitration_id=id_remap.get(can_id, can_id), is_extended_id=bool(kind & _EXTENDED),
-                                    is_remote_frame=bool(kind & _REMOTE), dlc=dlcs[i],
-                                    data=bytes(data[at:at + lens[i]]), channel=channel)
+        data, message, get = self._data, can.Message, id_remap.get
+        columns = (self._lines, self._t_ns, self._ids, self._kinds, self._dlcs, self._lens,
+                   range(0, len(self._data), _SLOT))
+        for line, stamp, can_id, kind, dlc, size, at in zip(*columns, strict=True):
+            yield line, message(timestamp=offset_s + (stamp - origin_ns) / 1e9 * scale,
+                                arbitration_id=get(can_id, can_id), is_extended_id=kind & _EXTENDED == _EXTENDED,
+                                is_remote_frame=kind & _REMOTE == _REMOTE, dlc=dlc, data=data[at:at + size],
+                                channel=channel)
 
     def _at(self, i: int) -> TraceFrame:
         return TraceFrame(self._lines[i], self.message(i, self._t_ns[i] / 1e9, self._ids[i], self.channel))
