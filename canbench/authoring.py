@@ -15,6 +15,7 @@ from array import array
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -429,30 +430,23 @@ def split_trace(trace: Path, buses: dict[str, str], folder: Path) -> tuple[dict[
     return paths, {iface: round((t_ns - start) / 1e9, 6) for iface, t_ns in first.items()}
 
 
-def dbc_cycles_of(s: TraceSummary, dbc_path: Path) -> dict[str, float]:
-    """trace id -> the DBC's cycle (ms) of its message, for the trace's ids that are a cyclic
+def dbc_cycles_of(s: TraceSummary, dbc_path: Path) -> dict[str, tuple[Any, float]]:
+    """trace id -> (its message, the DBC's cycle in ms), for the trace's ids that are a cyclic
     message of the DBC (its own id, or a J1939 group's from another source: dbc.message_of)."""
     from .dbc import cycle_of_id, load_dbc
     db = load_dbc(dbc_path)
-    return {i.ident: found[1] for i in s.ids if (found := cycle_of_id(db, int(i.ident, 16), i.extended))}
+    return {i.ident: found for i in s.ids if (found := cycle_of_id(db, int(i.ident, 16), i.extended))}
 
 
-def dbc_at_most_of(s: TraceSummary, dbc_path: Path) -> set[str]:
-    """The trace's ids of a cyclic message of the DBC that also sends on events (EventPeriodic,
-    ...): cycle_time.from_dbc judges their longest gap on the bus against the DBC's cycle."""
-    from .dbc import cycle_of_id, load_dbc, send_type_at_most
-    db = load_dbc(dbc_path)
-    return {i.ident for i in s.ids if (found := cycle_of_id(db, int(i.ident, 16), i.extended))
-            and send_type_at_most(found[0].send_type)}
-
-
-def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float], tolerance_pct: float,
-                    at_most: frozenset[str] | set[str] = frozenset()) -> dict[str, tuple[float, float]]:
+def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, tuple[Any, float]],
+                    tolerance_pct: float) -> dict[str, tuple[float, float]]:
     """id -> (the trace's median cycle, the DBC's) for the trace's ids of a cyclic message of the
     DBC (dbc_cycles) that it sends at another cycle (beyond tolerance_pct; the median over its
-    interfaces), and for those of an event-periodic message (at_most) whose longest gap in the
-    trace is beyond the DBC's cycle + tolerance_pct (a frame the car or its logger missed): the
-    gate from_dbc writes for them would fail the trace itself."""
+    interfaces), and for those of an event-periodic message (EventPeriodic, ...: from_dbc judges
+    its longest gap on the bus against the DBC's cycle) whose longest gap in the trace is beyond
+    the DBC's cycle + tolerance_pct (a frame the car or its logger missed): the gate from_dbc
+    writes for them would fail the trace itself."""
+    from .dbc import send_type_at_most
     seen: dict[str, list[float]] = {}
     longest: dict[str, float] = {}
     for i in s.ids:
@@ -461,11 +455,12 @@ def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, float], tolerance_pct
         if i.max_gap_ms is not None:
             longest[i.ident] = max(longest.get(i.ident, 0.0), i.max_gap_ms)
     out = {}
-    for ident, cycle in dbc_cycles.items():
+    for ident, (message, cycle) in dbc_cycles.items():
         if ident in seen:
             median = statistics.median(seen[ident])
             if abs(median - cycle) > cycle * tolerance_pct / 100 or (
-                    ident in at_most and longest.get(ident, 0.0) > cycle * (1 + tolerance_pct / 100)):
+                    send_type_at_most(message.send_type)
+                    and longest.get(ident, 0.0) > cycle * (1 + tolerance_pct / 100)):
                 out[ident] = (round(median, 3), cycle)
     return out
 
@@ -586,7 +581,7 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
             # where the recorded car sends a message at another cycle than its DBC says (another
             # variant, an event-periodic message's events), the trace's cycle: the gate judges the
             # bridge against the bus, and the car is what the bus replays
-            overridden = _dbc_cycles_off(s, dbc_cycles, tolerance, dbc_at_most_of(s, dbc))
+            overridden = _dbc_cycles_off(s, dbc_cycles, tolerance)
             ids |= {ident: trace_cycle for ident, (trace_cycle, _) in overridden.items()}
             expect["cycle_time"] = {"from_dbc": True, "tolerance_pct": tolerance} | ({"ids": ids} if ids else {})
             header += (f"# cycle_time.from_dbc: the DBC's GenMsgCycleTime for the trace's {len(from_dbc)} ids of its "

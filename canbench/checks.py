@@ -27,7 +27,12 @@ FLOOD_ACTION = "can_flood"
 
 
 def _frames(items) -> str:
-    listed = ", ".join(describe(i) for i in items[:SHOW])
+    return _listed(items, describe)
+
+
+def _listed(items, said) -> str:
+    """The first SHOW items as said, and how many more."""
+    listed = ", ".join(said(i) for i in items[:SHOW])
     return listed + (f", ... ({len(items) - SHOW} more)" if len(items) > SHOW else "")
 
 
@@ -422,8 +427,7 @@ def only_expected_keys(result: RunResult) -> list[str] | None:
     keys = result.unexpected_keys  # all of them in metrics.json unexpected_keys
     if not keys:
         return []
-    listed = ", ".join(repr(k) for k in keys[:SHOW]) + (f", ... ({len(keys) - SHOW} more)" if len(keys) > SHOW else "")
-    return [f"samples on {len(keys)} unexpected keys: {listed}"]
+    return [f"samples on {len(keys)} unexpected keys: {_listed(keys, repr)}"]
 
 
 def ecus_sent_their_traces(result: RunResult) -> list[str] | None:

@@ -55,14 +55,17 @@ def timed_plan(frames: TraceFrames, speed: float, loops: int, start_offset_s: fl
     span_s = (frames.t_ns(len(frames) - 1) - first_ns) / 1e9  # a loop: the frames' own span and first gap
     period = span_s + ((frames.t_ns(1) - first_ns) / 1e9 if len(frames) > 1 else 0.001)
 
+    def offset_s(loop: int) -> float:  # a frame goes at start_offset_s + (t - t0 + loop * period) / speed
+        return start_offset_s + loop * period / speed
+
     def sent() -> Iterator[tuple[int, can.Message]]:
-        for loop in range(loops):  # at start_offset_s + (t - t0 + loop * period) / speed
-            yield from frames.sent(t0_ns, start_offset_s + loop * period / speed, 1 / speed, id_remap, bus)
+        for loop in range(loops):
+            yield from frames.sent(t0_ns, offset_s(loop), 1 / speed, id_remap, bus)
 
     last_at = len(frames) - 1
     can_id = frames.key(last_at)[0]
-    last = frames.message(last_at, start_offset_s + ((frames.t_ns(last_at) - t0_ns) / 1e9 + (loops - 1) * period)
-                          / speed, id_remap.get(can_id, can_id), bus)
+    last = frames.message(last_at, offset_s(loops - 1) + (frames.t_ns(last_at) - t0_ns) / 1e9 / speed,
+                          id_remap.get(can_id, can_id), bus)
     wanted = (last.arbitration_id, last.is_extended_id)
     per_loop = sum(n for (can_id, extended), n in Counter(frames.keys()).items()
                    if (id_remap.get(can_id, can_id), extended) == wanted)
