@@ -224,7 +224,7 @@ check-faults: ucan firmware zenohd
 	ZN_CAPTURE=$(CURDIR)/$(FW_BUILD)/zn-capture UCAN_BUILD=$(CURDIR)/$(UCAN_BUILD) ZN_BRIDGE=$(CURDIR)/$(FW_BUILD)/zenoh-node $(PYTEST) -q tests/faults
 
 # The bench itself in compose, as make test runs it.
-check-compose: images
+check-compose: images ucan firmware
 	BENCH_REQUIRE_IMAGES=1 $(PYTEST) -q tests/compose
 
 # make check's phases, in order (scripts/run-phases: progress and each phase's time)
@@ -352,7 +352,9 @@ images: base
 # its own compose project; SHARD=k/n: this runner's share; one summary in reports/<suite>/
 JOBS  ?= 1
 SHARD ?=
-test: images
+# DEVICE=host:PORT [DEVICE_CMD=...]: a device of your own in the bridge's place (scripts/bench-run);
+# a host process joins the userspace bus through the host's build of the preload library
+test: images $(if $(DEVICE),ucan)
 	@JOBS=$(JOBS) SHARD=$(SHARD) scripts/bench-suite $(SCENARIO)
 
 # Nightly soak: one hour, memory slope and descriptor growth gated (docs/faults.md).

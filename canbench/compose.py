@@ -9,6 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import faults, scenario, security
+from .device import Device
+from .device import override as device_override
+from .identities import PORT
 
 # scenario bridge key -> the bridge's environment variable: the schema's x-env of each key
 # (tests/unit/test_bridge_options.py holds it to the bridge's option table and Kconfig)
@@ -48,12 +51,19 @@ def bus_spec(bus: dict) -> str:
     return bus["name"] + (":" + ",".join(opts) if opts else "")
 
 
-def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: bool = False,
-                     can_mode: str = "userspace") -> dict:
+def bridge_environment(sc: scenario.Scenario) -> dict[str, str]:
+    """The scenario's bridge settings as the bridge's environment variables."""
     bridge_env = {"ZENOH_NODE_CAN": ",".join(sc.bus_names), "ZENOH_PUBLISH_PERIOD_MS": "0"}
     bridge_env.update({env: str(sc.bridge[key]).lower() if isinstance(sc.bridge[key], bool) else str(sc.bridge[key])
                        for key, env in BRIDGE_ENV.items() if key in sc.bridge})  # a YAML true as the bridge's "true"
     bridge_env.setdefault(BRIDGE_ENV["tx_max_age_ms"], str(sc.tx_max_age_ms))  # on by default in the bench
+    return bridge_env
+
+
+def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: bool = False,
+                     can_mode: str = "userspace", device: Device | None = None, canbus_dir: str = "") -> dict:
+    """device: a device of your own in the bridge's place (canbench.device), its bus in canbus_dir."""
+    bridge_env = bridge_environment(sc)
     orchestrator_env = {"SCENARIO": scenario_in_container}
     services: dict = {
         "bus": {"environment": {"BENCH_CAN_IFACES": " ".join(bus_spec(b) for b in sc.buses)}},
@@ -127,7 +137,12 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
                         "--run-id", "${RUN_ID}", "--run-dir", "/reports/${RUN_ID}", "--router", ROUTER],
         }, tmp=True)
     services.update(probe_services(sc))
-    return {"services": services}
+    out: dict = {"services": services}
+    if device:
+        extra = device_override(device, canbus_dir, PORT)
+        services["router"] = {**services.get("router", {}), **extra["services"]["router"]}
+        out["volumes"] = extra["volumes"]
+    return out
 
 
 def probe_services(sc: scenario.Scenario) -> dict:

@@ -31,6 +31,7 @@ CAPTURE_MOUNT = "/run/zenoh-capture"  # the orchestrator's second identity, for 
 IDENTITIES = ("router", "router2", "bridge", "orchestrator", "capture", "ecu", "viewer")
 ROGUE = "rogue-bridge"  # CN "bridge", signed by a CA the router does not trust
 ANONYMOUS = "anonymous"  # the CA's certificate only (it trusts the router), no certificate of its own
+DEVICE_IDENTITY = "device"  # a device of your own (canbench.device): CN bridge, its files on the host
 SAN = "subjectAltName=DNS:router,DNS:router2,DNS:localhost,IP:127.0.0.1\n"  # what clients dial
 ALL = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable", "liveliness_token",
        "liveliness_query", "declare_liveliness_subscriber"]
@@ -154,11 +155,26 @@ def bridge_acl(prefix: str = "vehicle/can") -> dict:
     return router_acl
 
 
+def device_config(secure: bool, host_dir: str, endpoint: str) -> dict:
+    """The Zenoh config of a device of your own (canbench.device): a client of the router on
+    loopback, its identity's files where the host holds them, no multicast, no listener."""
+    conf: dict = {"mode": "client", "connect": {"endpoints": [endpoint]}, "listen": {"endpoints": []},
+                  "scouting": {"multicast": {"enabled": False}}}
+    if secure:
+        conf["transport"] = {"link": {"tls": {
+            "root_ca_certificate": f"{host_dir}/ca.pem", "enable_mtls": True,
+            "connect_certificate": f"{host_dir}/cert.pem", "connect_private_key": f"{host_dir}/key.pem"}}}
+    return conf
+
+
 def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_keys: tuple[str, ...] = (),
-             ros2_domains: tuple[int, ...] = (), bridge_listens: bool = False) -> list[str]:
+             ros2_domains: tuple[int, ...] = (), bridge_listens: bool = False,
+             device: tuple[str, str] | None = None) -> list[str]:
     """Writes every identity's directory under out (which must not exist or be empty); returns
     the identities written. Files are 0644 (certificates, configs) and 0640 (keys): every bench
-    service runs as the bench's user and sees only its own directory."""
+    service runs as the bench's user and sees only its own directory.
+    device: (the host's path of out, the router's endpoint on loopback) for a device of your own:
+    DEVICE_IDENTITY/ with a certificate of CN bridge (the ACL's bridge) and its config."""
     out.mkdir(parents=True, exist_ok=True)
     if any(out.iterdir()):
         raise RuntimeError(f"canbench identities: {out} is not empty (identities are made once per run)")
@@ -172,6 +188,19 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
             for name in IDENTITIES:
                 _cert(work, "ca", name, name)
             _cert(work, "rogue-ca", "bridge", ROGUE)
+            if device:
+                _cert(work, "ca", "bridge", DEVICE_IDENTITY)
+        if device:
+            d = out / DEVICE_IDENTITY
+            d.mkdir()
+            if secure:
+                shutil.copy(work / "ca.pem", d / "ca.pem")
+                shutil.copy(work / f"{DEVICE_IDENTITY}.pem", d / "cert.pem")
+                shutil.copy(work / f"{DEVICE_IDENTITY}.key", d / "key.pem")
+                os.chmod(d / "key.pem", 0o640)
+            host_dir, endpoint = device
+            (d / "zenoh.json5").write_text(json.dumps(device_config(secure, f"{host_dir}/{DEVICE_IDENTITY}", endpoint),
+                                                      indent=1) + "\n")
         for name in names:
             d = out / name
             d.mkdir()
@@ -198,5 +227,5 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
                                                      + "\n")
     for d in [out, *out.iterdir()]:
         os.chmod(d, 0o755)
-    return names
+    return names + ([DEVICE_IDENTITY] if device else [])
 

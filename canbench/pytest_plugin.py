@@ -32,6 +32,11 @@ def pytest_addoption(parser):
                     help="a viewer records the run (traffic.rrd): wait for it before the traffic starts")
     group.addoption("--baseline", default=os.environ.get("BENCH_BASELINE") or None,
                     help="metrics.json (or its run directory) of a run to gate relative regressions against")
+    group.addoption("--device", default=os.environ.get("BENCH_DEVICE") or None,
+                    help="a device of your own in the bridge's place (DEVICE=host:PORT), as metrics.json records it")
+    group.addoption("--ready-timeout", type=float, default=float(os.environ.get("BENCH_READY_TIMEOUT_S") or
+                                                                 run.BRIDGE_READY_TIMEOUT_S),
+                    help="seconds to wait for the bridge's (or the device's) liveliness token")
 
 
 def pytest_configure(config):
@@ -56,7 +61,8 @@ def scenario_run(bench_options, request):
         baseline = json.loads((path / "metrics.json" if path.is_dir() else path).read_text())
     result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router,
                          consumer=bench_options.consumer, baseline=baseline, project=bench_options.project,
-                         wait_viewer=bench_options.viewer)
+                         wait_viewer=bench_options.viewer, ready_timeout_s=bench_options.ready_timeout)
+    result.metrics["device"] = bench_options.device  # None: the bench's own bridge
     request.config.pluginmanager.get_plugin(PLUGIN_NAME).result = result
     return result
 

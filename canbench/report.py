@@ -248,6 +248,7 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}
 .fail{{color:#c00;font-weight:bold}} .skip{{color:#888}} h1 .fail,h1 .pass{{font-size:80%}}</style></head><body>
 <h1>{html.escape(m['scenario'])} <span class="{'pass' if passed else 'fail'}">{verdict}</span></h1>
 <p>Run {html.escape(m['run_id'])} · traffic {m.get('traffic_s')} s · {html.escape(result.scenario.description)}
+{'· device under test ' + html.escape(str(m['device'])) if m.get('device') else ''}
 {'· baseline ' + html.escape(str(m['baseline_run_id'])) if m.get('baseline_run_id') else ''}</p>
 <p>{links}</p>
 <h2>Verdicts</h2>{_table(["check", "verdict", "problems"], verdict_rows)}

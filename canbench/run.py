@@ -21,7 +21,7 @@ from .faults import Injector
 from .runkeys import rx_key
 from .scenario import Scenario
 
-BRIDGE_READY_TIMEOUT_S = 60
+BRIDGE_READY_TIMEOUT_S = 60  # the default; a device started by hand gets longer (scripts/bench-run)
 DRAIN_TIMEOUT_S = 5.0
 # immediate mode's drained: nothing new read for this long (a frame still in the bridge's socket is
 # in no counter: its last one read just after the stats said 1539 of 1540, seen once in the host lane)
@@ -88,10 +88,10 @@ class Execution:
         if self.echo_names <= set(self.done):
             self.echoes_done.set()
 
-    def ready(self, wait_viewer: bool) -> None:
+    def ready(self, wait_viewer: bool, bridge_timeout_s: float = BRIDGE_READY_TIMEOUT_S) -> None:
         """The data path is up end to end (the token seen through the consumer's path), the
         echoes are bound, and a recording viewer subscribes to the bridge's ROS 2 topic."""
-        runkeys.wait_token(self.data, runkeys.bridges(self.prefix), BRIDGE_READY_TIMEOUT_S)
+        runkeys.wait_token(self.data, runkeys.bridges(self.prefix), bridge_timeout_s)
         for e in self.scenario.echoes:
             runkeys.wait_token(self.session, runkeys.ecu_ready(self.run_id, e.name), BRIDGE_READY_TIMEOUT_S)
         if wait_viewer:
@@ -227,15 +227,16 @@ class Execution:
 
 def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can",
             consumer: str | None = None, baseline: dict | None = None, project: str | None = None,
-            wait_viewer: bool = False) -> RunResult:
+            wait_viewer: bool = False, ready_timeout_s: float = BRIDGE_READY_TIMEOUT_S) -> RunResult:
     """router: where the bench coordinates (ECUs, stats); consumer: where the capture and the
     commands connect (the router by default; a far router or the bridge itself by topology);
     project: the compose project, for fault steps; wait_viewer: a `canbench view` records the
-    run (make test VIEWER=1), the traffic starts once its token says it subscribes."""
+    run (make test VIEWER=1), the traffic starts once its token says it subscribes; ready_timeout_s: how
+    long the bridge's token may take (a device of your own started by hand: longer)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     run = Execution(scenario, run_id, run_dir, router, prefix, consumer, project)
     try:
-        run.ready(wait_viewer)
+        run.ready(wait_viewer, ready_timeout_s)
         try:
             run.captures()
             run.traffic()

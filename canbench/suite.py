@@ -27,7 +27,7 @@ import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from . import compare, scenario
+from . import compare, device, scenario
 from .errors import InputError, ScenarioError
 
 # A run's fixed cost on top of its traffic phase (compose up, readiness, analysis, reports,
@@ -70,6 +70,22 @@ def plan(paths: list[str], shard: str | None = None) -> list[tuple[float, str]]:
     expected = {p: expected_s(Path(p)) for p in dict.fromkeys(paths)}
     k, n = parse_shard(shard) if shard else (1, 1)
     return [(expected[p], p) for p in shards(expected, n)[k - 1]]
+
+
+def for_device(spec: str, paths: list[str], can_mode: str) -> list[str]:
+    """The scenarios a device of your own can run; each one left out said on stderr. ValueError:
+    a DEVICE that is not host:PORT, or no scenario left."""
+    device.parse(spec)
+    kept = []
+    for path in paths:
+        why = device.refusals(scenario.load(Path(path)), can_mode)
+        if why:
+            print(f"suite: not run against DEVICE={spec}: {'; '.join(why)}", file=sys.stderr)
+        else:
+            kept.append(path)
+    if not kept:
+        raise ValueError(f"DEVICE={spec}: none of the {len(paths)} scenario(s) can run against a device of your own")
+    return kept
 
 
 @dataclass
@@ -271,6 +287,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     q = sub.add_parser("plan", help="the scenarios of one shard, longest first, with expected seconds")
     q.add_argument("scenarios", nargs="+")
     q.add_argument("--shard", help="K/N: the K-th of N balanced shares (default: all)")
+    q.add_argument("--device", help="host:PORT: leave out, saying why, the scenarios a device of your own "
+                                    "cannot stand in for (canbench.device)")
+    q.add_argument("--can-mode", choices=("userspace", "kernel"), default="userspace")
     q = sub.add_parser("summary", help="index.html, junit.xml and summary.json of a suite's runs")
     q.add_argument("suite_dir", type=Path)
     q = sub.add_parser("compare", help="canbench compare of every scenario against the baseline suites")
@@ -283,7 +302,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     if args.suite_cmd == "plan":
-        for seconds, path in plan(args.scenarios, args.shard):
+        scenarios = args.scenarios
+        if args.device:
+            try:
+                scenarios = for_device(args.device, scenarios, args.can_mode)
+            except ValueError as e:
+                print(f"suite: {e}", file=sys.stderr)
+                return 2
+        for seconds, path in plan(scenarios, args.shard):
             print(f"{seconds:.0f}\t{path}")
         return 0
     if args.suite_cmd == "compare":

@@ -17,8 +17,9 @@ def cmd_identities(args) -> int:
         ros2_keys = tuple(runkeys.ros2_data_keys(sc))
         ros2_domains = (sc.bridge.get("ros2_domain", 0),) if sc.bridge.get("ros2_topic") else ()
         bridge_listens = sc.consumer == "bridge" or "listen" in sc.bridge
+    device = (args.device_host_dir, args.device_endpoint) if args.device_endpoint else None
     names = identities.generate(args.dir, secure=not args.open, ros2_keys=ros2_keys, ros2_domains=ros2_domains,
-                                bridge_listens=bridge_listens)
+                                bridge_listens=bridge_listens, device=device)
     print(f"identities: {len(names)} in {args.dir} ({'plain tcp, no access control' if args.open else 'mTLS + ACL'})")
     return 0
 
@@ -28,4 +29,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("dir", type=Path, help="an empty directory (scripts/bench-run: build/runs/<run-id>.identities)")
     p.add_argument("--scenario", type=Path, help="the run's scenario: its ROS 2 keys, whether the bridge listens")
     p.add_argument("--open", action="store_true", help="no TLS, no ACL: plain tcp (BENCH_ACCESS=open)")
+    p.add_argument("--device-endpoint", help="also an identity for a device of your own (canbench.device), "
+                                             "dialling this endpoint (tls/127.0.0.1:PORT)")
+    p.add_argument("--device-host-dir", default="", help="where the host holds DIR (the device's config names "
+                                                         "its files there)")
     p.set_defaults(func=cmd_identities)

@@ -176,3 +176,32 @@ def test_shards_together_run_every_scenario_once(bench):
         assert proc.returncode == 0, proc.stdout + proc.stderr
     started = [name for kind, name, _ in events() if kind == "start"]
     assert sorted(started) == sorted(names)
+
+
+FAULTED = ("name: {name}\nduration_s: 10\nbuses: [{{name: vcan0}}]\n"
+           "ecus: [{{name: e, bus: vcan0, role: echo, echo_ids: ['600']}}]\nexpect: {{integrity: true}}\n"
+           "faults: [{{at_s: 1, action: router_restart}}]\n")
+
+
+def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):
+    run, add, events, root = bench
+    add("plain")
+    add("faulted", text=FAULTED.format(name="faulted"))
+    proc = run(["plain", "faulted"], DEVICE="host:7448")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert [name for kind, name, _ in events() if kind == "start"] == ["plain"]
+    assert "not run against DEVICE=host:7448: " in proc.stderr and "faulted.yaml: fault steps" in proc.stderr
+    # nothing it can run, or a DEVICE that is not host:PORT: bad input, nothing started
+    for names, device, says in ((["faulted"], "host:7448", "none of the 1 scenario(s)"),
+                                (["plain"], "192.168.1.1:7447", "expected host:PORT")):
+        proc = run(names, DEVICE=device)
+        assert proc.returncode == 2 and says in proc.stderr, proc.stdout + proc.stderr
+    assert len([e for e in events() if e[0] == "start"]) == 1
+
+
+def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
+    run, add, events, root = bench
+    add("plain")
+    proc = run(["plain"], DEVICE="host:7448", JOBS="2")
+    assert proc.returncode == 2 and "JOBS=1, not 2" in proc.stderr
+    assert events() == []

@@ -1,0 +1,87 @@
+"""A device of your own in the bridge's place, as `make test DEVICE=host:PORT DEVICE_CMD=...`
+runs it (scripts/bench-run, canbench.device): the host's own build of zenoh-node, started by
+the bench on the host with the run's identity, reaches the router on 127.0.0.1 only and the bus
+through the hub's socket directory, and passes the smoke scenario on every check, its own stats
+included; the same device with a seeded fault (zenoh-node-faulty) fails the check for that
+fault; a device that stops early fails the run; nothing is left behind (containers, the host's
+socket directory, the device's process). Needs the images, `make ucan firmware` and Docker."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import socket
+import subprocess
+from pathlib import Path
+
+import pytest
+from test_compose import REPO, bench_run, junit_cases, leftovers
+
+pytestmark = pytest.mark.compose
+
+FIRMWARE = Path(os.environ.get("ZN_BRIDGE", REPO / "build" / "firmware" / "zenoh-node")).parent
+PRELOAD = REPO / "build" / "ucan" / "libucan-preload.so"
+SMOKE = REPO / "scenarios" / "smoke.yaml"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def built():
+    missing = [p for p in (FIRMWARE / "zenoh-node", FIRMWARE / "zenoh-node-faulty", PRELOAD) if not p.exists()]
+    if missing:
+        if os.environ.get("BENCH_REQUIRE_IMAGES"):
+            pytest.fail(f"{missing} not built although make built them first")
+        pytest.skip(f"host builds missing: {missing} (make ucan firmware)")
+
+
+def run_device(command: str, scenario: Path = SMOKE, **env: str) -> tuple[subprocess.CompletedProcess, Path, str]:
+    device = f"host:{free_port()}"
+    proc, run_dir = bench_run(scenario, DEVICE=device, DEVICE_CMD=command, BENCH_RETRY_INVALID="0", **env)
+    assert run_dir is not None, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc, run_dir, device
+
+
+def nothing_left(proc: subprocess.CompletedProcess, run_dir: Path) -> None:
+    assert leftovers(run_dir) == []
+    # the device's process group is gone, and so is the host's socket directory
+    started = re.search(r"\(pid (\d+); .*; the bus's sockets: (\S+)\)", proc.stdout)
+    assert started, proc.stdout
+    assert not Path(f"/proc/{started.group(1)}").exists()
+    assert not Path(started.group(2)).exists()
+
+def test_the_hosts_own_bridge_build_as_a_device_passes_smoke_on_every_check(built):
+    proc, run_dir, device = run_device(str(FIRMWARE / "zenoh-node"))
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["device"] == device and metrics["passed"] is True
+    assert metrics["can_to_zenoh"]["vcan0"]["matched"] == metrics["ecus"]["engine"]["sent"] > 0
+    cases = junit_cases(run_dir)
+    for check in ("integrity", "ordering", "latency_can_to_zenoh", "cycle_time", "bridge_stats_agree"):
+        assert cases[f"test_check[{check}]"] == "passed", cases
+    # the device ran on the host (its log is the run's), the bench's bridge never started
+    assert "zenoh-node" in (run_dir / "device.log").read_text()
+    assert "bridge_1 " not in (run_dir / "containers.log").read_text()
+    assert "bridge-1 " not in (run_dir / "containers.log").read_text()
+    nothing_left(proc, run_dir)
+
+
+def test_a_device_with_a_seeded_fault_fails_the_check_for_it(built):
+    proc, run_dir, _ = run_device(f"ZN_FAULT=drop:5 exec {FIRMWARE / 'zenoh-node-faulty'}")
+    assert proc.returncode == 1, proc.stdout[-4000:] + proc.stderr[-4000:]
+    cases = junit_cases(run_dir)
+    assert cases["test_check[integrity]"] == "failed", cases
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["can_to_zenoh"]["vcan0"]["lost"] > 0
+    nothing_left(proc, run_dir)
+
+
+def test_a_device_that_stops_before_the_run_ends_fails_it(built):
+    proc, run_dir, _ = run_device("exit 3", BENCH_READY_TIMEOUT_S="10")
+    assert proc.returncode != 0
+    assert "exited with 3 before the run ended" in proc.stderr
+    assert leftovers(run_dir) == []
