@@ -6,8 +6,9 @@ identity of the run (canbench.identities) and the scenario's bridge settings as 
 variables (device.env). The run waits for the device's liveliness token as for the bridge's.
 
 What a device cannot stand in for yet is refused before anything starts: fault steps (they act on
-the bench's own bridge container), the bridge as the consumer's endpoint, kernel vcan (a host
-process cannot reach the bus container's namespace)."""
+the bench's own bridge container), the bridge as the consumer's endpoint or listening where
+the scenario says (that would be the host's interfaces), kernel vcan (a host process cannot
+reach the bus container's namespace)."""
 from __future__ import annotations
 
 import re
@@ -52,6 +53,9 @@ def refusals(sc: scenario.Scenario, can_mode: str) -> list[str]:
     if sc.consumer == "bridge":
         out.append(f"{where}: topology consumer: bridge reaches the bench's bridge in the bus's namespace; "
                    f"a device of your own is reached through the router")
+    if "listen" in sc.bridge:
+        out.append(f"{where}: bridge.listen was written for the bench's bridge in the bus's namespace; on the "
+                   f"host the device would listen on the host's interfaces")
     if can_mode == "kernel":
         out.append(f"{where}: BENCH_CAN_MODE=kernel: a host process cannot reach the bus container's vcan; "
                    f"a device of your own joins the userspace bus")

@@ -6,6 +6,7 @@ on a router at 127.0.0.1 (TLS to an IP address) and may do the bridge's job. The
 tests/compose/test_device.py."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -49,6 +50,9 @@ def test_what_a_device_cannot_stand_in_for_is_refused_at_its_file():
     assert "consumer: bridge" in why
     [why] = device.refusals(smoke, "kernel")
     assert "BENCH_CAN_MODE=kernel" in why
+    listening = dataclasses.replace(smoke, bridge={**smoke.bridge, "listen": "tls/127.0.0.1:7449"})
+    [why] = device.refusals(listening, "userspace")
+    assert "bridge.listen" in why and "host's interfaces" in why
 
 
 def test_the_router_is_published_on_loopback_only_and_the_bus_on_the_host():
