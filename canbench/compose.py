@@ -134,7 +134,9 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
             # bench-run does not expect an ECU that a fault step kills to exit cleanly
             "labels": {"bench.fault-target": str(any(f.target == e.name for f in sc.faults)).lower()},
             "command": ["canbench", "ecu", "--scenario", scenario_in_container, "--name", e.name,
-                        "--run-id", "${RUN_ID}", "--run-dir", "/reports/${RUN_ID}", "--router", ROUTER],
+                        "--run-id", "${RUN_ID}", "--run-dir", "/reports/${RUN_ID}", "--router", ROUTER,
+                        # the capture comes after the bridge's token: as long as the run waits for it, and then some
+                        "--timeout", "${BENCH_ECU_WAIT_S:-120}"],
         }, tmp=True)
     services.update(probe_services(sc))
     out: dict = {"services": services}

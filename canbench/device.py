@@ -33,7 +33,7 @@ class Device:
 
 def parse(spec: str) -> Device:
     """DEVICE's value: host:PORT (the only kind today; a host CAN interface is the next)."""
-    m = SPEC.fullmatch(spec.strip())
+    m = SPEC.fullmatch(spec)
     if not m:
         raise ValueError(f"DEVICE={spec!r}: expected host:PORT, a process on this machine reaching the router "
                          f"on 127.0.0.1:PORT (e.g. DEVICE=host:7448)")

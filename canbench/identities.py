@@ -32,6 +32,8 @@ IDENTITIES = ("router", "router2", "bridge", "orchestrator", "capture", "ecu", "
 ROGUE = "rogue-bridge"  # CN "bridge", signed by a CA the router does not trust
 ANONYMOUS = "anonymous"  # the CA's certificate only (it trusts the router), no certificate of its own
 DEVICE_IDENTITY = "device"  # a device of your own (canbench.device): CN bridge, its files on the host
+# its key lies on the host: a client's certificate only, never one a router's name would accept
+CLIENT_ONLY = "extendedKeyUsage=clientAuth\n"
 SAN = "subjectAltName=DNS:router,DNS:router2,DNS:localhost,IP:127.0.0.1\n"  # what clients dial
 ALL = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable", "liveliness_token",
        "liveliness_query", "declare_liveliness_subscriber"]
@@ -57,10 +59,10 @@ def _ca(d: Path, name: str) -> None:
              "-subj", f"/CN={name}", "-keyout", f"{name}.key", "-out", f"{name}.pem", cwd=d)
 
 
-def _cert(d: Path, ca: str, cn: str, out: str) -> None:
+def _cert(d: Path, ca: str, cn: str, out: str, extensions: str = SAN) -> None:
     _openssl("req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes", "-subj", f"/CN={cn}",
              "-keyout", f"{out}.key", "-out", f"{out}.csr", cwd=d)
-    (d / "san.ext").write_text(SAN)
+    (d / "san.ext").write_text(extensions)
     _openssl("x509", "-req", "-in", f"{out}.csr", "-CA", f"{ca}.pem", "-CAkey", f"{ca}.key", "-set_serial",
              str(int.from_bytes(os.urandom(8), "big")), "-days", "2", "-extfile", "san.ext", "-out", f"{out}.pem",
              cwd=d)
@@ -155,10 +157,11 @@ def bridge_acl(prefix: str = "vehicle/can") -> dict:
     return router_acl
 
 
-def device_config(secure: bool, host_dir: str, endpoint: str) -> dict:
-    """The Zenoh config of a device of your own (canbench.device): a client of the router on
-    loopback, its identity's files where the host holds them, no multicast, no listener."""
-    conf: dict = {"mode": "client", "connect": {"endpoints": [endpoint]}, "listen": {"endpoints": []},
+def device_config(secure: bool, host_dir: str, endpoint: str, mode: str = "client") -> dict:
+    """The Zenoh config of a device of your own (canbench.device): connected to the router on
+    loopback in the scenario's mode (bridge.mode), its identity's files where the host holds
+    them, no multicast, no listener (a peer's default would be every interface)."""
+    conf: dict = {"mode": mode, "connect": {"endpoints": [endpoint]}, "listen": {"endpoints": []},
                   "scouting": {"multicast": {"enabled": False}}}
     if secure:
         conf["transport"] = {"link": {"tls": {
@@ -169,12 +172,13 @@ def device_config(secure: bool, host_dir: str, endpoint: str) -> dict:
 
 def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_keys: tuple[str, ...] = (),
              ros2_domains: tuple[int, ...] = (), bridge_listens: bool = False,
-             device: tuple[str, str] | None = None) -> list[str]:
+             device: tuple[str, str] | None = None, device_mode: str = "client") -> list[str]:
     """Writes every identity's directory under out (which must not exist or be empty); returns
     the identities written. Files are 0644 (certificates, configs) and 0640 (keys): every bench
     service runs as the bench's user and sees only its own directory.
     device: (the host's path of out, the router's endpoint on loopback) for a device of your own:
-    DEVICE_IDENTITY/ with a certificate of CN bridge (the ACL's bridge) and its config."""
+    DEVICE_IDENTITY/ with a client certificate of CN bridge (the ACL's bridge) and its config, in
+    device_mode (the scenario's bridge.mode)."""
     out.mkdir(parents=True, exist_ok=True)
     if any(out.iterdir()):
         raise RuntimeError(f"canbench identities: {out} is not empty (identities are made once per run)")
@@ -189,7 +193,7 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
                 _cert(work, "ca", name, name)
             _cert(work, "rogue-ca", "bridge", ROGUE)
             if device:
-                _cert(work, "ca", "bridge", DEVICE_IDENTITY)
+                _cert(work, "ca", "bridge", DEVICE_IDENTITY, CLIENT_ONLY)
         if device:
             d = out / DEVICE_IDENTITY
             d.mkdir()
@@ -197,10 +201,10 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
                 shutil.copy(work / "ca.pem", d / "ca.pem")
                 shutil.copy(work / f"{DEVICE_IDENTITY}.pem", d / "cert.pem")
                 shutil.copy(work / f"{DEVICE_IDENTITY}.key", d / "key.pem")
-                os.chmod(d / "key.pem", 0o640)
+                os.chmod(d / "key.pem", 0o600)
             host_dir, endpoint = device
-            (d / "zenoh.json5").write_text(json.dumps(device_config(secure, f"{host_dir}/{DEVICE_IDENTITY}", endpoint),
-                                                      indent=1) + "\n")
+            conf = device_config(secure, f"{host_dir}/{DEVICE_IDENTITY}", endpoint, device_mode)
+            (d / "zenoh.json5").write_text(json.dumps(conf, indent=1) + "\n")
         for name in names:
             d = out / name
             d.mkdir()

@@ -30,6 +30,7 @@ from pathlib import Path
 from . import compare, device, scenario
 from .errors import InputError, ScenarioError
 
+DEVICE_REFUSED = 4  # plan's exit code: DEVICE is not host:PORT, or no scenario is left (not argparse's 2)
 # A run's fixed cost on top of its traffic phase (compose up, readiness, analysis, reports,
 # down): measured 15-25 s for the shipped scenarios on 2 cores.
 SETUP_S = 20.0
@@ -308,7 +309,7 @@ def main(args: argparse.Namespace) -> int:
                 scenarios = for_device(args.device, scenarios, args.can_mode)
             except ValueError as e:
                 print(f"suite: {e}", file=sys.stderr)
-                return 2
+                return DEVICE_REFUSED
         for seconds, path in plan(scenarios, args.shard):
             print(f"{seconds:.0f}\t{path}")
         return 0

@@ -12,14 +12,16 @@ def cmd_identities(args) -> int:
     ros2_keys: tuple[str, ...] = ()
     ros2_domains: tuple[int, ...] = ()
     bridge_listens = False
+    mode = "client"
     if args.scenario:
         sc = scenario.load(args.scenario)
         ros2_keys = tuple(runkeys.ros2_data_keys(sc))
         ros2_domains = (sc.bridge.get("ros2_domain", 0),) if sc.bridge.get("ros2_topic") else ()
         bridge_listens = sc.consumer == "bridge" or "listen" in sc.bridge
+        mode = sc.bridge.get("mode", "client")
     device = (args.device_host_dir, args.device_endpoint) if args.device_endpoint else None
     names = identities.generate(args.dir, secure=not args.open, ros2_keys=ros2_keys, ros2_domains=ros2_domains,
-                                bridge_listens=bridge_listens, device=device)
+                                bridge_listens=bridge_listens, device=device, device_mode=mode)
     print(f"identities: {len(names)} in {args.dir} ({'plain tcp, no access control' if args.open else 'mTLS + ACL'})")
     return 0
 

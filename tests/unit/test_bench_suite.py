@@ -75,7 +75,7 @@ SCENARIO = ("name: {name}\nduration_s: {duration}\nbuses: [{{name: vcan0}}]\n"
 def bench(tmp_path):
     root = tmp_path / "repo"
     (root / "scripts").mkdir(parents=True)
-    for script in ("bench-suite", "require-images"):
+    for script in ("bench-suite", "require-images", "device-preflight"):
         shutil.copy(REPO / "scripts" / script, root / "scripts")
     bins = tmp_path / "bin"
     bins.mkdir()
@@ -185,6 +185,8 @@ FAULTED = ("name: {name}\nduration_s: 10\nbuses: [{{name: vcan0}}]\n"
 
 def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):
     run, add, events, root = bench
+    (root / "build" / "ucan").mkdir(parents=True)
+    (root / "build" / "ucan" / "libucan-preload.so").write_text("")
     add("plain")
     add("faulted", text=FAULTED.format(name="faulted"))
     proc = run(["plain", "faulted"], DEVICE="host:7448")
@@ -201,7 +203,23 @@ def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):
 
 def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
     run, add, events, root = bench
+    (root / "build" / "ucan").mkdir(parents=True)
+    (root / "build" / "ucan" / "libucan-preload.so").write_text("")
     add("plain")
     proc = run(["plain"], DEVICE="host:7448", JOBS="2")
     assert proc.returncode == 2 and "JOBS=1, not 2" in proc.stderr
     assert events() == []
+
+
+@pytest.mark.parametrize("env,says", [
+    ({"DEVICE_CMD": "./my-gateway"}, "DEVICE_CMD is set but DEVICE is not"),
+    ({"DEVICE": "host:7448", "BENCH_ACCESS": "open"}, "without TLS or ACL"),
+    ({"DEVICE": "host:7448"}, "libucan-preload.so is missing (make ucan)"),
+    ({"DEVICE": "host:7448 ", "DEVICE_CMD": "x"}, "expected host:PORT"),
+])
+def test_a_device_run_that_would_mislead_or_expose_is_refused_before_anything_starts(bench, env, says):
+    run, add, events, root = bench
+    add("plain")
+    proc = run(["plain"], **env)
+    assert proc.returncode == 2 and says in proc.stderr and "nothing started" in proc.stderr, proc.stderr
+    assert events() == [] and not list((root / "reports").glob("suite-*"))

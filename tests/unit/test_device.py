@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 import zenoh
 from test_compose_privileges import defaults, merged
 from test_identities import Inbox, free_port
@@ -25,13 +26,14 @@ REPO = Path(__file__).resolve().parents[2]
 SCENARIOS = REPO / "scenarios"
 
 
-@pytest.mark.parametrize("spec,port", [("host:7448", 7448), (" host:65535 ", 65535), ("host:1024", 1024)])
+@pytest.mark.parametrize("spec,port", [("host:7448", 7448), ("host:65535", 65535), ("host:1024", 1024)])
 def test_a_host_device_and_its_port(spec, port):
     assert device.parse(spec) == device.Device(port)
     assert device.parse(spec).endpoint() == f"tls/127.0.0.1:{port}"
 
 
 @pytest.mark.parametrize("spec,says", [("7448", "expected host:PORT"), ("can0", "expected host:PORT"),
+                                       (" host:7448", "expected host:PORT"),
                                        ("host:", "expected host:PORT"), ("host:0.0.0.0:7448", "expected host:PORT"),
                                        ("host:80", "not in 1024-65535"), ("host:70000", "not in 1024-65535")])
 def test_a_device_that_is_not_a_host_port_is_refused_with_why(spec, says):
@@ -128,3 +130,31 @@ def test_open_access_writes_a_plain_tcp_device(tmp_path):
     conf = json.loads((tmp_path / "i" / identities.DEVICE_IDENTITY / "zenoh.json5").read_text())
     assert conf["connect"]["endpoints"] == ["tcp/127.0.0.1:7448"] and "transport" not in conf
     assert conf["scouting"]["multicast"]["enabled"] is False and conf["listen"]["endpoints"] == []
+
+
+def test_the_devices_certificate_is_a_clients_and_its_config_takes_the_scenarios_mode(tmp_path):
+    root = tmp_path / "i"
+    identities.generate(root, device=(str(root), "tls/127.0.0.1:7448"), device_mode="peer")
+    d = root / identities.DEVICE_IDENTITY
+    text = subprocess.run(["openssl", "x509", "-in", str(d / "cert.pem"), "-noout", "-text"], capture_output=True,
+                          text=True, check=True).stdout
+    # its key lies on the host: no router's name in it, client authentication only
+    assert "Subject Alternative Name" not in text and "TLS Web Client Authentication" in text
+    assert "TLS Web Server Authentication" not in text and "CN = bridge" in text
+    assert (d / "key.pem").stat().st_mode & 0o077 == 0
+    conf = json.loads((d / "zenoh.json5").read_text())
+    # a peer's listener would be on every interface by default: none, and no multicast scouting
+    assert conf["mode"] == "peer" and conf["listen"]["endpoints"] == []
+    assert conf["scouting"]["multicast"]["enabled"] is False
+
+
+@pytest.mark.parametrize("merge", ["replace", "deep"])
+def test_the_bus_directory_binds_whether_compose_replaces_or_merges_the_volume(merge):
+    # docker-compose 1.29 replaces a top-level volume an override names, compose v2 merges it key by key
+    base = defaults(yaml.safe_load((REPO / "compose.yaml").read_text()))["volumes"]["canbus"]
+    sc = scenario.load(SCENARIOS / "smoke.yaml")
+    mine = compose.compose_override(sc, "/scenarios/smoke.yaml", device=device.Device(7448),
+                                    canbus_dir="/tmp/canbench-bus.x")["volumes"]["canbus"]
+    merged_volume = mine if merge == "replace" else {**base, "driver_opts": {**base["driver_opts"],
+                                                                             **mine["driver_opts"]}}
+    assert merged_volume["driver_opts"] == {"type": "none", "o": "bind", "device": "/tmp/canbench-bus.x"}
