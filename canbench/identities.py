@@ -203,8 +203,8 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
                 shutil.copy(work / f"{DEVICE_IDENTITY}.key", d / "key.pem")
                 os.chmod(d / "key.pem", 0o600)
             host_dir, endpoint = device
-            conf = device_config(secure, f"{host_dir}/{DEVICE_IDENTITY}", endpoint, device_mode)
-            (d / "zenoh.json5").write_text(json.dumps(conf, indent=1) + "\n")
+            device_conf = device_config(secure, f"{host_dir}/{DEVICE_IDENTITY}", endpoint, device_mode)
+            (d / "zenoh.json5").write_text(json.dumps(device_conf, indent=1) + "\n")
         for name in names:
             d = out / name
             d.mkdir()

@@ -73,20 +73,24 @@ def plan(paths: list[str], shard: str | None = None) -> list[tuple[float, str]]:
     return [(expected[p], p) for p in shards(expected, n)[k - 1]]
 
 
-def for_device(spec: str, paths: list[str], can_mode: str) -> list[str]:
-    """The scenarios a device of your own can run; each one left out said on stderr. ValueError:
-    a DEVICE that is not host:PORT, or no scenario left."""
+LEFT_OUT = "left-out"  # a plan line's first field for a scenario the device cannot run: left-out<TAB>path<TAB>why
+
+
+def for_device(spec: str, paths: list[str], can_mode: str) -> tuple[list[str], dict[str, str]]:
+    """The scenarios a device of your own can run, and why each other one is left out (also said
+    on stderr). ValueError: a DEVICE that is not host:PORT, or no scenario left."""
     device.parse(spec)
-    kept = []
+    kept, left_out = [], {}
     for path in paths:
         why = device.refusals(scenario.load(Path(path)), can_mode)
         if why:
-            print(f"suite: not run against DEVICE={spec}: {'; '.join(why)}", file=sys.stderr)
+            left_out[path] = "; ".join(why)
+            print(f"suite: not run against DEVICE={spec}: {left_out[path]}", file=sys.stderr)
         else:
             kept.append(path)
     if not kept:
         raise ValueError(f"DEVICE={spec}: none of the {len(paths)} scenario(s) can run against a device of your own")
-    return kept
+    return kept, left_out
 
 
 @dataclass
@@ -98,15 +102,20 @@ class Run:
     expected_s: float = 0.0
     verdict: str = ""
     checks: dict[str, str] = field(default_factory=dict)
+    left_out: str = ""  # why a device of your own did not run it (then it never ran, and failed nothing)
 
 
 def read_runs(suite_dir: Path) -> list[Run]:
     expected = {}
+    runs = []
     if (suite_dir / "plan.tsv").exists():
         for line in (suite_dir / "plan.tsv").read_text().splitlines():
             seconds, path = line.split("\t", 1)
-            expected[path] = float(seconds)
-    runs = []
+            if seconds == LEFT_OUT:
+                path, why = path.split("\t", 1)
+                runs.append(Run(path, None, 0, 0, verdict=f"not run against the device: {why}", left_out=why))
+            else:
+                expected[path] = float(seconds)
     tsv = suite_dir / "runs.tsv"
     for line in tsv.read_text().splitlines() if tsv.exists() else []:
         path, run_id, code, seconds = line.split("\t")
@@ -143,7 +152,9 @@ def merged_junit(runs: list[Run], reports: Path, suite: str) -> ET.Element:
                 r.checks[case.get("name", "?")] = _case_outcome(case)
             # the run as a whole: an ECU that crashed or a run that never started fails here too
             run_case = ET.SubElement(ts, "testcase", classname=name, name="bench_run", time=str(r.seconds))
-            if r.exit_code != 0:
+            if r.left_out:
+                ET.SubElement(run_case, "skipped", message=f"{r.scenario}: {r.verdict}")
+            elif r.exit_code != 0:
                 ET.SubElement(run_case, "failure", message=f"{r.scenario}: {r.verdict} (exit {r.exit_code})")
             cases = list(ts.iter("testcase"))
             ts.set("tests", str(len(cases)))
@@ -178,11 +189,13 @@ def index_html(runs: list[Run], suite: str, code: int) -> str:
         rows.append(f"<tr class={'ok' if r.exit_code == 0 else 'bad'}><td>{html.escape(r.scenario)}</td>"
                     f"<td>{html.escape(r.verdict)}</td><td>{r.seconds} s</td><td>~{r.expected_s:.0f} s</td>"
                     f"<td>{link}</td><td>{html.escape(', '.join(failed))}</td></tr>")
-    passed = sum(r.exit_code == 0 for r in runs)
+    passed = sum(r.exit_code == 0 and not r.left_out for r in runs)
+    left_out = sum(bool(r.left_out) for r in runs)
     return ("<!doctype html><meta charset=utf-8><title>" + html.escape(suite) + "</title>"
             "<style>body{font-family:sans-serif}td,th{padding:2px 8px;text-align:left}"
             ".ok td:nth-child(2){color:#070}.bad td:nth-child(2){color:#b00}</style>"
-            f"<h1>{html.escape(suite)}</h1><p>{passed} of {len(runs)} scenarios passed; exit code {code}; "
+            f"<h1>{html.escape(suite)}</h1><p>{passed} of {len(runs) - left_out} scenarios passed"
+            + (f" ({left_out} not run against the device)" if left_out else "") + f"; exit code {code}; "
             "<a href=junit.xml>junit.xml</a>, <a href=summary.json>summary.json</a></p>"
             "<table><tr><th>scenario</th><th>verdict</th><th>took</th><th>expected</th><th>run</th>"
             "<th>failed checks</th></tr>" + "".join(rows) + "</table>\n")
@@ -221,9 +234,10 @@ def suite_runs(reports: Path, passed_only: bool = False) -> dict[str, Path]:
 
 
 def listed_scenarios(reports: Path) -> set[str]:
-    """Every scenario the suites under reports list, whether or not its run left a metrics.json."""
+    """Every scenario the suites under reports ran, whether or not its run left a metrics.json (not
+    those a device of your own left out: they never ran)."""
     return {Path(r["scenario"]).stem for summary in reports.glob("**/summary.json")
-            for r in json.loads(summary.read_text()).get("runs", []) if r.get("scenario")}
+            for r in json.loads(summary.read_text()).get("runs", []) if r.get("scenario") and not r.get("left_out")}
 
 
 def compare_suites(old_reports: Path, new_reports: Path) -> int:
@@ -304,14 +318,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     if args.suite_cmd == "plan":
         scenarios = args.scenarios
+        left_out: dict[str, str] = {}
         if args.device:
             try:
-                scenarios = for_device(args.device, scenarios, args.can_mode)
+                scenarios, left_out = for_device(args.device, scenarios, args.can_mode)
             except ValueError as e:
                 print(f"suite: {e}", file=sys.stderr)
                 return DEVICE_REFUSED
         for seconds, path in plan(scenarios, args.shard):
             print(f"{seconds:.0f}\t{path}")
+        if not args.shard or parse_shard(args.shard)[0] == 1:  # said once across the shards: by the first
+            for path, why in left_out.items():
+                print(f"{LEFT_OUT}\t{path}\t{why}")
         return 0
     if args.suite_cmd == "compare":
         return compare_suites(args.old_reports, args.new_reports)

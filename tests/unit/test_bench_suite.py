@@ -193,6 +193,16 @@ def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert [name for kind, name, _ in events() if kind == "start"] == ["plain"]
     assert "not run against DEVICE=host:7448: " in proc.stderr and "faulted.yaml: fault steps" in proc.stderr
+    # the summary lists it as not run, and the last line counts it apart from the runs
+    assert "all 1 scenario(s) passed (1 not run against DEVICE=host:7448" in proc.stdout
+    suite_dir = next((root / "reports").glob("suite-*"))
+    summary = json.loads((suite_dir / "summary.json").read_text())
+    left = [r for r in summary["runs"] if r["left_out"]]
+    assert [r["scenario"] for r in left] == ["sc/faulted.yaml"] and summary["exit_code"] == 0
+    assert "fault steps" in left[0]["verdict"]
+    junit = (suite_dir / "junit.xml").read_text()
+    assert "<skipped" in junit and "not run against the device" in junit
+    assert "1 of 1 scenarios passed (1 not run against the device)" in (suite_dir / "index.html").read_text()
     # nothing it can run, or a DEVICE that is not host:PORT: bad input, nothing started
     for names, device, says in ((["faulted"], "host:7448", "none of the 1 scenario(s)"),
                                 (["plain"], "192.168.1.1:7447", "expected host:PORT")):

@@ -145,6 +145,19 @@ def test_suite_compare_fails_a_scenario_whose_run_left_no_metrics(tmp_path, caps
     assert "suite compare: 0 of 1 scenarios regressed; 1 left no metrics: burst" in out
 
 
+
+def test_suite_compare_passes_what_a_device_of_your_own_did_not_run(tmp_path, capsys):
+    old, new = tmp_path / "old", tmp_path / "new"
+    write_suite(old, "suite-a", {"smoke": (metrics(0.5), 0), "router-faults": (metrics(0.5), 0)})
+    write_suite(new, "suite-b", {"smoke": (metrics(0.5), 0)})
+    summary = new / "suite-b" / "summary.json"
+    runs = json.loads(summary.read_text())["runs"] + [{"scenario": "scenarios/router-faults.yaml", "run_id": None,
+                                                       "exit_code": 0, "left_out": "fault steps ..."}]
+    summary.write_text(json.dumps({"runs": runs}))
+    assert cli.main(["suite", "compare", str(old), str(new)]) == 0
+    assert "left no metrics" not in capsys.readouterr().out
+
+
 def write_verdicts(d: Path, runs: dict[str, dict[str, str]]) -> Path:
     d.mkdir(parents=True)
     entries = [{"scenario": f"scenarios/{n}.yaml", "verdict": "passed", "checks": c} for n, c in runs.items()]
