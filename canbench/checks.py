@@ -56,10 +56,17 @@ def valid_run(result: RunResult) -> list[str] | None:
     return [f"{outcome}: {p}" for outcome, problems in v["problems"].items() for p in problems]
 
 
+# what the bench samples in its own bridge's container only (canbench.faults.Injector)
+CONTAINER_SAMPLED = ("bridge_memory", "bridge_fds")
+
+
 def skip_reason(result: RunResult, name: str) -> str:
     outcome = assess(result)["outcome"]
     if name != "valid_run" and outcome != "valid":
         return f"{name} not judged: the run is {outcome} (see valid_run)"
+    if name in CONTAINER_SAMPLED and result.metrics.get("device"):
+        return (f"{name} not judged: the bench samples its own bridge container's memory and descriptors, not "
+                f"a device of your own ({result.metrics['device']})")
     return f"{name} not asked for by this scenario"
 
 
@@ -394,7 +401,7 @@ def bridge_memory(result: RunResult) -> list[str] | None:
     in a soak, did not keep growing."""
     gate, slope_gate = _expect(result, "bridge_rss_mib"), _expect(result, "bridge_rss_slope_mib_per_h")
     faults = result.metrics.get("faults")
-    if (not gate and slope_gate is None) or not faults:
+    if (not gate and slope_gate is None) or not faults or result.metrics.get("device"):
         return None
     rss = faults["bridge_rss_mib"]
     if rss["max"] is None:
@@ -414,7 +421,7 @@ def bridge_fds(result: RunResult) -> list[str] | None:
     """The bridge's open file descriptors did not grow over the run (soak)."""
     gate = _expect(result, "bridge_fd_growth")
     faults = result.metrics.get("faults")
-    if gate is None or not faults:
+    if gate is None or not faults or result.metrics.get("device"):
         return None
     fds = faults["bridge_fds"]
     if fds["growth"] is None:

@@ -5,10 +5,10 @@ directory so a host process joins the bus through libucan-preload.so, and hands 
 identity of the run (canbench.identities) and the scenario's bridge settings as environment
 variables (device.env). The run waits for the device's liveliness token as for the bridge's.
 
-What a device cannot stand in for yet is refused before anything starts: fault steps (they act on
-the bench's own bridge container), the bridge as the consumer's endpoint or listening where
-the scenario says (that would be the host's interfaces), kernel vcan (a host process cannot
-reach the bus container's namespace)."""
+What a device cannot stand in for yet is refused before anything starts: fault steps on the
+bridge (they act on the bench's own bridge container or its listener on the router), the bridge
+as the consumer's endpoint or listening where the scenario says (that would be the host's
+interfaces), kernel vcan (a host process cannot reach the bus container's namespace)."""
 from __future__ import annotations
 
 import re
@@ -20,6 +20,9 @@ from . import scenario
 IDENTITY = "device"  # its directory among the run's identities; its certificate's CN is "bridge" (the ACL's)
 SPEC = re.compile(r"host:(\d{1,5})")
 LOWEST_PORT = 1024  # an unprivileged port: the bench never needs root on the host for it
+# fault steps on the bench's bridge container (stop, kill) or its own listener on the router (partition);
+# the router's, an ECU's and a flood of the bus act on the bench's side and run as they do for the bridge
+BRIDGE_FAULTS = ("bridge_term", "bridge_kill", "partition")
 
 
 @dataclass(frozen=True)
@@ -47,9 +50,10 @@ def refusals(sc: scenario.Scenario, can_mode: str) -> list[str]:
     """Why this scenario cannot run against a device of your own (empty: it can), each at its file."""
     where = str(sc.path)
     out = []
-    if sc.faults:
-        out.append(f"{where}: fault steps act on the bench's own containers (the bridge's restarts, its memory): "
-                   f"not run against a device of your own")
+    on_bridge = sorted({f.action for f in sc.faults if f.action in BRIDGE_FAULTS})
+    if on_bridge:
+        out.append(f"{where}: fault steps {', '.join(on_bridge)} act on the bench's own bridge container or its "
+                   f"listener on the router: not run against a device of your own")
     if sc.consumer == "bridge":
         out.append(f"{where}: topology consumer: bridge reaches the bench's bridge in the bus's namespace; "
                    f"a device of your own is reached through the router")

@@ -73,6 +73,7 @@ class Injector:
     project: str
     faults: list[Fault]
     on_ecu_killed: object = None  # callable(name) so the orchestrator stops waiting for it
+    sample_bridge: bool = True  # False: a device of your own is under test, no bridge container to sample
     windows: list[Window] = field(default_factory=list)
     rss_samples: list[tuple[int, float]] = field(default_factory=list)  # (ns, MiB)
     fd_samples: list[tuple[int, int]] = field(default_factory=list)  # (ns, open fds)
@@ -94,8 +95,9 @@ class Injector:
     def start(self) -> None:
         self.t0_ns = time.time_ns()
         t0 = time.monotonic()
-        self._threads = [threading.Thread(target=self._run, args=(t0,), daemon=True, name="faults"),
-                         threading.Thread(target=self._sample_rss, daemon=True, name="rss")]
+        self._threads = [threading.Thread(target=self._run, args=(t0,), daemon=True, name="faults")]
+        if self.sample_bridge:
+            self._threads.append(threading.Thread(target=self._sample_rss, daemon=True, name="rss"))
         for t in self._threads:
             t.start()
 

@@ -61,7 +61,8 @@ def scenario_run(bench_options, request):
         baseline = json.loads((path / "metrics.json" if path.is_dir() else path).read_text())
     result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router,
                          consumer=bench_options.consumer, baseline=baseline, project=bench_options.project,
-                         wait_viewer=bench_options.viewer, ready_timeout_s=bench_options.ready_timeout)
+                         wait_viewer=bench_options.viewer, ready_timeout_s=bench_options.ready_timeout,
+                         device=bench_options.device)
     result.metrics["device"] = bench_options.device  # None: the bench's own bridge
     request.config.pluginmanager.get_plugin(PLUGIN_NAME).result = result
     return result

@@ -63,9 +63,10 @@ class Execution:
     """One run's sessions, the ECUs' done messages, the captures, the commander and the fault injector."""
 
     def __init__(self, scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str,
-                 consumer: str | None, project: str | None):
+                 consumer: str | None, project: str | None, device: str | None = None):
         self.scenario, self.run_id, self.run_dir, self.prefix = scenario, run_id, run_dir, prefix
         self.consumer, self.project = consumer or router, project
+        self.device = device  # a device of your own under test (canbench.device), else the bench's bridge
         self.session = runkeys.open_session(router)
         self.data = self.session if consumer in (None, router) else runkeys.open_session(consumer)
         self.done: dict[str, dict] = {}
@@ -117,7 +118,8 @@ class Execution:
             if not self.project:
                 raise RuntimeError("this scenario has fault steps: they need the compose project (BENCH_PROJECT) "
                                    "and Docker's socket, i.e. a run by make test / scripts/bench-run")
-            self.injector = Injector(self.project, self.scenario.faults, self._ecu_killed)
+            self.injector = Injector(self.project, self.scenario.faults, self._ecu_killed,
+                                     sample_bridge=self.device is None)
         token = self.session.liveliness().declare_token(runkeys.capture_ready(self.run_id))
         self.closing.append(token.undeclare)
 
@@ -227,14 +229,15 @@ class Execution:
 
 def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can",
             consumer: str | None = None, baseline: dict | None = None, project: str | None = None,
-            wait_viewer: bool = False, ready_timeout_s: float = BRIDGE_READY_TIMEOUT_S) -> RunResult:
+            wait_viewer: bool = False, ready_timeout_s: float = BRIDGE_READY_TIMEOUT_S,
+            device: str | None = None) -> RunResult:
     """router: where the bench coordinates (ECUs, stats); consumer: where the capture and the
     commands connect (the router by default; a far router or the bridge itself by topology);
     project: the compose project, for fault steps; wait_viewer: a `canbench view` records the
     run (make test VIEWER=1), the traffic starts once its token says it subscribes; ready_timeout_s: how
     long the bridge's token may take (a device of your own started by hand: longer)."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    run = Execution(scenario, run_id, run_dir, router, prefix, consumer, project)
+    run = Execution(scenario, run_id, run_dir, router, prefix, consumer, project, device)
     try:
         run.ready(wait_viewer, ready_timeout_s)
         try:

@@ -101,3 +101,17 @@ def test_a_device_that_stops_before_the_run_ends_fails_it_and_its_stray_child_is
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "the device exited with 3 before the run ended" in proc.stdout
     nothing_left(proc, run_dir)
+
+
+def test_the_routers_faults_run_against_a_device_and_its_memory_is_not_judged(built):
+    # the device reconnects through the port published for it; what only the bench's own bridge
+    # container shows (memory, descriptors) is skipped with the reason, never passed
+    proc, run_dir, _ = run_device(str(FIRMWARE / "zenoh-node"), REPO / "scenarios" / "router-faults.yaml")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    cases = junit_cases(run_dir)
+    for check in ("faults_injected", "recovery", "integrity", "bridge_stats_agree"):
+        assert cases[f"test_check[{check}]"] == "passed", cases
+    assert cases["test_check[bridge_memory]"] == "skipped"
+    assert "not a device of your own" in (run_dir / "junit.xml").read_text()
+    assert "reconnected to the Zenoh router" in (run_dir / "device.log").read_text()
+    nothing_left(proc, run_dir)

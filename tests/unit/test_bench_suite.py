@@ -180,7 +180,7 @@ def test_shards_together_run_every_scenario_once(bench):
 
 FAULTED = ("name: {name}\nduration_s: 10\nbuses: [{{name: vcan0}}]\n"
            "ecus: [{{name: e, bus: vcan0, role: echo, echo_ids: ['600']}}]\nexpect: {{integrity: true}}\n"
-           "faults: [{{at_s: 1, action: router_restart}}]\n")
+           "faults: [{{at_s: 1, action: bridge_kill, duration_s: 0.5}}]\n")
 
 
 def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):

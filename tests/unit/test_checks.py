@@ -75,6 +75,17 @@ def test_too_few_samples_cannot_pass_a_soak_gate():
     assert "too few descriptor samples" in checks.bridge_fds(few)[0]
 
 
+
+def test_a_device_of_your_own_is_not_judged_on_what_only_the_benchs_container_shows():
+    # no memory or descriptor sample of a device on the host: not judged, said why, never a pass or a fail
+    unsampled = {"max": None, "samples": 0, "slope_mib_per_h": None}
+    run = SimpleNamespace(scenario=SimpleNamespace(expect={"bridge_rss_mib": 32, "bridge_fd_growth": 0}),
+                          metrics={"faults": {"bridge_rss_mib": unsampled,
+                                              "bridge_fds": {"max": None, "samples": 0, "growth": None}},
+                                   "device": "host:7448", "validity": {"outcome": "valid"}})
+    assert checks.bridge_memory(run) is None and checks.bridge_fds(run) is None
+    run.metrics["device"] = None  # the bench's own bridge with no sample: a failure, as before
+    assert checks.bridge_memory(run) == ["no memory sample of the bridge"]
 STALE_SCENARIO = """name: stale
 description: commands, one entry stamped too old when put
 duration_s: 5

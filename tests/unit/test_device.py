@@ -42,12 +42,18 @@ def test_a_device_that_is_not_a_host_port_is_refused_with_why(spec, says):
 
 
 def test_what_a_device_cannot_stand_in_for_is_refused_at_its_file():
-    faults = scenario.load(SCENARIOS / "router-faults.yaml")
+    faults = scenario.load(SCENARIOS / "bridge-faults.yaml")
+    partition = scenario.load(SCENARIOS / "stale-commands.yaml")
     consumer = scenario.load(SCENARIOS / "bridge-router.yaml")
     smoke = scenario.load(SCENARIOS / "smoke.yaml")
     assert device.refusals(smoke, "userspace") == []
     [why] = device.refusals(faults, "userspace")
-    assert why.startswith(str(faults.path)) and "fault steps" in why
+    assert why.startswith(str(faults.path)) and "fault steps bridge_kill, bridge_term act on" in why
+    [why] = device.refusals(partition, "userspace")
+    assert "fault steps partition act on" in why
+    # the router's faults, an ECU's and a flood act on the bench's side: a device meets them as the bridge does
+    for name in ("router-faults.yaml", "can-flood.yaml"):
+        assert device.refusals(scenario.load(SCENARIOS / name), "userspace") == [], name
     [why] = device.refusals(consumer, "userspace")
     assert "consumer: bridge" in why
     [why] = device.refusals(smoke, "kernel")
@@ -84,7 +90,7 @@ def test_the_compose_override_command_refuses_and_writes_the_settings(tmp_path):
     def run(name: str, *extra: str) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "-m", "canbench.cli", "compose-override", str(SCENARIOS / name),
                                "--device", "host:7448", *extra], capture_output=True, text=True, cwd=REPO)
-    refused = run("router-faults.yaml", "--device-canbus", str(tmp_path))
+    refused = run("bridge-faults.yaml", "--device-canbus", str(tmp_path))
     assert refused.returncode == 2 and "DEVICE=host:7448:" in refused.stderr and "fault steps" in refused.stderr
     assert "--device-canbus" in run("smoke.yaml").stderr
     ok = run("smoke.yaml", "--device-canbus", str(tmp_path), "--device-env", str(tmp_path / "device.env"))
