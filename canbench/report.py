@@ -237,6 +237,8 @@ def write_html(result: RunResult, path: Path) -> None:
                          _ms(fid.get("p99")), _ms(fid.get("max"))])
     files = [f for f in ("metrics.json", "junit.xml", "recording.mcap", "traffic.rrd", "can.log", "zenoh.tsv",
                          "commands.tsv", "containers.log") if (path.parent / f).exists() or f == "containers.log"]
+    if m.get("device"):  # bench-run writes it beside the report: a device of your own's output
+        files.append("device.log")
     files += sorted(p.name for p in path.parent.glob("ecu-*"))
     links = " · ".join(f'<a href="{f}">{f}</a>' for f in files)
     passed = m.get("passed")

@@ -79,6 +79,7 @@ def test_the_hosts_own_bridge_build_as_a_device_passes_smoke_on_every_check(buil
         assert cases[f"test_check[{check}]"] == "passed", cases
     # the device ran on the host (its log is the run's), the bench's bridge never started
     assert "zenoh-node" in (run_dir / "device.log").read_text()
+    assert 'href="device.log"' in (run_dir / "report.html").read_text()  # the report links the device's output
     assert "bridge_1 " not in (run_dir / "containers.log").read_text()
     assert "bridge-1 " not in (run_dir / "containers.log").read_text()
     nothing_left(proc, run_dir)
