@@ -13,6 +13,7 @@ import os
 import re
 import socket
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -96,11 +97,14 @@ def test_a_device_with_a_seeded_fault_fails_the_check_for_it(built):
 
 
 def test_a_device_that_stops_before_the_run_ends_fails_it_and_its_stray_child_is_stopped(built):
-    # the device's leader exits at once, leaving a child that ignores TERM in its group
-    proc, run_dir, _ = run_device("(trap '' TERM; exec sleep 600) & exit 3", BENCH_READY_TIMEOUT_S="10",
+    # the device's leader exits at once, leaving a child that ignores TERM in its group; the run
+    # stops then, not after the 300 s it would wait for the device's token
+    started = time.monotonic()
+    proc, run_dir, _ = run_device("(trap '' TERM; exec sleep 600) & exit 3", BENCH_READY_TIMEOUT_S="300",
                                   DEVICE_STOP_S="1")
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "the device exited with 3 before the run ended" in proc.stdout
+    assert time.monotonic() - started < 200
     nothing_left(proc, run_dir)
 
 
