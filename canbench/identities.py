@@ -68,6 +68,14 @@ def _cert(d: Path, ca: str, cn: str, out: str, extensions: str = SAN) -> None:
              cwd=d)
 
 
+def _install(work: Path, d: Path, ca: str, name: str, key_mode: int) -> None:
+    """An identity's files into its directory d: the CA it trusts, its certificate and its key."""
+    shutil.copy(work / f"{ca}.pem", d / "ca.pem")
+    shutil.copy(work / f"{name}.pem", d / "cert.pem")
+    shutil.copy(work / f"{name}.key", d / "key.pem")
+    os.chmod(d / "key.pem", key_mode)
+
+
 def _rule(rid: str, flows: list[str], messages: list[str], keys: list[str]) -> dict:
     return {"id": rid, "permission": "allow", "flows": flows, "messages": messages, "key_exprs": keys}
 
@@ -198,10 +206,7 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
             d = out / DEVICE_IDENTITY
             d.mkdir()
             if secure:
-                shutil.copy(work / "ca.pem", d / "ca.pem")
-                shutil.copy(work / f"{DEVICE_IDENTITY}.pem", d / "cert.pem")
-                shutil.copy(work / f"{DEVICE_IDENTITY}.key", d / "key.pem")
-                os.chmod(d / "key.pem", 0o600)
+                _install(work, d, "ca", DEVICE_IDENTITY, 0o600)
             host_dir, endpoint = device
             device_conf = device_config(secure, f"{host_dir}/{DEVICE_IDENTITY}", endpoint, device_mode)
             (d / "zenoh.json5").write_text(json.dumps(device_conf, indent=1) + "\n")
@@ -213,10 +218,7 @@ def generate(out: Path, secure: bool = True, prefix: str = "vehicle/can", ros2_k
                 shutil.copy(work / "ca.pem", d / "ca.pem")
                 conf = {"transport": {"link": {"tls": {"root_ca_certificate": f"{MOUNT}/ca.pem"}}}}
             elif secure:
-                shutil.copy(work / ("rogue-ca.pem" if name == ROGUE else "ca.pem"), d / "ca.pem")
-                shutil.copy(work / f"{name}.pem", d / "cert.pem")
-                shutil.copy(work / f"{name}.key", d / "key.pem")
-                os.chmod(d / "key.pem", 0o640)
+                _install(work, d, "rogue-ca" if name == ROGUE else "ca", name, 0o640)
                 identity = "bridge" if name == ROGUE else name
                 conf = _tls(identity, listen=identity == "bridge" and bridge_listens)
                 if identity == "bridge" and bridge_listens:

@@ -63,7 +63,6 @@ def scenario_run(bench_options, request):
                          consumer=bench_options.consumer, baseline=baseline, project=bench_options.project,
                          wait_viewer=bench_options.viewer, ready_timeout_s=bench_options.ready_timeout,
                          device=bench_options.device)
-    result.metrics["device"] = bench_options.device  # None: the bench's own bridge
     request.config.pluginmanager.get_plugin(PLUGIN_NAME).result = result
     return result
 

@@ -249,5 +249,7 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
             run.stop_captures()
     finally:
         run.close()
-    return analyse(scenario, run_id, run_dir, prefix, run.done, run.bridge_stats, run.traffic_s, baseline,
-                   run.injector.summary() if run.injector else None)
+    result = analyse(scenario, run_id, run_dir, prefix, run.done, run.bridge_stats, run.traffic_s, baseline,
+                     run.injector.summary() if run.injector else None)
+    result.metrics["device"] = device  # None: the bench's own bridge
+    return result
