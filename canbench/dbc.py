@@ -27,6 +27,7 @@ import cantools
 from cantools.database.can import Message
 
 from . import j1939
+from .files import file_problem
 
 # per message that cantools' strict mode refuses: why (its words), and the one-signal messages it
 # is decoded by; filled when the DBC is loaded, so a database in use is never changed
@@ -207,8 +208,8 @@ def read_dbc(path: Path, lenient: bool = False):
     missing or cannot be used, or when cantools' strict mode refuses it and lenient is not set
     (--dbc-lenient)."""
     from .errors import InputError
-    if not Path(path).is_file():
-        raise InputError(str(path), None, "no such DBC file")
+    if (problem := file_problem(Path(path), "DBC file", named=False)) is not None:
+        raise InputError(str(path), None, problem)
     try:
         db = load_dbc(path)
     except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read

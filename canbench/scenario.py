@@ -15,6 +15,7 @@ import yaml
 
 from . import rxqos
 from .errors import ScenarioError
+from .files import file_problem, is_file
 from .wire import EXT_ID_MAX, id_key
 
 SCHEMA_PATH = Path(__file__).with_name("scenario.schema.json")
@@ -406,8 +407,8 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
         if "trace" not in spec:
             return None
         shown = path.parent / spec["trace"]  # as the user wrote it, relative to the scenario
-        if not shown.is_file():
-            fail([*where, "trace"], f"no such file {shown}")
+        if (problem := file_problem(shown)) is not None:
+            fail([*where, "trace"], problem)
         return shown.resolve()
 
     def interface_of(spec: dict, where: list) -> str | None:
@@ -512,8 +513,8 @@ def _build(path: Path, doc: Any, problems: list[ScenarioError]) -> Scenario | No
     dbc = None
     if "dbc" in doc:
         shown = path.parent / str(doc["dbc"])
-        if not shown.is_file():
-            fail(["dbc"], f"no such file {shown}")
+        if (problem := file_problem(shown)) is not None:
+            fail(["dbc"], problem)
         dbc = shown.resolve()
     bus_dbcs, gates = _signal_parts(path, doc, dbc, fail)
     ecus, commands = _restbus_parts(path, doc, bus_dbcs, ecus, commands, problems, fail)
@@ -548,19 +549,19 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
     from .dbc import load_dbc, load_error_text, strict_problem
     bus_dbcs: dict[str, Path] = {}
     where_of: dict[Path, list] = {}
-    if dbc is not None and dbc.is_file():
+    if dbc is not None and is_file(dbc):
         where_of[dbc] = ["dbc"]
     for i, spec in enumerate(doc.get("buses", []) or []):
         if not isinstance(spec, dict) or "name" not in spec:
             continue
         if isinstance(spec.get("dbc"), str):
             shown = path.parent / spec["dbc"]
-            if not shown.is_file():
-                fail(["buses", i, "dbc"], f"no such file {shown}")
+            if (problem := file_problem(shown)) is not None:
+                fail(["buses", i, "dbc"], problem)
                 continue
             bus_dbcs[spec["name"]] = shown.resolve()
             where_of.setdefault(shown.resolve(), ["buses", i, "dbc"])
-        elif dbc is not None and dbc.is_file():
+        elif dbc is not None and is_file(dbc):
             bus_dbcs[spec["name"]] = dbc
     strict = doc.get("dbc_strict", True) is not False
     for file, where in where_of.items():

@@ -17,6 +17,7 @@ from pathlib import Path
 import can
 
 from .errors import NotClassicFrame, TraceError
+from .files import file_problem
 from .trace_frames import TraceFrames
 from .wire import EXT_ID_MAX, STD_ID_MAX, Frame
 
@@ -39,6 +40,7 @@ BINARY_SUFFIXES = (".blf", ".mf4")  # python-can's LogReader; "line" = the frame
 FORMATS_SAID = "candump -L (.log, .candump or no suffix), or .asc .blf .csv .trc (python-can; .mf4 with asammdf)"
 FRAME_CACHE = 1 << 20  # distinct frame texts kept for sharing (then it starts again: only memory is at stake)
 STREAM_CACHE = 1 << 14  # the same for a pass that keeps no frames (summarise, validate): ~4 MiB
+MAX_STAMP_S = float(1 << 33)  # ~2242: python-can's stamps are s since 1970; beyond, a damaged field
 
 
 ERROR_FRAME = ("an error frame: the bridge carries CAN 2.0 data and remote frames only (remove error frames: "
@@ -560,8 +562,8 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
     its kind (NotClassicFrame.kind), not a problem: what summarise and scaffold do with a recording (a
     scenario's trace has neither)."""
     path = Path(path)
-    if not path.is_file():
-        raise TraceError(str(path), None, "no such trace file")
+    if (problem := file_problem(path, "trace file", named=False)) is not None:
+        raise TraceError(str(path), None, problem)
     if path.stat().st_size == 0:  # in every format (a binary reader would say its header is short)
         return
     if not numbered(path):
@@ -631,6 +633,9 @@ def iter_trace(path: str | Path, interfaces: set[str] | None = None,
                    str(msg.channel + 1 if zero_based and isinstance(msg.channel, int) else msg.channel))
         if interfaces is not None and channel is not None and channel not in interfaces:
             fail(line, f"interface '{channel}' is not one of {sorted(interfaces)} (remap it in the scenario)")
+            continue
+        if not 0 <= msg.timestamp < MAX_STAMP_S:  # NaN, inf or a sign: a damaged stamp, not a time
+            fail(line, f"timestamp {msg.timestamp!r} s is not a time (0 .. {MAX_STAMP_S:.0f} s since 1970)")
             continue
         t_ns = _stamp_ns(msg.timestamp)
         problem = went_back(line, t_ns, channel)

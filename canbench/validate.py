@@ -11,6 +11,7 @@ from pathlib import Path
 from . import scenario
 from .dbc import load_dbc, strict_problem
 from .errors import InputError, ScenarioError, TraceError
+from .files import is_file
 from .trace import MAX_TRACE_FRAMES, STREAM_CACHE, interfaces_said, iter_trace, several_interfaces, too_many_frames
 from .wire import EXT_ID_MAX, STD_ID_MAX
 
@@ -54,7 +55,7 @@ def named_traces(path: Path, doc) -> list[Path]:
     (relative to the scenario), even when other parts of the scenario are wrong."""
     traces: list[Path] = []
     for _, _, _, trace in trace_specs(doc):
-        if (path.parent / trace).is_file() and path.parent / trace not in traces:
+        if is_file(path.parent / trace) and path.parent / trace not in traces:
             traces.append(path.parent / trace)
     return traces
 
@@ -97,10 +98,11 @@ def remap_problems(path: Path, doc) -> list[InputError]:
     """An id_remap that gives an 11-bit frame of its trace an id above 7FF (the frame keeps its
     format): one problem per remapped id, at the remap's line, naming the trace line."""
     found: list[InputError] = []
-    for i, spec in enumerate(doc.get("ecus") or []):
+    ecus = doc.get("ecus")
+    for i, spec in enumerate(ecus if isinstance(ecus, list) else []):  # the schema's problem otherwise
         remap = spec.get("id_remap") if isinstance(spec, dict) else None
         trace = spec.get("trace") if isinstance(spec, dict) else None
-        if not isinstance(remap, dict) or not isinstance(trace, str) or not (path.parent / trace).is_file():
+        if not isinstance(remap, dict) or not isinstance(trace, str) or not is_file(path.parent / trace):
             continue
         try:
             wide = {int(k, 16): (k, v) for k, v in remap.items() if STD_ID_MAX < int(v, 16) <= EXT_ID_MAX}
