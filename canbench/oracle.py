@@ -11,11 +11,13 @@ frame matched so far), the earlier one on a tie. Real traffic repeats
 contents (a status frame every 10 ms, counters that wrap), so "the n-th Zenoh
 frame with a key is the n-th CAN frame with it" is wrong as soon as one copy
 is lost: every later copy would shift onto its predecessor and the loss would
-show up at the end of the run instead of where it happened. Frames left on
-the CAN side are lost; Zenoh frames with a key the CAN side had are
-duplicates; Zenoh frames with a key it never had are paired with the lost
-frame at the same place in the stream, if that one has the same id and length
-(corrupted), else counted as unexpected.
+show up at the end of the run instead of where it happened. A frame of a
+backlog that may be a duplicate rather than the next copy it took is held in
+doubt until the frames after it tell (_Doubt). Frames left on the CAN side are
+lost; Zenoh frames with a key the CAN side had are duplicates; Zenoh frames
+with a key it never had are paired with the lost frame at the same place in
+the stream, if that one has the same id and length (corrupted), else counted
+as unexpected.
 
 One pass over both streams in time order, keeping a window: a bus frame can be
 matched by a Zenoh frame that arrived at most MATCH_WINDOW_NS after its stamp,
@@ -217,6 +219,8 @@ class Comparison:
             "unexpected": n["unexpected"], "reordered": n["reordered"],
             "reordered_per_id": self.reordered_per_id, "latency": self.latency.stats(),
             "lost_in_faults": n["lost_in_faults"], "recovery_s": self.recovery_s,
+            # the frame after which backlogs' duplicates were no longer weighed (oracle.REMATCH_SHARE)
+            **({"doubts_budget_spent_at": n["doubts_budget_spent_at"]} if n["doubts_budget_spent_at"] else {}),
             **({"attachment_disagrees": self.attachment} if self.attachment is not None else {}),
         }
 
@@ -258,6 +262,11 @@ def match_subset(expected: list[Observed], observed: list[Observed], window_ns: 
 
 STAMP_SLACK_NS = 5_000_000  # a frame this much "before it was sent" is matched anyway: a bench error, not a loss
 DUPLICATE_PACE = 10  # ... unless it came within 1/this of its copies' cycle after the last one (_Copies.take)
+DOUBT_BACKLOGS = 4  # backlogs a doubtful frame's stories are followed across while the greedy one breaks
+DOUBT_FRAMES = 4096  # ... and received frames at most (each matched again after it)
+REMATCH_SHARE = 2  # frames matched again for doubts, at most this many per frame received (+ REMATCH_FLOOR):
+REMATCH_FLOOR = 4 * DOUBT_FRAMES  # past that the run's rest is matched greedily, so the cost stays a few
+#                                   times the greedy match's whatever the traffic (stalls full of duplicates)
 BEHIND_SCAN = 4096           # matched copies looked past for a late one (a later frame is a duplicate + a loss)
 LOAD_TRIM_NS = 1_000_000_000  # how far past its window a frame may stay while the bus capture is read ahead
 _END = 1 << 62               # a time after every stamp: the end of both streams
@@ -288,7 +297,7 @@ class _Copies:
         self.ranks.append(rank)
         self.used.append(0)
 
-    def take(self, frontier: int, t_ns: int) -> int | None:
+    def take(self, frontier: int, t_ns: int, may_doubt: bool = False) -> int | None:
         """The copy a frame received at t_ns is, marked matched (None: it is none of them).
         Only a copy sent by t_ns can be it. Of those, the one with the fewest frames of other
         contents between it and the frontier; on a tie the one ahead (a loss is the simpler
@@ -300,7 +309,9 @@ class _Copies:
         the next copy would shift every later copy onto its predecessor (a fast constant frame:
         all reordered, all "early"). A frame early by its stamp alone arrives at the pace its
         copies were sent, and frames of one early sample follow an early one: both stay bench
-        errors. Returns the copy's position (frames[position])."""
+        errors. Returns the copy's position (frames[position]); with may_doubt, ~position when
+        the frame may be a duplicate instead (_Doubt): it came at a duplicate's pace and took a
+        copy ahead with frames of other contents between, none of them received yet."""
         arrived, self.arrived = self.arrived, t_ns
         n = len(self.indices)
         indices, used, times = self.indices, self.used, self.times
@@ -337,7 +348,38 @@ class _Copies:
         while head < n and used[head]:
             head += 1
         self.head = head
+        if may_doubt and best == ahead and best > self.start and arrived is not None and \
+                times[best] <= t_ns and indices[best] - frontier - (best - ahead_at) > 1 and \
+                DUPLICATE_PACE * (t_ns - arrived) < times[best] - times[best - 1]:
+            return ~best
         return best
+
+    def at(self, index: int) -> int:
+        """The position of the copy at bus position index (positions move when evict compacts)."""
+        return bisect.bisect_left(self.indices, index, self.start)
+
+    def mark(self, index: int, matched: bool) -> None:
+        """Marks the copy at bus position index matched or not (a match undone, or done again)."""
+        at = self.at(index)
+        self.used[at] = matched
+        if not matched:
+            self.head = min(self.head, at)
+        elif at == self.head:
+            head, n = at, len(self.used)
+            while head < n and self.used[head]:
+                head += 1
+            self.head = head
+
+    def free_between(self, after: int, before: int, t_ns: int, marked: set[int]) -> int | None:
+        """The bus position of the first copy after `after` and before `before`, sent by t_ns,
+        not matched or matched only since (marked)."""
+        indices, used, times = self.indices, self.used, self.times
+        at = bisect.bisect_right(indices, after, self.start)
+        while at < len(indices) and indices[at] < before:
+            if (not used[at] or indices[at] in marked) and times[at] <= t_ns:
+                return indices[at]
+            at += 1
+        return None
 
     def evict(self) -> Observed | None:
         """Drops the oldest copy from the window; returns it if it was never matched (lost)."""
@@ -364,6 +406,73 @@ class _Copies:
 
     def __bool__(self) -> bool:
         return self.head < len(self.frames)
+
+
+_MATCHED, _DUPLICATE, _THEIRS, _LEFT = range(4)  # a verdict: (kind, received, copy, rank or frontier)
+
+
+class _Doubt:
+    """A received frame that took the next copy of its content, sent after frames of other
+    contents not received yet, at a duplicate's pace (_Copies.take): that copy, having overtaken
+    them, or a duplicate of the copy before (a frame of a backlog published twice). The greedy
+    match goes on meanwhile, its verdicts held back (queue, in arrival order) and its marks noted,
+    to be undone. `reach` follows the stream as if the frame were a duplicate (the furthest frame
+    sent before its copy received since): a frame past that copy's place first says it was the
+    copy; its content again first makes it `suspect`. The greedy story then has every later copy
+    of the contents between one place on, which breaks where the backlog ends (a frame read
+    behind, a copy not sent yet); both stories are matched until its content comes at its own
+    pace again with no new break, and the duplicate taken only if it is the better story
+    (duplicate_story in _classify)."""
+
+    __slots__ = ("frame", "copies", "index", "frontier", "reach", "suspect", "inner", "cycle", "backlogs", "faults",
+                 "oldest", "queue", "marks", "marked", "arrived")
+
+    def __init__(self, r: Observed, copies: _Copies, at: int, frontier: int) -> None:
+        s = copies.frames[at]
+        assert s is not None
+        self.frame = r
+        self.copies = copies
+        self.index = s.index      # the copy it took
+        self.frontier = frontier  # where the stream was before it
+        self.reach = frontier
+        self.suspect = False
+        self.inner = False  # a frame since was doubtful too (matched again once it is resolved)
+        self.cycle = copies.times[at] - copies.times[at - 1]  # of its content's copies
+        self.backlogs = 0  # ends of backlogs the greedy match broke at, followed while suspect
+        self.faults = 0    # the greedy match's faults at the last of them
+        self.oldest = s.t_ns      # the earliest copy marked since: undone only while in the window
+        self.queue: list[tuple[int, Observed, Observed | None, int]] = []
+        self.marks: list[tuple[_Copies, int]] = []
+        self.marked: set[int] = set()
+        # each content's pace before it (its own: it arrived, a copy or a duplicate)
+        self.arrived: dict[int, tuple[_Copies, int | None]] = {id(copies): (copies, r.t_ns)}
+
+    def undo(self) -> None:
+        """The marks since it undone, each content's pace as before it."""
+        for copies, index in self.marks:
+            copies.mark(index, False)
+        for copies, arrived in self.arrived.values():
+            copies.arrived = arrived
+        self.marks = []
+
+
+def _faults(queue: list[tuple[int, Observed, Observed | None, int]], top: int) -> int:
+    """A story's faults, to weigh it against another of the same received frames: each frame it
+    matched to no copy (a duplicate), behind one received before it (reordered; top: the furthest
+    matched before) or to a copy not sent yet. Not the copies it left: a backlog's are still to come."""
+    n = 0
+    for kind, r, s, _ in queue:
+        if kind == _MATCHED:
+            assert s is not None
+            if s.index < top:
+                n += 1
+            else:
+                top = s.index
+            if r.t_ns < s.t_ns:
+                n += 1
+        elif kind == _DUPLICATE:
+            n += 1
+    return n
 
 
 class _everything(Counter):
@@ -533,71 +642,232 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             nxt = next(sent_it, None)
 
     values = latency.values
-    for r in received:
+
+    def settle(s: Observed, r: Observed, s_rank: int) -> None:
+        """r is the copy s (s_rank: its place in the sent stream): counted, in arrival order."""
+        nonlocal previous, previous_seq, stamp_count, stamp_max_ns, seq_count
+        counts["matched"] += 1
+        if keep_matched:
+            c.matched.append((s, r))
+        if on_match is not None:
+            on_match(s, r)
+        # reordering: received order against sent order, globally and per id
+        if previous is not None and s.index < previous.index:
+            _note(c, c.reordered, (s, previous), "reordered", keep)
+        ident = (s.frame.can_id, s.frame.extended)
+        last = last_by_id.get(ident, -1)
+        if s.index < last:
+            c.reordered_per_id += 1
+        else:
+            last_by_id[ident] = s.index
+        if previous is None or s.index > previous.index:
+            previous = s
+        if len(values) < latency.cap:  # Distribution.add's exact mode, inline: the hot path
+            values.append((r.t_ns - s.t_ns) / 1e6)
+        else:
+            latency.add((r.t_ns - s.t_ns) / 1e6)
+        if r.t_ns < s.t_ns:
+            _note(c, c.negative, (s, r), "negative", keep)
+        if windows:
+            faults.matched(s, r, c, keep)
+        if attachment:
+            # the bridge's own account against the oracle's (reported, never used to judge):
+            # its stamp of the frame (at the capture's microseconds), and its numbering of two
+            # frames that arrived one after the other against their distance on the bus
+            if r.bridge_rx_ns and r.bridge_rx_ns // 1000 != s.t_ns // 1000:
+                stamp_count += 1
+                stamp_max_ns = max(stamp_max_ns, abs(r.bridge_rx_ns - s.t_ns))
+                if len(stamps) < EXAMPLES:
+                    stamps.append(f"{describe(s)}: bridge stamp {(r.bridge_rx_ns - s.t_ns) / 1000:+.3f} us off")
+            if r.seq >= 0:
+                if previous_seq is not None:
+                    s0, r0, rank0 = previous_seq
+                    if r.seq - r0.seq != s_rank - rank0:
+                        seq_count += 1
+                        if len(seqs) < EXAMPLES:
+                            seqs.append(f"seq {r0.seq} -> {r.seq} for {describe(s0)} -> {describe(s)} "
+                                        f"({s_rank - rank0:+d} on the bus)")
+                previous_seq = (s, r, s_rank)
+
+    doubt: _Doubt | None = None
+    doubts = explained is None  # Zenoh -> CAN and round trips keep the greedy match alone
+    rematched = 0  # frames matched again for doubts so far (REMATCH_SHARE)
+    todo: deque[Observed] = deque()  # received frames to match again, once a doubt is resolved
+
+    def unmatched(r: Observed, k: tuple) -> tuple[int, Observed, Observed | None, int]:
+        """r matched no copy: an ECU's frame (explained), a duplicate, or, once the window tells, a
+        corruption or an unexpected frame (leftovers)."""
+        if explained is not None and explained[k] > 0:
+            explained[k] -= 1
+            c.received -= 1
+            return _THEIRS, r, None, 0
+        # a copy sent by the time it arrived: a frame matched again after a doubt must not see the
+        # copies loaded since (a corrupted counter read as a later value's duplicate, that frame lost)
+        copies = waiting.get(k)
+        if copies is not None and copies.times[copies.start] <= r.t_ns + slack:
+            return _DUPLICATE, r, None, 0
+        return _LEFT, r, None, frontier
+
+    def step(r: Observed, may_doubt: bool) -> tuple[int, Observed, Observed | None, int]:
+        """The greedy match of r, marked: (kind, r, copy, its rank or the frontier); a doubt noted."""
+        nonlocal frontier, doubt
         if nxt is not None and nxt.t_ns <= r.t_ns + slack:
             load(r.t_ns + slack)
         if window_ns is not None and r.t_ns - window_ns > horizon:
             advance(r.t_ns)
-        c.received += 1
         k = _key(r.frame)
         copies = waiting.get(k)
-        at = copies.take(frontier, r.t_ns) if copies else None
-        if at is not None:
-            s = copies.frames[at]  # type: ignore[union-attr]
-            assert s is not None
-            if s.index > frontier:
-                frontier = s.index
-            counts["matched"] += 1
-            if keep_matched:
-                c.matched.append((s, r))
-            if on_match is not None:
-                on_match(s, r)
-            # reordering: received order against sent order, globally and per id
-            if previous is not None and s.index < previous.index:
-                _note(c, c.reordered, (s, previous), "reordered", keep)
-            ident = (s.frame.can_id, s.frame.extended)
-            last = last_by_id.get(ident, -1)
-            if s.index < last:
-                c.reordered_per_id += 1
+        if copies is None:
+            return unmatched(r, k)
+        if doubt is not None and id(copies) not in doubt.arrived:
+            doubt.arrived[id(copies)] = (copies, copies.arrived)
+        at = copies.take(frontier, r.t_ns, may_doubt)
+        if at is None:
+            return unmatched(r, k)
+        if at < 0:
+            at = ~at
+            if doubt is None:
+                doubt = _Doubt(r, copies, at, frontier)
             else:
-                last_by_id[ident] = s.index
-            if previous is None or s.index > previous.index:
-                previous = s
-            if len(values) < latency.cap:  # Distribution.add's exact mode, inline: the hot path
-                values.append((r.t_ns - s.t_ns) / 1e6)
-            else:
-                latency.add((r.t_ns - s.t_ns) / 1e6)
-            if r.t_ns < s.t_ns:
-                _note(c, c.negative, (s, r), "negative", keep)
-            if windows:
-                faults.matched(s, r, c, keep)
-            if attachment:
-                # the bridge's own account against the oracle's (reported, never used to judge):
-                # its stamp of the frame (at the capture's microseconds), and its numbering of two
-                # frames that arrived one after the other against their distance on the bus
-                if r.bridge_rx_ns and r.bridge_rx_ns // 1000 != s.t_ns // 1000:
-                    stamp_count += 1
-                    stamp_max_ns = max(stamp_max_ns, abs(r.bridge_rx_ns - s.t_ns))
-                    if len(stamps) < EXAMPLES:
-                        stamps.append(f"{describe(s)}: bridge stamp {(r.bridge_rx_ns - s.t_ns) / 1000:+.3f} us off")
-                if r.seq >= 0:
-                    s_rank = copies.ranks[at]  # type: ignore[union-attr]
-                    if previous_seq is not None:
-                        s0, r0, rank0 = previous_seq
-                        if r.seq - r0.seq != s_rank - rank0:
-                            seq_count += 1
-                            if len(seqs) < EXAMPLES:
-                                seqs.append(f"seq {r0.seq} -> {r.seq} for {describe(s0)} -> {describe(s)} "
-                                            f"({s_rank - rank0:+d} on the bus)")
-                    previous_seq = (s, r, s_rank)
-        elif explained is not None and explained[k] > 0:
-            explained[k] -= 1
-            c.received -= 1
-            others.append(r)
-        elif k in waiting:
+                doubt.inner = True
+        s = copies.frames[at]
+        assert s is not None
+        if s.index > frontier:
+            frontier = s.index
+        if doubt is not None:
+            doubt.marks.append((copies, s.index))
+            doubt.marked.add(s.index)
+            doubt.oldest = min(doubt.oldest, s.t_ns)
+        return _MATCHED, r, s, copies.ranks[at]
+
+    def emit(kind: int, r: Observed, s: Observed | None, n: int) -> None:
+        if kind == _MATCHED:
+            settle(s, r, n)  # type: ignore[arg-type]
+        elif kind == _DUPLICATE:
             _note(c, c.duplicates, r, "duplicates", keep)
+        elif kind == _THEIRS:
+            others.append(r)
         else:
-            leftovers.append((r, frontier))
+            leftovers.append((r, n))
+
+    def duplicate_story(d: _Doubt) -> bool:
+        """Matches the frames after the doubtful one again as if it were a duplicate, and tells if
+        that story is the better one: fewer faults than the greedy story, and no copy left behind
+        that the greedy story matched (a late frame the greedy match read as a later copy would
+        become a duplicate and a loss). If so its marks stay, else the greedy story's are back."""
+        nonlocal frontier, rematched
+        rematched += len(d.queue)
+        top = previous.index if previous is not None else -1
+        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
+        d.undo()
+        frontier = d.frontier
+        story = [unmatched(d.frame, d.copies.key)] + [step(r, False) for _, r, _, _ in d.queue[1:]]
+        matched = {index for _, index in d.marks}
+        # nor a copy of its own content before the one it took left unmatched in the window: the
+        # frame may be that copy, late (delayed past its next copy in a batch, the greedy match then
+        # one copy on until the end), not a duplicate and a loss
+        if _faults(story, top) < _faults(d.queue, top) and \
+                d.copies.free_between(-1, d.index, d.frame.t_ns, set()) is None and \
+                all(index in matched or index > frontier for _, index in greedy[0]):
+            return True
+        d.undo()
+        d.marks, frontier, arrived = greedy
+        for copies, index in d.marks:
+            copies.mark(index, True)
+        for copies, value in arrived:
+            copies.arrived = value
+        return False
+
+    def resolve() -> None:
+        """The doubtful frame is the copy it took (the greedy match), or a duplicate if suspect and
+        that story is the better one. If a frame since was doubtful too, or the story changed,
+        every change since is undone and the frames after it are matched again."""
+        nonlocal doubt, frontier, doubts, rematched
+        d = doubt
+        assert d is not None
+        duplicate = d.suspect and duplicate_story(d)
+        doubt = None
+        if doubts and rematched > REMATCH_SHARE * c.received + REMATCH_FLOOR:
+            doubts = False  # the budget spent: no new doubt, the run's rest matched greedily (said in counts)
+            counts["doubts_budget_spent_at"] = c.received
+        if not duplicate and not d.inner:  # the greedy match stands: its verdicts as they were
+            for entry in d.queue:
+                emit(*entry)
+            return
+        d.undo()
+        frontier = d.frontier
+        if duplicate:
+            emit(*unmatched(d.frame, d.copies.key))
+        else:
+            _, r, s, s_rank = d.queue[0]
+            assert s is not None
+            d.copies.mark(s.index, True)
+            frontier = max(frontier, s.index)
+            settle(s, r, s_rank)
+        rematched += len(d.queue)
+        todo.extendleft(r for _, r, _, _ in reversed(d.queue[1:]))
+
+    def match(r: Observed) -> None:
+        """Matches r; while a doubt is open, its verdict is held back with the doubt's."""
+        if doubt is not None and window_ns is not None and doubt.oldest < r.t_ns - window_ns:
+            todo.appendleft(r)
+            resolve()  # before a copy it marked leaves the window
+            return
+        if doubt is None:
+            entry = step(r, doubts)
+            if doubt is not None:
+                doubt.queue.append(entry)
+            elif entry[0] == _MATCHED:
+                settle(entry[2], r, entry[3])  # type: ignore[arg-type]
+            else:
+                emit(*entry)
+            return
+        k = _key(r.frame)
+        again = k == doubt.copies.key
+        passed = False
+        if again and not doubt.suspect:
+            # its content again before the stream passed the copy the doubtful frame took: after
+            # frames sent before that copy, this may be that copy
+            if doubt.reach == doubt.frontier:
+                todo.appendleft(r)
+                resolve()
+                return
+            doubt.suspect = True
+        elif not doubt.suspect:
+            copies = waiting.get(k)
+            reached = copies.free_between(doubt.reach, doubt.index, r.t_ns, doubt.marked) if copies else None
+            if reached is not None:
+                doubt.reach = reached
+            else:
+                passed = True
+        pace = doubt.copies.arrived  # its content's last arrival, before r's
+        entry = step(r, doubts)
+        doubt.queue.append(entry)
+        s = entry[2]
+        if len(doubt.queue) >= DOUBT_FRAMES:
+            resolve()  # a bound on the verdicts held back, and on the frames matched again
+        elif not doubt.suspect:
+            if passed and s is not None and s.index > doubt.frontier:
+                resolve()  # the stream passed its copy's place: it was that copy
+        elif again and pace is not None and DUPLICATE_PACE * (r.t_ns - pace) >= doubt.cycle:
+            # its content at its own pace again: a backlog is over. The greedy match's breaks (frames
+            # read behind, a copy taken too far) show where each backlog ends, as long as its shift lasts
+            faults = _faults(doubt.queue, previous.index if previous is not None else -1)
+            if faults > doubt.faults and doubt.backlogs < DOUBT_BACKLOGS:
+                doubt.faults = faults
+                doubt.backlogs += 1
+            else:
+                resolve()
+
+    for r in received:
+        c.received += 1
+        match(r)
+        while todo:
+            match(todo.popleft())
+    while doubt is not None:
+        resolve()
+        while todo:
+            match(todo.popleft())
     load(_END)
     advance(_END)
     c.sent = rank
