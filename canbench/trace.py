@@ -445,11 +445,46 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
             fail(None, f"truncated: its last object (at byte {cut_at}) ends past the file's end" + (
                 ", and its header was never finished (a logger stopped without closing the file, or an incomplete "
                 "copy)" if unfinished else ""))
-        yield from enumerate(reader, 1)
+        skipped = _Skipped(logging.getLogger("can.io.blf"))  # what it skips with only a warning
+        try:
+            for number, msg in enumerate(reader, 1):
+                skipped.said(fail, number)
+                yield number, msg
+            skipped.said(fail, None)
+        finally:
+            skipped.close()
     except TraceError:
         raise
     except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
         raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
+
+
+class _Skipped(logging.Handler):
+    """The warnings of python-can's BLF reader: a container of an unknown compression method or
+    an object of an unknown header version is skipped with only a log line, and the frames in it
+    would be missing from the replay without a word."""
+
+    def __init__(self, logger: logging.Logger):
+        super().__init__(logging.WARNING)
+        self.logger, self.level_before = logger, logger.level
+        self.messages: list[str] = []
+        logger.addHandler(self)
+        logger.setLevel(logging.WARNING)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+    def said(self, fail: Callable[..., None], number: int | None) -> None:
+        """Each warning since, as a problem before frame `number` (None: at the file's end)."""
+        for message in self.messages:
+            where = f"before frame {number}" if number is not None else "after the last frame"
+            fail(None, f"python-can skipped part of it {where} ({message}): the frames there are not read")
+        self.messages.clear()
+
+    def close(self) -> None:
+        self.logger.removeHandler(self)
+        self.logger.setLevel(self.level_before)
+        super().close()
 
 
 def _blf_cut_at(path: Path) -> int | None:

@@ -176,3 +176,15 @@ def test_ecus_of_the_wrong_type_is_a_problem_not_a_crash(tmp_path):
     path = tmp_path / "s.yaml"
     path.write_text("name: s\nduration_s: 1\nbuses: [{name: vcan0}]\necus: 1.5\n")
     assert validate.problems(path)
+
+
+def test_a_blf_container_python_can_skips_is_refused_not_missing(tmp_path, seeds):
+    # python-can skips a container of a compression method it does not know with only a log line
+    data = bytearray(seeds[".blf"])
+    header = int.from_bytes(data[4:8], "little")  # the file header's size: the first object follows
+    assert data[header:header + 4] == b"LOBJ" and int.from_bytes(data[header + 12:header + 16], "little") == 10
+    data[header + 16:header + 18] = (7).to_bytes(2, "little")  # LOG_CONTAINER's method: 0 or 2 (zlib)
+    path = tmp_path / "odd.blf"
+    path.write_bytes(bytes(data))
+    with pytest.raises(TraceError, match=r"odd.blf: python-can skipped part of it .*Unknown compression method \(7\)"):
+        list(iter_trace(path))
