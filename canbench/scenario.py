@@ -549,8 +549,9 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
     from .dbc import load_dbc, load_error_text, strict_problem
     bus_dbcs: dict[str, Path] = {}
     where_of: dict[Path, list] = {}
-    if dbc is not None and is_file(dbc):
-        where_of[dbc] = ["dbc"]
+    top = dbc if dbc is not None and is_file(dbc) else None  # the top-level DBC (a missing one: said at its line)
+    if top is not None:
+        where_of[top] = ["dbc"]
     for i, spec in enumerate(doc.get("buses", []) or []):
         if not isinstance(spec, dict) or "name" not in spec:
             continue
@@ -561,8 +562,8 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
                 continue
             bus_dbcs[spec["name"]] = shown.resolve()
             where_of.setdefault(shown.resolve(), ["buses", i, "dbc"])
-        elif dbc is not None and is_file(dbc):
-            bus_dbcs[spec["name"]] = dbc
+        elif top is not None:
+            bus_dbcs[spec["name"]] = top
     strict = doc.get("dbc_strict", True) is not False
     for file, where in where_of.items():
         try:

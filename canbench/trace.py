@@ -12,6 +12,7 @@ import re
 import string
 import struct
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -340,6 +341,21 @@ def _csv_problem(text: str) -> str | None:
     return None
 
 
+@contextmanager
+def _listening(logger: str, handler: logging.Handler, level: int) -> Iterator[None]:
+    """handler gets what a python-can reader logs at `level` and above while the block runs (what
+    its readers skip with only a log line); the logger's level as it was after."""
+    log = logging.getLogger(logger)
+    before = log.level
+    log.addHandler(handler)
+    log.setLevel(level)
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(before)
+
+
 class _ReaderLog(logging.Handler):
     """What python-can's TRC reader only logs, with the line it was reading: a line it could not
     parse (WARNING) and the record types it does not read (INFO 'Unsupported type')."""
@@ -379,36 +395,33 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
         f = open(path, encoding="utf-8-sig", errors="replace")
         counter: _LineCounter = _AscLines(f, path) if suffix == ".asc" else _LineCounter(f)
         log = _ReaderLog(counter)
-        trc_log = logging.getLogger("can.io.trc")
-        trc_log.addHandler(log)
-        level = trc_log.level
-        trc_log.setLevel(logging.INFO)
         try:
-            reader = TEXT_READERS[suffix](counter)
-            for msg in reader:
-                line = counter.line
-                _reader_problems(log, fail)
-                if unended and line == unended[0]:
-                    hex_bytes = str(getattr(reader, "base", "hex")).lower() != "dec"  # ASC: as its header said
-                    cut = _cut(unended[1], msg, suffix, hex_bytes)
-                    unended = None  # judged once
-                    if cut:
-                        fail(line, cut_said)
+            with _listening("can.io.trc", log, logging.INFO):
+                reader = TEXT_READERS[suffix](counter)
+                for msg in reader:
+                    line = counter.line
+                    _reader_problems(log, fail)
+                    if unended and line == unended[0]:
+                        hex_bytes = str(getattr(reader, "base", "hex")).lower() != "dec"  # ASC: as its header said
+                        cut = _cut(unended[1], msg, suffix, hex_bytes)
+                        unended = None  # judged once
+                        if cut:
+                            fail(line, cut_said)
+                            continue
+                    if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
+                        continue  # a transmit request is no frame on the bus
+                    if suffix == ".asc" and msg.is_fd and not msg.is_error_frame:
+                        msg = _classic_in_fd_line(counter.text, msg)
+                    elif suffix == ".asc" and msg.dlc > 8 and not msg.is_remote_frame:
+                        msg = _asc_dlc_code(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
+                    problem = _csv_problem(counter.text) if suffix == ".csv" else None
+                    if problem:
+                        fail(line, problem)
                         continue
-                if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
-                    continue  # a transmit request is no frame on the bus
-                if suffix == ".asc" and msg.is_fd and not msg.is_error_frame:
-                    msg = _classic_in_fd_line(counter.text, msg)
-                elif suffix == ".asc" and msg.dlc > 8 and not msg.is_remote_frame:
-                    msg = _asc_dlc_code(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
-                problem = _csv_problem(counter.text) if suffix == ".csv" else None
-                if problem:
-                    fail(line, problem)
-                    continue
-                yield line, msg
-            _reader_problems(log, fail)
-            if unended and _cut(unended[1], None, suffix):  # python-can read nothing from it
-                fail(unended[0], cut_said)
+                    yield line, msg
+                _reader_problems(log, fail)
+                if unended and _cut(unended[1], None, suffix):  # python-can read nothing from it
+                    fail(unended[0], cut_said)
         except TraceError:
             raise
         except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad lines
@@ -416,8 +429,6 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
                 raise TraceError(str(path), counter.line, cut_said) from None
             raise TraceError(str(path), counter.line or None, f"python-can cannot read it: {e}{hint}") from None
         finally:
-            trc_log.removeHandler(log)
-            trc_log.setLevel(level)
             counter.close()
         return
     if suffix == ".gz":
@@ -445,14 +456,12 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
             fail(None, f"truncated: its last object (at byte {cut_at}) ends past the file's end" + (
                 ", and its header was never finished (a logger stopped without closing the file, or an incomplete "
                 "copy)" if unfinished else ""))
-        skipped = _Skipped(logging.getLogger("can.io.blf"))  # what it skips with only a warning
-        try:
+        skipped = _Skipped()
+        with _listening("can.io.blf", skipped, logging.WARNING):  # what it skips with only a warning
             for number, msg in enumerate(reader, 1):
                 skipped.said(fail, number)
                 yield number, msg
             skipped.said(fail, None)
-        finally:
-            skipped.close()
     except TraceError:
         raise
     except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
@@ -464,12 +473,9 @@ class _Skipped(logging.Handler):
     an object of an unknown header version is skipped with only a log line, and the frames in it
     would be missing from the replay without a word."""
 
-    def __init__(self, logger: logging.Logger):
+    def __init__(self) -> None:
         super().__init__(logging.WARNING)
-        self.logger, self.level_before = logger, logger.level
         self.messages: list[str] = []
-        logger.addHandler(self)
-        logger.setLevel(logging.WARNING)
 
     def emit(self, record: logging.LogRecord) -> None:
         self.messages.append(record.getMessage())
@@ -480,11 +486,6 @@ class _Skipped(logging.Handler):
             where = f"before frame {number}" if number is not None else "after the last frame"
             fail(None, f"python-can skipped part of it {where} ({message}): the frames there are not read")
         self.messages.clear()
-
-    def close(self) -> None:
-        self.logger.removeHandler(self)
-        self.logger.setLevel(self.level_before)
-        super().close()
 
 
 def _blf_cut_at(path: Path) -> int | None:

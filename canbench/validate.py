@@ -98,11 +98,9 @@ def remap_problems(path: Path, doc) -> list[InputError]:
     """An id_remap that gives an 11-bit frame of its trace an id above 7FF (the frame keeps its
     format): one problem per remapped id, at the remap's line, naming the trace line."""
     found: list[InputError] = []
-    ecus = doc.get("ecus")
-    for i, spec in enumerate(ecus if isinstance(ecus, list) else []):  # the schema's problem otherwise
-        remap = spec.get("id_remap") if isinstance(spec, dict) else None
-        trace = spec.get("trace") if isinstance(spec, dict) else None
-        if not isinstance(remap, dict) or not isinstance(trace, str) or not is_file(path.parent / trace):
+    for key, i, spec, trace in trace_specs(doc):
+        remap = spec.get("id_remap")
+        if key != "ecus" or not isinstance(remap, dict) or not is_file(path.parent / trace):
             continue
         try:
             wide = {int(k, 16): (k, v) for k, v in remap.items() if STD_ID_MAX < int(v, 16) <= EXT_ID_MAX}
