@@ -2,8 +2,11 @@
 `socketcan` + eclipse-zenoh, one thread per bus, the same 16-byte wire format
 and keys as zenoh-node (CAN -> Zenoh one sample per frame; Zenoh -> CAN on
 the tx key). Declares a liveliness token like the bridge, so the same
-readiness wait applies. Not a product: the baseline `make bench` measures
-zenoh-node against, in the same run.
+readiness wait applies (`--no-token`: none, as a user's bridge that announces
+nothing: tests/compose/test_device.py runs it as DEVICE_ANNOUNCES=0's device).
+Its Zenoh settings are $ZENOH_CONFIG's when set (a device's identity), then
+--router as the one endpoint, client mode, no scouting. Not a product: the
+baseline `make bench` measures zenoh-node against, in the same run.
 
   python -m bench.refbridge --router tcp/127.0.0.1:7447 --can vcan0,vcan1"""
 from __future__ import annotations
@@ -29,6 +32,7 @@ def main() -> None:
     ap.add_argument("--router", default="tcp/127.0.0.1:7447")
     ap.add_argument("--can", default="vcan0")
     ap.add_argument("--prefix", default="vehicle/can")
+    ap.add_argument("--no-token", action="store_true", help="declare no liveliness token")
     args = ap.parse_args()
     buses = args.can.split(",")
     stop = threading.Event()
@@ -58,7 +62,8 @@ def main() -> None:
                 if msg is not None and not msg.is_error_frame:
                     pub.put(wire.encode(frame_of(msg)))
         threads.append(threading.Thread(target=forward, daemon=True))
-        keep.append(session.liveliness().declare_token(f"{args.prefix}/bridges/python-ref/{name}/client"))
+        if not args.no_token:
+            keep.append(session.liveliness().declare_token(f"{args.prefix}/bridges/python-ref/{name}/client"))
     for t in threads:
         t.start()
     stop.wait()

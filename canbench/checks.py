@@ -67,6 +67,9 @@ def skip_reason(result: RunResult, name: str) -> str:
     if name in CONTAINER_SAMPLED and result.metrics.get("device"):
         return (f"{name} not judged: the bench samples its own bridge container's memory and descriptors, not "
                 f"a device of your own ({result.metrics['device']})")
+    if name == "bridge_stats_agree" and result.metrics.get("device_announces") is False:
+        return (f"{name} not judged: the device ({result.metrics['device']}) has no stats queryable "
+                f"(DEVICE_ANNOUNCES=0)")
     return f"{name} not asked for by this scenario"
 
 
@@ -457,6 +460,8 @@ def _since_last_restart(result: RunResult, frames):
 
 def bridge_stats_agree(result: RunResult) -> list[str] | None:
     """The bridge's own counters agree with what the oracle saw."""
+    if result.metrics.get("device_announces") is False:
+        return None  # a device with no stats queryable (skip_reason)
     if result.bridge_stats is None:
         return ["the bridge's stats queryable did not answer"]
     problems = []

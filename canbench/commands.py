@@ -143,9 +143,11 @@ class Commander(threading.Thread):
     """Publishes the plan in a thread; .error holds what stopped it early, if anything. After the
     last put it fences the stream: per bus, the receipt time of the first stats reply in which the
     bridge counts every command put on it (tx_samples), an upper bound on when each one reached the
-    bridge (commands-arrived.json; delivered_late's bound for a stream's last commands)."""
+    bridge (commands-arrived.json; delivered_late's bound for a stream's last commands). fence=False:
+    a device with no stats queryable (DEVICE_ANNOUNCES=0), no fence and no file."""
 
-    def __init__(self, session: zenoh.Session, scenario: Scenario, log_path: Path, prefix: str = "vehicle/can"):
+    def __init__(self, session: zenoh.Session, scenario: Scenario, log_path: Path, prefix: str = "vehicle/can",
+                 fence: bool = True):
         super().__init__(name="commander", daemon=True)
         self.items = _aged_plan(scenario)
         self.log_path = log_path
@@ -155,6 +157,7 @@ class Commander(threading.Thread):
         self.sent = 0
         self.sent_per_bus = dict.fromkeys(buses, 0)
         self.error: BaseException | None = None
+        self.fence = fence
 
     def run(self) -> None:
         try:
@@ -174,7 +177,8 @@ class Commander(threading.Thread):
                     self.sent += 1
                     self.sent_per_bus[bus] += 1
                     log.write(sent_line(line, now_ns, frame, bus))
-            self._fence()
+            if self.fence:
+                self._fence()
         except BaseException as e:  # reported by the orchestrator, never lost in a thread
             self.error = e
         finally:

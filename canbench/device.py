@@ -3,7 +3,8 @@ device of your own"): the bench leaves its `bridge` service out, publishes the r
 127.0.0.1:PORT only (never on every interface), binds the hub's socket directory to a host
 directory so a host process joins the bus through libucan-preload.so, and hands the device an
 identity of the run (canbench.identities) and the scenario's bridge settings as environment
-variables (device.env). The run waits for the device's liveliness token as for the bridge's.
+variables (device.env). The run waits for the device's liveliness token as for the bridge's (or,
+for a device that announces nothing, DEVICE_ANNOUNCES=0, for its subscription to the tx keys).
 
 What a device cannot stand in for yet is refused before anything starts: fault steps on the
 bridge (they act on the bench's own bridge container or its listener on the router), the bridge

@@ -18,11 +18,14 @@ from .capture import CanCapture, ZenohCapture
 from .commands import Commander
 from .commands import plan as command_plan
 from .faults import Injector
-from .runkeys import rx_key
+from .runkeys import rx_key, tx_key
 from .scenario import Scenario
 
 BRIDGE_READY_TIMEOUT_S = 60  # the default; a device started by hand gets longer (scripts/bench-run)
 DRAIN_TIMEOUT_S = 5.0
+# a device that announces nothing (no stats to say what it read) is drained when the capture got
+# nothing new for this long (or two publish periods)
+DEVICE_QUIET_S = 0.5
 # immediate mode's drained: nothing new read for this long (a frame still in the bridge's socket is
 # in no counter: its last one read just after the stats said 1539 of 1540, seen once in the host lane)
 IMMEDIATE_QUIET_S = 0.05
@@ -63,10 +66,13 @@ class Execution:
     """One run's sessions, the ECUs' done messages, the captures, the commander and the fault injector."""
 
     def __init__(self, scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str,
-                 consumer: str | None, project: str | None, device: str | None = None):
+                 consumer: str | None, project: str | None, device: str | None = None, announces: bool = True):
         self.scenario, self.run_id, self.run_dir, self.prefix = scenario, run_id, run_dir, prefix
         self.consumer, self.project = consumer or router, project
         self.device = device  # a device of your own under test (canbench.device), else the bench's bridge
+        # False: a device that declares neither the bridge's liveliness token nor its stats queryable
+        # (DEVICE_ANNOUNCES=0): ready once it subscribes to the tx keys, drained once the capture is quiet
+        self.announces = announces
         self.session = runkeys.open_session(router)
         self.data = self.session if consumer in (None, router) else runkeys.open_session(consumer)
         self.done: dict[str, dict] = {}
@@ -90,9 +96,15 @@ class Execution:
             self.echoes_done.set()
 
     def ready(self, wait_viewer: bool, bridge_timeout_s: float = BRIDGE_READY_TIMEOUT_S) -> None:
-        """The data path is up end to end (the token seen through the consumer's path), the
-        echoes are bound, and a recording viewer subscribes to the bridge's ROS 2 topic."""
-        runkeys.wait_token(self.data, runkeys.bridges(self.prefix), bridge_timeout_s)
+        """The data path is up end to end (the token seen through the consumer's path; a device that
+        announces nothing: its subscription to every tx key, before the bench's own capture subscribes),
+        the echoes are bound, and a recording viewer subscribes to the bridge's ROS 2 topic."""
+        if self.announces:
+            runkeys.wait_token(self.data, runkeys.bridges(self.prefix), bridge_timeout_s)
+        else:
+            n = len(self.scenario.bus_names)
+            runkeys.wait_subscribed(self.data, [tx_key(self.prefix, b, n) for b in self.scenario.bus_names],
+                                    bridge_timeout_s)
         for e in self.scenario.echoes:
             runkeys.wait_token(self.session, runkeys.ecu_ready(self.run_id, e.name), BRIDGE_READY_TIMEOUT_S)
         if wait_viewer:
@@ -113,7 +125,8 @@ class Execution:
                                           runkeys.zenoh_capture_ready(self.run_id))
         self.closing.append(self.zenoh_capture.stop)
         if self.scenario.commands:
-            self.commander = Commander(self.data, self.scenario, self.run_dir / "commands.tsv", self.prefix)
+            self.commander = Commander(self.data, self.scenario, self.run_dir / "commands.tsv", self.prefix,
+                                       fence=self.announces)
         if self.scenario.faults:
             if not self.project:
                 raise RuntimeError("this scenario has fault steps: they need the compose project (BENCH_PROJECT) "
@@ -171,14 +184,19 @@ class Execution:
     def drain(self) -> None:
         """Bounded waits until the bridge handled every command and published what it read, the
         echoes stopped, and the samples in flight reached the capture; what is missing then is loss."""
-        if self.commander:
+        if self.commander and self.announces:
             self._drain_commands(self.commander.sent)
+        elif self.commander:
+            self._wait_answers()
         if self.echo_names:
             self.session.put(runkeys.ecu_stop(self.run_id), b"")
             if not self.echoes_done.wait(ECHO_STOP_TIMEOUT_S):
                 raise TimeoutError(f"echo ECUs {sorted(self.echo_names - set(self.done))} did not stop within "
                                    f"{ECHO_STOP_TIMEOUT_S} s; see their container logs")
 
+        if not self.announces:
+            self._drain_quiet()
+            return
         # In batching mode the bridge reads its socket once per period: frames can wait there,
         # not yet in can_rx_frames. Drained = all it read is published and nothing new was read
         # for a whole period (immediate mode: for IMMEDIATE_QUIET_S).
@@ -206,8 +224,11 @@ class Execution:
             stats = query_stats(self.session, self.prefix)
             return stats is not None and sum(b["tx_frames"] + b["can_tx_errors"] + sum(b["tx_rejected"].values())
                                              for b in stats["buses"]) >= sent
-        if not _bounded(handled, DRAIN_TIMEOUT_S, "the bridge to write the commands to CAN"):
-            return
+        if _bounded(handled, DRAIN_TIMEOUT_S, "the bridge to write the commands to CAN"):
+            self._wait_answers()
+
+    def _wait_answers(self) -> None:
+        """Until the echoes' answers to the commands reached the capture (bounded)."""
         ids = answer_ids(self.scenario)
         if not ids:
             return
@@ -216,6 +237,19 @@ class Execution:
         keys = {rx_key(self.prefix, b, len(self.scenario.bus_names)): i for b, i in ids.items()}
         _bounded(lambda: self.zenoh_capture.frames_with_ids(keys) >= wanted, DRAIN_TIMEOUT_S + self.period_s,
                  "the echoes' answers to reach the capture")
+
+    def _drain_quiet(self) -> None:
+        """A device with no stats: drained once no new frame reached the capture for DEVICE_QUIET_S (or
+        two publish periods); bounded like the stats' drain, what is missing then is loss."""
+        quiet_s = max(2 * self.period_s, DEVICE_QUIET_S)
+        last = {"frames": -1, "since": 0.0}
+
+        def quiet() -> bool:
+            frames, now = self.zenoh_capture.frames_on(self.rx_keys), time.monotonic()
+            if frames != last["frames"]:
+                last.update(frames=frames, since=now)
+            return now - last["since"] >= quiet_s
+        _bounded(quiet, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1) + quiet_s, "the device's frames to stop coming")
 
     def stop_captures(self) -> None:
         while self.closing:
@@ -230,14 +264,15 @@ class Execution:
 def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix: str = "vehicle/can",
             consumer: str | None = None, baseline: dict | None = None, project: str | None = None,
             wait_viewer: bool = False, ready_timeout_s: float = BRIDGE_READY_TIMEOUT_S,
-            device: str | None = None) -> RunResult:
+            device: str | None = None, device_announces: bool = True) -> RunResult:
     """router: where the bench coordinates (ECUs, stats); consumer: where the capture and the
     commands connect (the router by default; a far router or the bridge itself by topology);
     project: the compose project, for fault steps; wait_viewer: a `canbench view` records the
     run (make test VIEWER=1), the traffic starts once its token says it subscribes; ready_timeout_s: how
-    long the bridge's token may take (a device of your own started by hand: longer)."""
+    long the bridge's token may take (a device of your own started by hand: longer); device_announces:
+    False for a device that declares neither the token nor the stats queryable (DEVICE_ANNOUNCES=0)."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    run = Execution(scenario, run_id, run_dir, router, prefix, consumer, project, device)
+    run = Execution(scenario, run_id, run_dir, router, prefix, consumer, project, device, device_announces)
     try:
         run.ready(wait_viewer, ready_timeout_s)
         try:
@@ -252,4 +287,6 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
     result = analyse(scenario, run_id, run_dir, prefix, run.done, run.bridge_stats, run.traffic_s, baseline,
                      run.injector.summary() if run.injector else None)
     result.metrics["device"] = device  # None: the bench's own bridge
+    if device:
+        result.metrics["device_announces"] = device_announces
     return result

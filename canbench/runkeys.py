@@ -115,6 +115,31 @@ def wait_token(session: zenoh.Session, key: str, timeout_s: float) -> None:
         sub.undeclare()
 
 
+def _matching(status: object) -> bool:
+    """A MatchingStatus's answer (zenoh-python 1.10's stub says a bool; the object has .matching)."""
+    return bool(getattr(status, "matching", status))
+
+
+def wait_subscribed(session: zenoh.Session, keys: list[str], timeout_s: float) -> None:
+    """Blocks until every key has a subscriber somewhere (a publisher's matching status, pushed by
+    the router: no polling). Nothing is put on them."""
+    deadline = time.monotonic() + timeout_s
+    for key in keys:
+        seen = threading.Event()
+
+        def on_status(status: object, seen: threading.Event = seen) -> None:
+            if _matching(status):
+                seen.set()
+        pub = session.declare_publisher(key)
+        listener = pub.declare_matching_listener(on_status)
+        try:
+            if not (_matching(pub.matching_status) or seen.wait(max(0.0, deadline - time.monotonic()))):
+                raise TimeoutError(f"no subscriber on {key} after {timeout_s:.0f} s")
+        finally:
+            listener.undeclare()
+            pub.undeclare()
+
+
 def wait_until(condition, timeout_s: float, what: str, step_s: float = 0.02):
     """Polls a cheap, explicit condition (a counter, a file) until it holds; bounded."""
     deadline = time.monotonic() + timeout_s

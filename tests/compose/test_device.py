@@ -13,6 +13,7 @@ import os
 import re
 import socket
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -119,4 +120,34 @@ def test_the_routers_faults_run_against_a_device_and_its_memory_is_not_judged(bu
     assert cases["test_check[bridge_memory]"] == "skipped"
     assert "not a device of your own" in (run_dir / "junit.xml").read_text()
     assert "reconnected to the Zenoh router" in (run_dir / "device.log").read_text()
+    nothing_left(proc, run_dir)
+
+
+def test_a_device_that_announces_nothing_is_ready_by_its_subscription_and_passes_a_round_trip(built):
+    # a user's bridge that speaks only the wire format on the rx/tx keys (python-can + zenoh, no
+    # liveliness token, no stats queryable): ready once it subscribes to the tx key, drained on a
+    # quiet capture, bridge_stats_agree skipped with the reason; every other check judged
+    command = (f'PYTHONPATH={REPO} exec {sys.executable} -m bench.refbridge --router "$ZENOH_ROUTER_ADDRESS" '
+               f'--can "$ZENOH_NODE_CAN" --no-token')
+    proc, run_dir, device = run_device(command, REPO / "scenarios" / "round-trip.yaml", DEVICE_ANNOUNCES="0")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["device"] == device and metrics["device_announces"] is False and metrics["passed"] is True
+    assert metrics["bridge_stats"] is None
+    cases = junit_cases(run_dir)
+    for check in ("integrity", "ordering", "zenoh_to_can", "round_trip", "latency_round_trip"):
+        assert cases[f"test_check[{check}]"] == "passed", cases
+    assert cases["test_check[bridge_stats_agree]"] == "skipped"
+    assert "has no stats queryable (DEVICE_ANNOUNCES=0)" in (run_dir / "junit.xml").read_text()
+    nothing_left(proc, run_dir)
+
+
+def test_a_device_that_announces_nothing_and_subscribes_to_nothing_is_never_ready(built):
+    # the same bridge with its command side missing would be waited for until the ready timeout,
+    # then the run is an error that names the key, not a verdict
+    command = (f'PYTHONPATH={REPO} exec {sys.executable} -c "import time; time.sleep(600)"')
+    proc, run_dir, _ = run_device(command, DEVICE_ANNOUNCES="0", BENCH_READY_TIMEOUT_S="5")
+    assert proc.returncode != 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "no subscriber on vehicle/can/tx after 5 s" in (run_dir / "containers.log").read_text() + \
+        (run_dir / "junit.xml").read_text()
     nothing_left(proc, run_dir)

@@ -226,6 +226,8 @@ def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
     ({"DEVICE": "host:7448", "BENCH_ACCESS": "open"}, "without TLS or ACL"),
     ({"DEVICE": "host:7448"}, "libucan-preload.so is missing (make ucan)"),
     ({"DEVICE": "host:7448 ", "DEVICE_CMD": "x"}, "expected host:PORT"),
+    ({"DEVICE_ANNOUNCES": "0"}, "DEVICE_ANNOUNCES is set but DEVICE is not"),
+    ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "no"}, "DEVICE_ANNOUNCES=no: expected 1"),
 ])
 def test_a_device_run_that_would_mislead_or_expose_is_refused_before_anything_starts(bench, env, says):
     run, add, events, root = bench

@@ -6,6 +6,7 @@ on a router at 127.0.0.1 (TLS to an IP address) and may do the bridge's job. The
 tests/compose/test_device.py."""
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import subprocess
@@ -99,7 +100,10 @@ def test_the_compose_override_command_refuses_and_writes_the_settings(tmp_path):
     assert "127.0.0.1:7448:7447" in ok.stdout
 
 
-def test_the_devices_identity_as_written_gets_a_session_on_loopback_and_does_the_bridges_job(tmp_path):
+@contextlib.contextmanager
+def device_and_consumer(tmp_path: Path):
+    """A router with the run's identities and ACL on a loopback port, the orchestrator's session
+    (the consumer) and the device's as its identity is written for it, on the host's paths."""
     root, port = tmp_path / "identities", free_port()
     endpoint = f"tls/127.0.0.1:{port}"
     names = identities.generate(root, device=(str(root), endpoint))
@@ -122,14 +126,36 @@ def test_the_devices_identity_as_written_gets_a_session_on_loopback_and_does_the
             cconf.insert_json5(key, json.dumps(value))
         with zenoh.open(cconf) as consumer, zenoh.open(zenoh.Config.from_file(
                 str(root / identities.DEVICE_IDENTITY / "zenoh.json5"))) as dev:
-            inbox = Inbox()
-            keep = [consumer.declare_subscriber("vehicle/can/rx", inbox),
-                    dev.liveliness().declare_token("vehicle/can/bridges/zenoh-node/vcan0/client")]
-            # the router answers the consumer's token query after its subscription: then the put finds it
-            runkeys.wait_token(consumer, runkeys.bridges("vehicle/can"), 5)
-            dev.put("vehicle/can/rx", b"from-the-device")  # the router's ACL lets it publish rx as the bridge
-            inbox.wait_for("from-the-device")
-            del keep
+            yield consumer, dev
+
+
+def test_the_devices_identity_as_written_gets_a_session_on_loopback_and_does_the_bridges_job(tmp_path):
+    with device_and_consumer(tmp_path) as (consumer, dev):
+        inbox = Inbox()
+        keep = [consumer.declare_subscriber("vehicle/can/rx", inbox),
+                dev.liveliness().declare_token("vehicle/can/bridges/zenoh-node/vcan0/client")]
+        # the router answers the consumer's token query after its subscription: then the put finds it
+        runkeys.wait_token(consumer, runkeys.bridges("vehicle/can"), 5)
+        dev.put("vehicle/can/rx", b"from-the-device")  # the router's ACL lets it publish rx as the bridge
+        inbox.wait_for("from-the-device")
+        del keep
+
+
+def test_a_device_that_announces_nothing_is_seen_ready_by_its_subscription_under_the_acl(tmp_path):
+    # DEVICE_ANNOUNCES=0: the orchestrator learns of the device's subscription to the tx keys through
+    # the router (a publisher's matching status), with the ACL the run has; nothing before it
+    with device_and_consumer(tmp_path) as (consumer, dev):
+        keys = ["vehicle/can/vcan0/tx", "vehicle/can/vcan1/tx"]
+        with pytest.raises(TimeoutError, match="no subscriber on vehicle/can/vcan0/tx after 0 s"):
+            runkeys.wait_subscribed(consumer, keys, 0.3)
+        first = dev.declare_subscriber("vehicle/can/vcan0/tx", lambda _s: None)
+        with pytest.raises(TimeoutError, match="no subscriber on vehicle/can/vcan1/tx"):
+            runkeys.wait_subscribed(consumer, keys, 0.3)
+        second = dev.declare_subscriber("vehicle/can/vcan1/tx", lambda _s: None)
+        runkeys.wait_subscribed(consumer, keys, 5)
+        first.undeclare()
+        second.undeclare()
+
 
 def test_open_access_writes_a_plain_tcp_device(tmp_path):
     identities.generate(tmp_path / "i", secure=False, device=(str(tmp_path / "i"), "tcp/127.0.0.1:7448"))

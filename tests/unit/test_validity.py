@@ -137,3 +137,16 @@ def test_report_shows_the_outcome_instead_of_a_verdict_and_the_min_latency(tmp_p
     assert "BENCH ERROR</span></h1>" in page and "FAILED" not in page
     assert "<th>min ms</th>" in page and "<td>-0.120</td>" in page
     assert "bench error: vcan0 CAN -&gt; Zenoh: 1 of 388 matched frames arrived before they were sent" in page
+
+
+def test_the_stats_check_is_skipped_with_its_reason_only_for_a_device_that_announces_nothing(tmp_path):
+    # no stats answered: the bench's bridge and a device that announces itself fail it; a device
+    # run with DEVICE_ANNOUNCES=0 has none to give, said as the reason it is not judged
+    r = seeded(tmp_path)
+    assert checks.bridge_stats_agree(r) == ["the bridge's stats queryable did not answer"]
+    r.metrics |= {"device": "host:7448", "device_announces": True}
+    assert checks.bridge_stats_agree(r) == ["the bridge's stats queryable did not answer"]
+    r.metrics["device_announces"] = False
+    assert checks.bridge_stats_agree(r) is None
+    assert checks.skip_reason(r, "bridge_stats_agree") == (
+        "bridge_stats_agree not judged: the device (host:7448) has no stats queryable (DEVICE_ANNOUNCES=0)")
