@@ -34,13 +34,21 @@ def pytest_addoption(parser):
                     help="metrics.json (or its run directory) of a run to gate relative regressions against")
     group.addoption("--device", default=os.environ.get("BENCH_DEVICE") or None,
                     help="a device of your own in the bridge's place (DEVICE=host:PORT), as metrics.json records it")
-    group.addoption("--device-announces", type=int, choices=(0, 1),
-                    default=int(os.environ.get("BENCH_DEVICE_ANNOUNCES") or 1),
+    group.addoption("--device-announces", choices=("0", "1"),
+                    default=os.environ.get("BENCH_DEVICE_ANNOUNCES") or "1",  # checked by the run, as given
                     help="0: the device declares neither the bridge's liveliness token nor its stats queryable "
                          "(DEVICE_ANNOUNCES=0): ready once it subscribes to the tx keys")
     group.addoption("--ready-timeout", type=float, default=float(os.environ.get("BENCH_READY_TIMEOUT_S") or
                                                                  run.BRIDGE_READY_TIMEOUT_S),
-                    help="seconds to wait for the bridge's (or the device's) liveliness token")
+                    help="seconds to wait for the bridge's (or the device's) liveliness token, or the subscription "
+                         "of a device that announces nothing")
+
+
+def _announces(value: str) -> bool:
+    """--device-announces as given (an environment default escapes argparse's choices)."""
+    if value not in ("0", "1"):
+        raise pytest.UsageError(f"--device-announces / BENCH_DEVICE_ANNOUNCES={value!r}: expected 0 or 1")
+    return value == "1"
 
 
 def pytest_configure(config):
@@ -66,7 +74,7 @@ def scenario_run(bench_options, request):
     result = run.execute(sc, bench_options.run_id, Path(bench_options.run_dir), bench_options.router,
                          consumer=bench_options.consumer, baseline=baseline, project=bench_options.project,
                          wait_viewer=bench_options.viewer, ready_timeout_s=bench_options.ready_timeout,
-                         device=bench_options.device, device_announces=bool(bench_options.device_announces))
+                         device=bench_options.device, device_announces=_announces(bench_options.device_announces))
     request.config.pluginmanager.get_plugin(PLUGIN_NAME).result = result
     return result
 

@@ -244,13 +244,16 @@ def write_html(result: RunResult, path: Path) -> None:
     passed = m.get("passed")
     outcome = (m.get("validity") or {}).get("outcome", "valid")
     verdict = outcome.upper() if outcome != "valid" else "PASSED" if passed else "FAILED"
+    device = ("· device under test " + html.escape(str(m["device"])) +
+              (" (announces nothing: no token, no stats)" if m.get("device_announces") is False else "")
+              if m.get("device") else "")
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(m['scenario'])} - canbench</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1200px}} table{{border-collapse:collapse;margin:1em 0}}
 td,th{{border:1px solid #ccc;padding:3px 8px;text-align:left;vertical-align:top}} .pass{{color:#080}}
 .fail{{color:#c00;font-weight:bold}} .skip{{color:#888}} h1 .fail,h1 .pass{{font-size:80%}}</style></head><body>
 <h1>{html.escape(m['scenario'])} <span class="{'pass' if passed else 'fail'}">{verdict}</span></h1>
 <p>Run {html.escape(m['run_id'])} · traffic {m.get('traffic_s')} s · {html.escape(result.scenario.description)}
-{'· device under test ' + html.escape(str(m['device'])) if m.get('device') else ''}
+{device}
 {'· baseline ' + html.escape(str(m['baseline_run_id'])) if m.get('baseline_run_id') else ''}</p>
 <p>{links}</p>
 <h2>Verdicts</h2>{_table(["check", "verdict", "problems"], verdict_rows)}

@@ -1,5 +1,6 @@
 """Runs one scenario from the orchestrator's side, in four steps: ready (the bridge's liveliness
-token through the consumer's path, every echo ECU's, the viewer's), captures (both sides, then the
+token through the consumer's path, or a device's subscription to the tx keys when it announces
+nothing; every echo ECU's token, the viewer's), captures (both sides, then the
 token that tells the ECUs to go), traffic (the commands on the tx keys, fault steps, until every
 ECU's done message), drain (until the bridge handled and published everything, the echoes
 stopped). Then the analysis (canbench.analysis) writes metrics.json; the pytest checks read the
@@ -23,8 +24,8 @@ from .scenario import Scenario
 
 BRIDGE_READY_TIMEOUT_S = 60  # the default; a device started by hand gets longer (scripts/bench-run)
 DRAIN_TIMEOUT_S = 5.0
-# a device that announces nothing (no stats to say what it read) is drained when the capture got
-# nothing new for this long (or two publish periods)
+# a device that announces nothing (no stats to say what it read) is drained once the capture holds
+# what the ECUs sent and got nothing new for this long (or two publish periods)
 DEVICE_QUIET_S = 0.5
 # immediate mode's drained: nothing new read for this long (a frame still in the bridge's socket is
 # in no counter: its last one read just after the stats said 1539 of 1540, seen once in the host lane)
@@ -103,8 +104,12 @@ class Execution:
             runkeys.wait_token(self.data, runkeys.bridges(self.prefix), bridge_timeout_s)
         else:
             n = len(self.scenario.bus_names)
-            runkeys.wait_subscribed(self.data, [tx_key(self.prefix, b, n) for b in self.scenario.bus_names],
-                                    bridge_timeout_s)
+            try:
+                runkeys.wait_subscribed(self.data, [tx_key(self.prefix, b, n) for b in self.scenario.bus_names],
+                                        bridge_timeout_s)
+            except TimeoutError as missing:
+                raise TimeoutError(f"{missing}: a device that announces nothing (DEVICE_ANNOUNCES=0) is ready once it "
+                                   "subscribes to every bus's tx key") from None
         for e in self.scenario.echoes:
             runkeys.wait_token(self.session, runkeys.ecu_ready(self.run_id, e.name), BRIDGE_READY_TIMEOUT_S)
         if wait_viewer:
@@ -195,7 +200,7 @@ class Execution:
                                    f"{ECHO_STOP_TIMEOUT_S} s; see their container logs")
 
         if not self.announces:
-            self._drain_quiet()
+            self._drain_unannounced()
             return
         # In batching mode the bridge reads its socket once per period: frames can wait there,
         # not yet in can_rx_frames. Drained = all it read is published and nothing new was read
@@ -238,18 +243,22 @@ class Execution:
         _bounded(lambda: self.zenoh_capture.frames_with_ids(keys) >= wanted, DRAIN_TIMEOUT_S + self.period_s,
                  "the echoes' answers to reach the capture")
 
-    def _drain_quiet(self) -> None:
-        """A device with no stats: drained once no new frame reached the capture for DEVICE_QUIET_S (or
-        two publish periods); bounded like the stats' drain, what is missing then is loss."""
+    def _drain_unannounced(self) -> None:
+        """A device with no stats: drained once the capture holds as many frames as the ECUs said they
+        sent (a bridge forwards every frame of its bus but its own) and nothing new came for DEVICE_QUIET_S
+        or two publish periods (commands still on their way to the bus, a duplicate); bounded like the
+        stats' drain: what is missing then is loss (or a frame the device does not forward)."""
+        expected = sum(int(summary.get("sent", 0)) for summary in self.done.values())
         quiet_s = max(2 * self.period_s, DEVICE_QUIET_S)
         last = {"frames": -1, "since": 0.0}
 
-        def quiet() -> bool:
+        def drained() -> bool:
             frames, now = self.zenoh_capture.frames_on(self.rx_keys), time.monotonic()
             if frames != last["frames"]:
                 last.update(frames=frames, since=now)
-            return now - last["since"] >= quiet_s
-        _bounded(quiet, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1) + quiet_s, "the device's frames to stop coming")
+            return frames >= expected and now - last["since"] >= quiet_s
+        _bounded(drained, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1) + quiet_s,
+                 "the device to publish what the ECUs sent")
 
     def stop_captures(self) -> None:
         while self.closing:
@@ -271,6 +280,9 @@ def execute(scenario: Scenario, run_id: str, run_dir: Path, router: str, prefix:
     run (make test VIEWER=1), the traffic starts once its token says it subscribes; ready_timeout_s: how
     long the bridge's token may take (a device of your own started by hand: longer); device_announces:
     False for a device that declares neither the token nor the stats queryable (DEVICE_ANNOUNCES=0)."""
+    if not device_announces and (device is None or wait_viewer):
+        raise ValueError("device_announces=False is for a device of your own (DEVICE), without a viewer (it finds "
+                         "bridges by their tokens, and its subscription would be taken for the device's)")
     run_dir.mkdir(parents=True, exist_ok=True)
     run = Execution(scenario, run_id, run_dir, router, prefix, consumer, project, device, device_announces)
     try:

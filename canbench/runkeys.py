@@ -131,12 +131,14 @@ def wait_subscribed(session: zenoh.Session, keys: list[str], timeout_s: float) -
             if _matching(status):
                 seen.set()
         pub = session.declare_publisher(key)
-        listener = pub.declare_matching_listener(on_status)
         try:
-            if not (_matching(pub.matching_status) or seen.wait(max(0.0, deadline - time.monotonic()))):
-                raise TimeoutError(f"no subscriber on {key} after {timeout_s:.0f} s")
+            listener = pub.declare_matching_listener(on_status)
+            try:
+                if not (_matching(pub.matching_status) or seen.wait(max(0.0, deadline - time.monotonic()))):
+                    raise TimeoutError(f"no subscriber on {key} after {timeout_s:g} s")
+            finally:
+                listener.undeclare()
         finally:
-            listener.undeclare()
             pub.undeclare()
 
 

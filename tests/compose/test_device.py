@@ -139,6 +139,7 @@ def test_a_device_that_announces_nothing_is_ready_by_its_subscription_and_passes
         assert cases[f"test_check[{check}]"] == "passed", cases
     assert cases["test_check[bridge_stats_agree]"] == "skipped"
     assert "has no stats queryable (DEVICE_ANNOUNCES=0)" in (run_dir / "junit.xml").read_text()
+    assert "(announces nothing: no token, no stats)" in (run_dir / "report.html").read_text()
     nothing_left(proc, run_dir)
 
 
@@ -148,6 +149,6 @@ def test_a_device_that_announces_nothing_and_subscribes_to_nothing_is_never_read
     command = (f'PYTHONPATH={REPO} exec {sys.executable} -c "import time; time.sleep(600)"')
     proc, run_dir, _ = run_device(command, DEVICE_ANNOUNCES="0", BENCH_READY_TIMEOUT_S="5")
     assert proc.returncode != 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    assert "no subscriber on vehicle/can/tx after 5 s" in (run_dir / "containers.log").read_text() + \
-        (run_dir / "junit.xml").read_text()
+    said = (run_dir / "containers.log").read_text() + (run_dir / "junit.xml").read_text()
+    assert "no subscriber on vehicle/can/tx after 5 s: a device that announces nothing" in said
     nothing_left(proc, run_dir)

@@ -228,6 +228,7 @@ def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
     ({"DEVICE": "host:7448 ", "DEVICE_CMD": "x"}, "expected host:PORT"),
     ({"DEVICE_ANNOUNCES": "0"}, "DEVICE_ANNOUNCES is set but DEVICE is not"),
     ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "no"}, "DEVICE_ANNOUNCES=no: expected 1"),
+    ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "0", "VIEWER": "1"}, "VIEWER with DEVICE_ANNOUNCES=0"),
 ])
 def test_a_device_run_that_would_mislead_or_expose_is_refused_before_anything_starts(bench, env, says):
     run, add, events, root = bench
