@@ -11,7 +11,7 @@ from pathlib import Path
 from . import oracle, signals, wire
 from .capture import iter_zenoh_capture
 from .commands import delivered_late, explained_refusals, read_arrivals, stale_at_put, stamp_ages_ns
-from .faults import disruptive
+from .faults import cutting, disruptive
 from .put_order import overtaken_commands
 from .runkeys import rx_key, tx_key
 from .scenario import Scenario
@@ -149,14 +149,14 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             tx.counts["reordered"] = len(tx.reordered)
             tx.reordered_per_id = sum(s.frame.can_id == p.frame.can_id and s.frame.extended == p.frame.extended
                                       for s, p in tx.reordered)
-        comparison = oracle.compare(from_ecus, zenoh_frames)
+        windows = [(w["start_ns"], w["end_ns"]) for w in disruptive(faults["windows"])] if faults else []
+        cuts = [(w["start_ns"], w["end_ns"]) for w in cutting(faults["windows"])] if faults else []
+        comparison = oracle.compare(from_ecus, zenoh_frames, windows, cuts)
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None
-        if faults:
-            windows = [(w["start_ns"], w["end_ns"]) for w in disruptive(faults["windows"])]
-            for c in (comparison, tx, round_trip):
-                if c is not None:
-                    oracle.apply_fault_windows(c, windows)
+        for c in (tx, round_trip):
+            if c is not None and windows:
+                oracle.apply_fault_windows(c, windows)
         stale = stale_at_put(scenario)
         if tx is not None and stale:
             # stamped older than the deadline when put: the bridge must refuse them, no loss of zenoh_to_can's

@@ -48,6 +48,13 @@ def disruptive(windows: list[dict]) -> list[dict]:
     return [w for w in windows if w["action"] != "ecu_kill"]
 
 
+def cutting(windows: list[dict]) -> list[dict]:
+    """The windows of faults that may cut the bridge's link (router and bridge steps, a partition):
+    everything sent in one may be lost at once, an outage the oracle looks for there (a flood only
+    delays and drops frames of its bus)."""
+    return [w for w in disruptive(windows) if w["action"] != "can_flood"]
+
+
 def last_bridge_restart_ns(windows: list[dict]) -> int:
     """When the bridge's last incarnation was started (0: it never restarted)."""
     return max((w["end_ns"] for w in windows if w["action"].startswith("bridge_")), default=0)

@@ -226,19 +226,21 @@ class Comparison:
 
 
 def compare(sent: Iterable[Observed], received: Iterable[Observed],
-            windows: list[tuple[int, int]] | None = None) -> Comparison:
+            windows: list[tuple[int, int]] | None = None, cuts: list[tuple[int, int]] | None = None) -> Comparison:
     """sent: CAN frames in bus order; received: Zenoh frames in arrival order. Every frame of
-    every kind kept (the matched pairs too); windows: fault windows (apply_fault_windows)."""
-    return _classify(sent, received, None, windows=windows, attachment=True)[0]
+    every kind kept (the matched pairs too); windows: fault windows (apply_fault_windows); cuts:
+    those of faults that cut the bridge's link (an outage's doubt looks only there: _outage_copy)."""
+    return _classify(sent, received, None, windows=windows, cuts=cuts, attachment=True)[0]
 
 
 def compare_stream(sent: Iterable[Observed], received: Iterable[Observed],
                    windows: list[tuple[int, int]] | None = None, keep: int = FAILURES_KEPT,
-                   on_match: Callable[[Observed, Observed], None] | None = None) -> Comparison:
+                   on_match: Callable[[Observed, Observed], None] | None = None,
+                   cuts: list[tuple[int, int]] | None = None) -> Comparison:
     """compare() in bounded memory, for captures of any length read as they go (iter_candump_frames,
     iter_zenoh_frames): the same verdicts, counts and latencies; the matched pairs are not kept
     (on_match sees each), and `keep` frames per kind of failure are."""
-    return _classify(sent, received, None, windows=windows, attachment=True, keep=keep,
+    return _classify(sent, received, None, windows=windows, cuts=cuts, attachment=True, keep=keep,
                      keep_matched=False, on_match=on_match)[0]
 
 
@@ -264,6 +266,8 @@ STAMP_SLACK_NS = 5_000_000  # a frame this much "before it was sent" is matched 
 DUPLICATE_PACE = 10  # ... unless it came within 1/this of its copies' cycle after the last one (_Copies.take)
 DOUBT_BACKLOGS = 4  # backlogs a doubtful frame's stories are followed across while the greedy one breaks
 DOUBT_FRAMES = 4096  # ... and received frames at most (each matched again after it)
+OUTAGE_HOLD = 2  # cycles of its content an outage's doubt is held at least
+RECENT = 64  # matches per block of the recent latency range (an outage's doubt: _outage_copy)
 REMATCH_SHARE = 2  # frames matched again for doubts, at most this many per frame received (+ REMATCH_FLOOR):
 REMATCH_FLOOR = 4 * DOUBT_FRAMES  # past that the run's rest is matched greedily, so the cost stays a few
 #                                   times the greedy match's whatever the traffic (stalls full of duplicates)
@@ -425,7 +429,7 @@ class _Doubt:
     (duplicate_story in _classify)."""
 
     __slots__ = ("frame", "copies", "index", "frontier", "reach", "suspect", "inner", "cycle", "backlogs", "faults",
-                 "oldest", "queue", "marks", "marked", "arrived")
+                 "oldest", "queue", "marks", "marked", "arrived", "late", "until")
 
     def __init__(self, r: Observed, copies: _Copies, at: int, frontier: int) -> None:
         s = copies.frames[at]
@@ -446,6 +450,8 @@ class _Doubt:
         self.marked: set[int] = set()
         # each content's pace before it (its own: it arrived, a copy or a duplicate)
         self.arrived: dict[int, tuple[_Copies, int | None]] = {id(copies): (copies, r.t_ns)}
+        self.late: int | None = None  # an outage's doubt (_outage_copy): the copy it may be instead
+        self.until = 0  # an outage's doubt: weighed no earlier (a second backlog right after the first)
 
     def undo(self) -> None:
         """The marks since it undone, each content's pace as before it."""
@@ -454,6 +460,42 @@ class _Doubt:
         for copies, arrived in self.arrived.values():
             copies.arrived = arrived
         self.marks = []
+
+
+def _cycle(times: list[int], at: int) -> int:
+    """The cycle of a content's copies at position `at` (it and the next are in the window): the
+    longer of the gaps around it, so that two identical frames sent back to back (a burst) do
+    not make a cycle of their 0.1 ms."""
+    return max(times[at + 1] - times[at], times[at] - times[at - 1] if at > 0 else 0)
+
+
+def _outage_copy(copies: _Copies, at: int, t_ns: int, recent_ns: int,
+                 cuts: list[tuple[int, int]]) -> tuple[int, int] | None:
+    """A frame that took the copy at position `at` may instead be a later copy of its content, the
+    ones between lost in an outage (a cut link, a router restarted): the bus index of the earliest
+    copy sent by its arrival whose latency is within the recent range (recent_ns, the highest of
+    the last matches: a batch's earliest frame), when the taken one's is past it by more than half the content's
+    cycle, with frames of other contents sent between them (none received yet: the taken copy is
+    ahead of every match), and the copies between them sent around a fault that cut the link (cuts:
+    start - FAULT_LEAD_NS to end + FAULT_SETTLE_NS, where their loss is the fault's), and the latest
+    such end + FAULT_SETTLE_NS (the doubt is weighed no earlier). None: no such doubt. Only there:
+    elsewhere a lasting rise of latency with nothing lost reads the same on repeating frames, and
+    the greedy match reads that one right (docs/bench.md, "The oracle")."""
+    times, indices, used = copies.times, copies.indices, copies.used
+    if at + 1 >= len(times):
+        return None
+    half_cycle = _cycle(times, at) // 2
+    if t_ns - times[at] <= recent_ns + half_cycle:
+        return None
+    late = bisect.bisect_left(times, t_ns - recent_ns - half_cycle, at + 1)  # the earliest one in range
+    if late >= len(times) or times[late] > t_ns or used[late]:
+        return None
+    if indices[late] - indices[at] - (late - at) < 1:
+        return None  # no frame of another content between: a run of identical frames, not an outage
+    ends = [end for start, end in cuts if times[at] < end + FAULT_SETTLE_NS and times[late] > start - FAULT_LEAD_NS]
+    if not ends:
+        return None
+    return indices[late], max(ends) + FAULT_SETTLE_NS
 
 
 def _faults(queue: list[tuple[int, Observed, Observed | None, int]], top: int) -> int:
@@ -535,7 +577,8 @@ def _note(c: Comparison, where: list, item, kind: str, keep: int | None) -> None
 
 @_without_gc
 def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained: Counter | None, *,
-              windows: list[tuple[int, int]] | None = None, attachment: bool = False, keep: int | None = None,
+              windows: list[tuple[int, int]] | None = None, cuts: list[tuple[int, int]] | None = None,
+              attachment: bool = False, keep: int | None = None,
               keep_matched: bool = True, on_match: Callable[[Observed, Observed], None] | None = None,
               window_ns: int | None = MATCH_WINDOW_NS) -> tuple[Comparison, list[Observed]]:
     """One pass in time order: a sent frame enters the window when the received stream gets to
@@ -662,10 +705,17 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             last_by_id[ident] = s.index
         if previous is None or s.index > previous.index:
             previous = s
+        late_ns = r.t_ns - s.t_ns
         if len(values) < latency.cap:  # Distribution.add's exact mode, inline: the hot path
-            values.append((r.t_ns - s.t_ns) / 1e6)
+            values.append(late_ns / 1e6)
         else:
-            latency.add((r.t_ns - s.t_ns) / 1e6)
+            latency.add(late_ns / 1e6)
+        if cuts:  # the recent latency range, for an outage's doubt
+            if late_ns > recent[1]:
+                recent[1] = late_ns
+            recent[2] += 1
+            if recent[2] == RECENT:
+                recent[0], recent[1], recent[2] = recent[1], 0, 0
         if r.t_ns < s.t_ns:
             _note(c, c.negative, (s, r), "negative", keep)
         if windows:
@@ -690,6 +740,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                 previous_seq = (s, r, s_rank)
 
     doubt: _Doubt | None = None
+    recent = [0, 0, 0]  # the highest latency (ns) of the last block of RECENT matches, of this one, matches in it
     doubts = explained is None  # Zenoh -> CAN and round trips keep the greedy match alone
     rematched = 0  # frames matched again for doubts so far (REMATCH_SHARE)
     todo: deque[Observed] = deque()  # received frames to match again, once a doubt is resolved
@@ -730,6 +781,15 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                 doubt = _Doubt(r, copies, at, frontier)
             else:
                 doubt.inner = True
+        elif cuts and may_doubt and doubt is None and recent[0] and copies.indices[at] > frontier and \
+                (outage := _outage_copy(copies, at, r.t_ns, max(recent[0], recent[1]), cuts)) is not None:
+            doubt = _Doubt(r, copies, at, frontier)
+            doubt.late, settled = outage
+            doubt.cycle = _cycle(copies.times, at)
+            # held for OUTAGE_HOLD cycles at least (backlogs released one after the other, overlapping
+            # stalls, break the outage's story only with the second one), and until the fault settled:
+            # a burst of jitter or a queue while the link comes back, worked off by then, is no outage
+            doubt.until = max(r.t_ns + OUTAGE_HOLD * doubt.cycle, settled)
         s = copies.frames[at]
         assert s is not None
         if s.index > frontier:
@@ -749,6 +809,16 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             others.append(r)
         else:
             leftovers.append((r, n))
+
+    def greedy_again(d: _Doubt, greedy: tuple) -> None:
+        """The greedy story back after another was matched: its marks, frontier and paces."""
+        nonlocal frontier
+        d.undo()
+        d.marks, frontier, arrived = greedy
+        for copies, index in d.marks:
+            copies.mark(index, True)
+        for copies, value in arrived:
+            copies.arrived = value
 
     def duplicate_story(d: _Doubt) -> bool:
         """Matches the frames after the doubtful one again as if it were a duplicate, and tells if
@@ -770,12 +840,29 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                 d.copies.free_between(-1, d.index, d.frame.t_ns, set()) is None and \
                 all(index in matched or index > frontier for _, index in greedy[0]):
             return True
+        greedy_again(d, greedy)
+        return False
+
+    def outage_story(d: _Doubt) -> bool:
+        """Matches the frames after the doubtful one again as if it were the later copy (d.late,
+        the ones between lost), and tells if that story is the better one: no more faults than the
+        greedy story. If so its marks stay, else the greedy story's are back."""
+        nonlocal frontier, rematched
+        assert d.late is not None
+        rematched += len(d.queue)
+        top = previous.index if previous is not None else -1
+        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
         d.undo()
-        d.marks, frontier, arrived = greedy
-        for copies, index in d.marks:
-            copies.mark(index, True)
-        for copies, value in arrived:
-            copies.arrived = value
+        frontier = max(d.frontier, d.late)
+        d.copies.mark(d.late, True)
+        d.marks.append((d.copies, d.late))
+        d.copies.arrived = d.frame.t_ns
+        at = d.copies.at(d.late)
+        story = [(_MATCHED, d.frame, d.copies.frames[at], d.copies.ranks[at])] + \
+            [step(r, False) for _, r, _, _ in d.queue[1:]]
+        if _faults(story, top) <= _faults(d.queue, top):
+            return True
+        greedy_again(d, greedy)
         return False
 
     def resolve() -> None:
@@ -785,12 +872,13 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         nonlocal doubt, frontier, doubts, rematched
         d = doubt
         assert d is not None
-        duplicate = d.suspect and duplicate_story(d)
+        duplicate = d.suspect and d.late is None and duplicate_story(d)
+        outage = d.suspect and d.late is not None and outage_story(d)
         doubt = None
         if doubts and rematched > REMATCH_SHARE * c.received + REMATCH_FLOOR:
             doubts = False  # the budget spent: no new doubt, the run's rest matched greedily (said in counts)
             counts["doubts_budget_spent_at"] = c.received
-        if not duplicate and not d.inner:  # the greedy match stands: its verdicts as they were
+        if not duplicate and not outage and not d.inner:  # the greedy match stands: its verdicts as they were
             for entry in d.queue:
                 emit(*entry)
             return
@@ -798,6 +886,15 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         frontier = d.frontier
         if duplicate:
             emit(*unmatched(d.frame, d.copies.key))
+        elif outage:
+            assert d.late is not None
+            d.copies.mark(d.late, True)
+            d.copies.arrived = d.frame.t_ns
+            at = d.copies.at(d.late)
+            s_late = d.copies.frames[at]
+            assert s_late is not None
+            frontier = max(frontier, d.late)
+            settle(s_late, d.frame, d.copies.ranks[at])
         else:
             _, r, s, s_rank = d.queue[0]
             assert s is not None
@@ -806,6 +903,14 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             settle(s, r, s_rank)
         rematched += len(d.queue)
         todo.extendleft(r for _, r, _, _ in reversed(d.queue[1:]))
+
+    def weigh_outage(d: _Doubt) -> None:
+        """An outage's doubt decided: the outage's story against the greedy one on the frames since
+        (a backlog worked off, a burst of jitter: the outage's story then takes the copies it skipped
+        behind the frontier, faults the greedy one does not have; a real outage: the greedy match
+        stays shifted, its latency the gap's, with faults where it meets frames of other contents)."""
+        d.suspect = True
+        resolve()
 
     def match(r: Observed) -> None:
         """Matches r; while a doubt is open, its verdict is held back with the doubt's."""
@@ -824,6 +929,18 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             return
         k = _key(r.frame)
         again = k == doubt.copies.key
+        if doubt.late is not None:
+            pace = doubt.copies.arrived  # its arrival (the content's last)
+            entry = step(r, doubts)  # a frame doubtful as a duplicate meanwhile: all matched again after
+            doubt.queue.append(entry)
+            if len(doubt.queue) >= DOUBT_FRAMES:
+                weigh_outage(doubt)  # a busy bus: weighed on what the bound let it see
+            elif again and pace is not None and DUPLICATE_PACE * (r.t_ns - pace) >= doubt.cycle and \
+                    r.t_ns >= doubt.until:
+                # its content again at its own pace (not in the burst of a backlog or of a batch), the
+                # fault settled: both stories weighed on everything since
+                weigh_outage(doubt)
+            return
         passed = False
         if again and not doubt.suspect:
             # its content again before the stream passed the copy the doubtful frame took: after
@@ -865,7 +982,10 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         while todo:
             match(todo.popleft())
     while doubt is not None:
-        resolve()
+        if doubt.late is not None:
+            weigh_outage(doubt)  # the run ended before the fault settled: weighed on what it saw
+        else:
+            resolve()
         while todo:
             match(todo.popleft())
     load(_END)
