@@ -916,7 +916,11 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         """Matches r; while a doubt is open, its verdict is held back with the doubt's."""
         if doubt is not None and window_ns is not None and doubt.oldest < r.t_ns - window_ns:
             todo.appendleft(r)
-            resolve()  # before a copy it marked leaves the window
+            # before a copy it marked leaves the window (an outage's doubt weighed: a cut of ~20 s)
+            if doubt.late is not None:
+                weigh_outage(doubt)
+            else:
+                resolve()
             return
         if doubt is None:
             entry = step(r, doubts)

@@ -125,8 +125,8 @@ def test_the_routers_faults_run_against_a_device_and_its_memory_is_not_judged(bu
 
 def test_a_device_that_announces_nothing_is_ready_by_its_subscription_and_passes_a_round_trip(built):
     # a user's bridge that speaks only the wire format on the rx/tx keys (python-can + zenoh, no
-    # liveliness token, no stats queryable): ready once it subscribes to the tx key, drained on a
-    # quiet capture, bridge_stats_agree skipped with the reason; every other check judged
+    # liveliness token, no stats queryable): ready once it subscribes to the tx key, drained on the
+    # capture, bridge_stats_agree skipped with the reason; every other check judged
     command = (f'PYTHONPATH={REPO} exec {sys.executable} -m bench.refbridge --router "$ZENOH_ROUTER_ADDRESS" '
                f'--can "$ZENOH_NODE_CAN" --no-token')
     proc, run_dir, device = run_device(command, REPO / "scenarios" / "round-trip.yaml", DEVICE_ANNOUNCES="0")
@@ -146,7 +146,7 @@ def test_a_device_that_announces_nothing_is_ready_by_its_subscription_and_passes
 def test_a_device_that_announces_nothing_and_subscribes_to_nothing_is_never_ready(built):
     # the same bridge with its command side missing would be waited for until the ready timeout,
     # then the run is an error that names the key, not a verdict
-    command = (f'PYTHONPATH={REPO} exec {sys.executable} -c "import time; time.sleep(600)"')
+    command = f'exec {sys.executable} -c "import time; time.sleep(600)"'
     proc, run_dir, _ = run_device(command, DEVICE_ANNOUNCES="0", BENCH_READY_TIMEOUT_S="5")
     assert proc.returncode != 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     said = (run_dir / "containers.log").read_text() + (run_dir / "junit.xml").read_text()
