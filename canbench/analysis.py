@@ -132,6 +132,8 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
     answers = expected_answers(scenario, commands)
     arrivals = read_arrivals(commands_log)
     buses = []
+    windows = [(w["start_ns"], w["end_ns"]) for w in disruptive(faults["windows"])] if faults else []
+    cuts = [(w["start_ns"], w["end_ns"]) for w in cutting(faults["windows"])] if faults else []
     for bus in scenario.bus_names:
         key = rx_key(prefix, bus, n)
         can_frames = oracle.read_candump(run_dir / "can.log", bus)
@@ -149,8 +151,6 @@ def analyse(scenario: Scenario, run_id: str, run_dir: Path, prefix: str, ecus: d
             tx.counts["reordered"] = len(tx.reordered)
             tx.reordered_per_id = sum(s.frame.can_id == p.frame.can_id and s.frame.extended == p.frame.extended
                                       for s, p in tx.reordered)
-        windows = [(w["start_ns"], w["end_ns"]) for w in disruptive(faults["windows"])] if faults else []
-        cuts = [(w["start_ns"], w["end_ns"]) for w in cutting(faults["windows"])] if faults else []
         comparison = oracle.compare(from_ecus, zenoh_frames, windows, cuts)
         bus_answers = [a for b, a in answers if b == bus]
         round_trip = oracle.match_subset(bus_answers, zenoh_frames) if bus_answers else None

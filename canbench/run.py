@@ -54,6 +54,20 @@ def viewer_subscriptions(session) -> set[str]:
     return out
 
 
+class _Unchanged:
+    """How long a counter has kept its value, as seen by successive looks (a drain's quiet time)."""
+
+    def __init__(self) -> None:
+        self.value: int | None = None
+        self.since = 0.0
+
+    def for_s(self, value: int) -> float:
+        now = time.monotonic()
+        if value != self.value:
+            self.value, self.since = value, now
+        return now - self.since
+
+
 def _bounded(condition, timeout_s: float, what: str) -> bool:
     """A bounded wait whose timeout is no error: what is missing then, the checks report."""
     try:
@@ -72,7 +86,7 @@ class Execution:
         self.consumer, self.project = consumer or router, project
         self.device = device  # a device of your own under test (canbench.device), else the bench's bridge
         # False: a device that declares neither the bridge's liveliness token nor its stats queryable
-        # (DEVICE_ANNOUNCES=0): ready once it subscribes to the tx keys, drained once the capture is quiet
+        # (DEVICE_ANNOUNCES=0): ready once it subscribes to the tx keys, drained on the capture (_drain_unannounced)
         self.announces = announces
         self.session = runkeys.open_session(router)
         self.data = self.session if consumer in (None, router) else runkeys.open_session(consumer)
@@ -205,7 +219,7 @@ class Execution:
         # In batching mode the bridge reads its socket once per period: frames can wait there,
         # not yet in can_rx_frames. Drained = all it read is published and nothing new was read
         # for a whole period (immediate mode: for IMMEDIATE_QUIET_S).
-        last = {"read": -1, "since": 0.0}
+        reading = _Unchanged()
 
         def drained() -> bool:
             stats = query_stats(self.session, self.prefix)
@@ -213,11 +227,8 @@ class Execution:
                 return False
             read = sum(b["can_rx_frames"] - b["filtered"] - b["rx_queue_drops"] for b in stats["buses"])
             published = sum(b["published_frames"] + b["publish_errors"] for b in stats["buses"])
-            now = time.monotonic()
-            if read != last["read"]:
-                last.update(read=read, since=now)
             period_s = stats.get("publish_period_ms", 0) / 1000  # the bridge's own, whatever it was given
-            return published >= read and now - last["since"] >= max(2 * period_s, IMMEDIATE_QUIET_S)
+            return reading.for_s(read) >= max(2 * period_s, IMMEDIATE_QUIET_S) and published >= read
         _bounded(drained, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1), "the bridge to publish what it read")
         self.bridge_stats = query_stats(self.session, self.prefix)
         published = sum(b["published_frames"] for b in self.bridge_stats["buses"]) if self.bridge_stats else 0
@@ -250,13 +261,11 @@ class Execution:
         stats' drain: what is missing then is loss (or a frame the device does not forward)."""
         expected = sum(int(summary.get("sent", 0)) for summary in self.done.values())
         quiet_s = max(2 * self.period_s, DEVICE_QUIET_S)
-        last = {"frames": -1, "since": 0.0}
+        arriving = _Unchanged()
 
         def drained() -> bool:
-            frames, now = self.zenoh_capture.frames_on(self.rx_keys), time.monotonic()
-            if frames != last["frames"]:
-                last.update(frames=frames, since=now)
-            return frames >= expected and now - last["since"] >= quiet_s
+            frames = self.zenoh_capture.frames_on(self.rx_keys)
+            return arriving.for_s(frames) >= quiet_s and frames >= expected
         _bounded(drained, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1) + quiet_s,
                  "the device to publish what the ECUs sent")
 
