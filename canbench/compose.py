@@ -141,7 +141,9 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
     services.update(probe_services(sc))
     out: dict = {"services": services}
     if device:
-        extra = device_override(device, canbus_dir, PORT)
+        # a partition drops the bridge's own listener: the device reaches the router there
+        partitioned = any(f.action == "partition" for f in sc.faults)
+        extra = device_override(device, canbus_dir, faults.PARTITION_PORT if partitioned else PORT)
         services["router"] = {**services.get("router", {}), **extra["services"]["router"]}
         out["volumes"] = extra["volumes"]
     return out

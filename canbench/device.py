@@ -6,24 +6,25 @@ identity of the run (canbench.identities) and the scenario's bridge settings as 
 variables (device.env). The run waits for the device's liveliness token as for the bridge's (or,
 for a device that announces nothing, DEVICE_ANNOUNCES=0, for its subscription to the tx keys).
 
-What a device cannot stand in for yet is refused before anything starts: fault steps on the
-bridge (they act on the bench's own bridge container or its listener on the router), the bridge
-as the consumer's endpoint or listening where the scenario says (that would be the host's
-interfaces), kernel vcan (a host process cannot reach the bus container's namespace)."""
+Fault steps on the bridge act on the device: a partition cuts the device's own listener on the
+router (its published port leads there), a stop or a kill is bench-run's, which started the device
+(DEVICE_CMD) and starts it again (canbench.device_control). What a device cannot stand in for yet is
+refused before anything starts: a stop or a kill of a device started by hand, the bridge as the
+consumer's endpoint or listening where the scenario says (that would be the host's interfaces),
+kernel vcan (a host process cannot reach the bus container's namespace)."""
 from __future__ import annotations
 
 import re
 import shlex
 from dataclasses import dataclass
 
-from . import scenario
+from . import device_control, scenario
 
 IDENTITY = "device"  # its directory among the run's identities; its certificate's CN is "bridge" (the ACL's)
 SPEC = re.compile(r"host:(\d{1,5})")
 LOWEST_PORT = 1024  # an unprivileged port: the bench never needs root on the host for it
-# fault steps on the bench's bridge container (stop, kill) or its own listener on the router (partition);
-# the router's, an ECU's and a flood of the bus act on the bench's side and run as they do for the bridge
-BRIDGE_FAULTS = ("bridge_term", "bridge_kill", "partition")
+# fault steps that stop the bridge: on a device, bench-run's, which can only stop what it started
+RESTARTS = device_control.ACTIONS
 
 
 @dataclass(frozen=True)
@@ -47,14 +48,15 @@ def parse(spec: str) -> Device:
     return Device(port)
 
 
-def refusals(sc: scenario.Scenario, can_mode: str) -> list[str]:
-    """Why this scenario cannot run against a device of your own (empty: it can), each at its file."""
+def refusals(sc: scenario.Scenario, can_mode: str, restartable: bool = False) -> list[str]:
+    """Why this scenario cannot run against a device of your own (empty: it can), each at its file.
+    restartable: bench-run starts the device (DEVICE_CMD), so it can stop it and start it again."""
     where = str(sc.path)
     out = []
-    on_bridge = sorted({f.action for f in sc.faults if f.action in BRIDGE_FAULTS})
-    if on_bridge:
-        out.append(f"{where}: fault steps {', '.join(on_bridge)} act on the bench's own bridge container or its "
-                   f"listener on the router: not run against a device of your own")
+    restarts = sorted({f.action for f in sc.faults if f.action in RESTARTS})
+    if restarts and not restartable:
+        out.append(f"{where}: fault steps {', '.join(restarts)} stop the device and start it again, which the "
+                   f"bench does only for a device it started: give DEVICE_CMD")
     if sc.consumer == "bridge":
         out.append(f"{where}: topology consumer: bridge reaches the bench's bridge in the bus's namespace; "
                    f"a device of your own is reached through the router")
@@ -68,7 +70,8 @@ def refusals(sc: scenario.Scenario, can_mode: str) -> list[str]:
 
 
 def override(device: Device, canbus_dir: str, router_port: int) -> dict:
-    """What compose.yaml changes for the device: the router published on loopback only, and the
+    """What compose.yaml changes for the device: the router's port router_port (the bridge's
+    listener of a partition scenario, else the router's own) published on loopback only, and the
     hub's socket directory a host directory (bench-run makes it, the bench's user's, 0770)."""
     return {"services": {"router": {"ports": [f"127.0.0.1:{device.port}:{router_port}"]}},
             "volumes": {"canbus": {"driver_opts": {"type": "none", "o": "bind", "device": canbus_dir}}}}

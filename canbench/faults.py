@@ -11,9 +11,11 @@ compose labels) at `at_s` seconds after the traffic starts:
   router_replace  SIGKILL and a new instance after duration_s (new Zenoh id)
   bridge_term     SIGTERM to the bridge, start again after duration_s
   bridge_kill     SIGKILL to the bridge, start again after duration_s
+                  (a device of your own: bench-run's, canbench.device_control)
   ecu_kill        the ECU `target` vanishes for good
   partition       the bridge's link to the router black-holed for duration_s (iptables
-                  DROP in the router's network namespace, on the bridge's own listener)
+                  DROP in the router's network namespace, on the bridge's own listener,
+                  where a device of your own is published too)
   can_flood       cangen floods `bus` as fast as the bus takes it for duration_s
                   (at most max_frames; id `id`, data counting up)
 
@@ -27,7 +29,9 @@ import subprocess
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
+from . import device_control
 from .scenario import Fault
 from .wire import id_hex
 
@@ -81,6 +85,8 @@ class Injector:
     faults: list[Fault]
     on_ecu_killed: object = None  # callable(name) so the orchestrator stops waiting for it
     sample_bridge: bool = True  # False: a device of your own is under test, no bridge container to sample
+    # a device of your own: the run's directory, where bench-run serves its stops and restarts
+    device_dir: Path | None = None
     windows: list[Window] = field(default_factory=list)
     rss_samples: list[tuple[int, float]] = field(default_factory=list)  # (ns, MiB)
     fd_samples: list[tuple[int, int]] = field(default_factory=list)  # (ns, open fds)
@@ -117,7 +123,10 @@ class Injector:
             self.windows.append(window)
             exact = None
             try:
-                exact = self._inject(fault, None if fault.action == "can_flood" else self.container(service))
+                if self.device_dir and fault.action in device_control.ACTIONS:
+                    exact = device_control.restart(self.device_dir, fault.action, fault.duration_s)
+                else:
+                    exact = self._inject(fault, None if fault.action == "can_flood" else self.container(service))
             except Exception as e:  # noqa: BLE001 - reported as the bench's failure, never lost in a thread
                 window.error = f"{type(e).__name__}: {e}"
                 self.errors.append(f"{fault.action} on {service}: {window.error}")

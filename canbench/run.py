@@ -151,7 +151,8 @@ class Execution:
                 raise RuntimeError("this scenario has fault steps: they need the compose project (BENCH_PROJECT) "
                                    "and Docker's socket, i.e. a run by make test / scripts/bench-run")
             self.injector = Injector(self.project, self.scenario.faults, self._ecu_killed,
-                                     sample_bridge=self.device is None)
+                                     sample_bridge=self.device is None,
+                                     device_dir=self.run_dir if self.device else None)
         token = self.session.liveliness().declare_token(runkeys.capture_ready(self.run_id))
         self.closing.append(token.undeclare)
 

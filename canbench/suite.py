@@ -76,13 +76,14 @@ def plan(paths: list[str], shard: str | None = None) -> list[tuple[float, str]]:
 LEFT_OUT = "left-out"  # a plan line's first field for a scenario the device cannot run: left-out<TAB>path<TAB>why
 
 
-def for_device(spec: str, paths: list[str], can_mode: str) -> tuple[list[str], dict[str, str]]:
+def for_device(spec: str, paths: list[str], can_mode: str, restartable: bool = False) \
+        -> tuple[list[str], dict[str, str]]:
     """The scenarios a device of your own can run, and why each other one is left out (also said
     on stderr). ValueError: a DEVICE that is not host:PORT, or no scenario left."""
     device.parse(spec)
     kept, left_out = [], {}
     for path in paths:
-        why = device.refusals(scenario.load(Path(path)), can_mode)
+        why = device.refusals(scenario.load(Path(path)), can_mode, restartable)
         if why:
             left_out[path] = "; ".join(why)
             print(f"suite: not run against DEVICE={spec}: {left_out[path]}", file=sys.stderr)
@@ -305,6 +306,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     q.add_argument("--device", help="host:PORT: leave out, saying why, the scenarios a device of your own "
                                     "cannot stand in for (canbench.device)")
     q.add_argument("--can-mode", choices=("userspace", "kernel"), default="userspace")
+    q.add_argument("--device-restartable", action="store_true",
+                   help="bench-run starts the device (DEVICE_CMD): fault steps may stop it and start it again")
     q = sub.add_parser("summary", help="index.html, junit.xml and summary.json of a suite's runs")
     q.add_argument("suite_dir", type=Path)
     q = sub.add_parser("compare", help="canbench compare of every scenario against the baseline suites")
@@ -321,7 +324,7 @@ def main(args: argparse.Namespace) -> int:
         left_out: dict[str, str] = {}
         if args.device:
             try:
-                scenarios, left_out = for_device(args.device, scenarios, args.can_mode)
+                scenarios, left_out = for_device(args.device, scenarios, args.can_mode, args.device_restartable)
             except ValueError as e:
                 print(f"suite: {e}", file=sys.stderr)
                 return DEVICE_REFUSED

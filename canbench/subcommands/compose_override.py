@@ -21,7 +21,7 @@ def cmd_compose_override(args) -> int:
         except ValueError as e:
             print(f"canbench compose-override: {e}", file=sys.stderr)
             return 2
-        problems = device.refusals(sc, args.can_mode)
+        problems = device.refusals(sc, args.can_mode, args.device_restartable)
         if not args.device_canbus:
             problems.append("--device needs --device-canbus: the host directory of the hub's socket")
         if problems:
@@ -43,6 +43,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
                    help="kernel: the bus container creates vcan interfaces (root with NET_ADMIN, that container only)")
     p.add_argument("--device", help="host:PORT: a device of your own in the bridge's place, the router on "
                                     "127.0.0.1:PORT (exit 2 when the scenario cannot run against one)")
+    p.add_argument("--device-restartable", action="store_true",
+                   help="bench-run starts the device (DEVICE_CMD): fault steps may stop it and start it again")
     p.add_argument("--device-canbus", help="the host directory bound as the hub's socket directory")
     p.add_argument("--device-env", type=Path, help="write the scenario's bridge settings here (KEY=value lines)")
     p.set_defaults(func=cmd_compose_override)

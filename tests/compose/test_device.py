@@ -152,3 +152,53 @@ def test_a_device_that_announces_nothing_and_subscribes_to_nothing_is_never_read
     said = (run_dir / "containers.log").read_text() + (run_dir / "junit.xml").read_text()
     assert "no subscriber on vehicle/can/tx after 5 s: a device that announces nothing" in said
     nothing_left(proc, run_dir)
+
+
+def test_the_bridges_stop_and_kill_restart_a_device_the_bench_started(built):
+    # bench-run stops the device's process group (TERM, or KILL) and runs DEVICE_CMD again after the
+    # step's hold; the device comes back on its own, and every check is judged as for the bench's bridge
+    proc, run_dir, _ = run_device(str(FIRMWARE / "zenoh-node"), REPO / "scenarios" / "bridge-faults.yaml")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    cases = junit_cases(run_dir)
+    for check in ("faults_injected", "recovery", "integrity", "ordering", "zenoh_to_can", "bridge_stats_agree"):
+        assert cases[f"test_check[{check}]"] == "passed", cases
+    windows = json.loads((run_dir / "metrics.json").read_text())["faults"]["windows"]
+    stops = [w for w in windows if w["action"].startswith("bridge_")]
+    assert [w["action"] for w in stops] == ["bridge_term", "bridge_kill"]
+    assert all(not w["error"] and w["end_ns"] - w["start_ns"] >= 0.5e9 for w in stops), stops  # the hold's 0.5 s
+    restarts = re.findall(r"device: (bridge_\w+) at \S+, started again \(pid (\d+)\)", proc.stderr)
+    assert [action for action, _ in restarts] == ["bridge_term", "bridge_kill"], proc.stderr[-3000:]
+    log = (run_dir / "device.log").read_text()
+    assert log.count("ready: zid") == 3, log[-3000:]  # the first start and two more
+    assert log.count("final stats") == 2  # TERM lets it say goodbye (and the run's end), KILL does not
+    for _, pid in restarts:
+        assert group_members(int(pid)) == []
+    nothing_left(proc, run_dir)
+    assert not list(run_dir.glob("device.re*"))  # the FIFOs are the run's, not reports
+
+
+def test_a_device_that_does_not_come_back_after_a_stop_fails_the_run(built):
+    # DEVICE_CMD run again is the command itself: one that cannot start a second time is a verdict on
+    # the device, said as such, never a hang or a pass
+    marker = REPO / "build" / f"device-started-{os.getpid()}"
+    marker.unlink(missing_ok=True)
+    command = f'[ ! -e {marker} ] || exit 7; touch {marker}; exec {FIRMWARE / "zenoh-node"}'
+    try:
+        proc, run_dir, _ = run_device(command, REPO / "scenarios" / "bridge-faults.yaml")
+    finally:
+        marker.unlink(missing_ok=True)
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "the device exited with 7 before the run ended" in proc.stdout
+    nothing_left(proc, run_dir)
+
+
+def test_a_partition_cuts_a_devices_link_and_it_reconnects(built):
+    # the device is published to the router's listener that the partition drops: its session is cut
+    # (it says so when it reconnects), the captures' are not
+    proc, run_dir, _ = run_device(str(FIRMWARE / "zenoh-node"), REPO / "scenarios" / "network-partition.yaml")
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
+    cases = junit_cases(run_dir)
+    for check in ("faults_injected", "recovery", "integrity", "bridge_stats_agree"):
+        assert cases[f"test_check[{check}]"] == "passed", cases
+    assert "reconnected to the Zenoh router" in (run_dir / "device.log").read_text()
+    nothing_left(proc, run_dir)

@@ -211,6 +211,18 @@ def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):
     assert len([e for e in events() if e[0] == "start"]) == 1
 
 
+def test_a_device_the_bench_starts_runs_the_steps_that_stop_it(bench):
+    # with DEVICE_CMD bench-run stops the device and starts it again: a bridge_kill is no reason to leave out
+    run, add, events, root = bench
+    (root / "build" / "ucan").mkdir(parents=True)
+    (root / "build" / "ucan" / "libucan-preload.so").write_text("")
+    add("faulted", text=FAULTED.format(name="faulted"))
+    proc = run(["faulted"], DEVICE="host:7448", DEVICE_CMD="./my-gateway")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert [name for kind, name, _ in events() if kind == "start"] == ["faulted"]
+    assert "not run against" not in proc.stderr + proc.stdout
+
+
 def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
     run, add, events, root = bench
     (root / "build" / "ucan").mkdir(parents=True)

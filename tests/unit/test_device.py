@@ -19,7 +19,7 @@ import zenoh
 from test_compose_privileges import defaults, merged
 from test_identities import Inbox, free_port
 
-from canbench import compose, device, identities, runkeys, scenario
+from canbench import compose, device, faults, identities, runkeys, scenario
 
 pytestmark = pytest.mark.unit
 
@@ -48,13 +48,16 @@ def test_what_a_device_cannot_stand_in_for_is_refused_at_its_file():
     consumer = scenario.load(SCENARIOS / "bridge-router.yaml")
     smoke = scenario.load(SCENARIOS / "smoke.yaml")
     assert device.refusals(smoke, "userspace") == []
+    # a stop or a kill of the device is bench-run's, which can start again only what it started
     [why] = device.refusals(faults, "userspace")
-    assert why.startswith(str(faults.path)) and "fault steps bridge_kill, bridge_term act on" in why
-    [why] = device.refusals(partition, "userspace")
-    assert "fault steps partition act on" in why
-    # the router's faults, an ECU's and a flood act on the bench's side: a device meets them as the bridge does
-    for name in ("router-faults.yaml", "can-flood.yaml"):
+    assert why.startswith(str(faults.path)) and "fault steps bridge_kill, bridge_term stop the device" in why
+    assert "give DEVICE_CMD" in why
+    assert device.refusals(faults, "userspace", restartable=True) == []
+    # the router's faults, an ECU's, a flood and a partition (of the device's own listener) act on the
+    # bench's side: a device meets them as the bridge does
+    for name in ("router-faults.yaml", "can-flood.yaml", "network-partition.yaml"):
         assert device.refusals(scenario.load(SCENARIOS / name), "userspace") == [], name
+    assert device.refusals(partition, "userspace") == []
     [why] = device.refusals(consumer, "userspace")
     assert "consumer: bridge" in why
     [why] = device.refusals(smoke, "kernel")
@@ -77,6 +80,17 @@ def test_the_router_is_published_on_loopback_only_and_the_bus_on_the_host():
         assert svc.get("cap_drop") == ["ALL"] and svc.get("read_only") is True, name
 
 
+def test_a_partitions_device_is_published_to_the_listener_the_partition_cuts():
+    # the partition drops the router's second listener only (the captures and ECUs keep theirs): the
+    # device's published port leads there, as the bench's bridge dials it
+    sc = scenario.load(SCENARIOS / "network-partition.yaml")
+    out = compose.compose_override(sc, "/scenarios/network-partition.yaml", device=device.Device(7448),
+                                   canbus_dir="/tmp/canbench-bus.x")
+    router = defaults(merged(out))["services"]["router"]
+    assert router["ports"] == [f"127.0.0.1:7448:{faults.PARTITION_PORT}"]
+    assert f"tls/0.0.0.0:{faults.PARTITION_PORT}" in router["command"]
+
+
 def test_the_settings_survive_the_shell_that_starts_the_device(tmp_path):
     settings = {"ZENOH_NODE_CAN": "vcan0,vcan1", "ODD": "a b 'c' \"d\" $HOME `x` ;&"}
     env = tmp_path / "device.env"
@@ -93,6 +107,8 @@ def test_the_compose_override_command_refuses_and_writes_the_settings(tmp_path):
                                "--device", "host:7448", *extra], capture_output=True, text=True, cwd=REPO)
     refused = run("bridge-faults.yaml", "--device-canbus", str(tmp_path))
     assert refused.returncode == 2 and "DEVICE=host:7448:" in refused.stderr and "fault steps" in refused.stderr
+    restartable = run("bridge-faults.yaml", "--device-canbus", str(tmp_path), "--device-restartable")
+    assert restartable.returncode == 0, restartable.stderr
     assert "--device-canbus" in run("smoke.yaml").stderr
     ok = run("smoke.yaml", "--device-canbus", str(tmp_path), "--device-env", str(tmp_path / "device.env"))
     assert ok.returncode == 0, ok.stderr
