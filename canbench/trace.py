@@ -17,6 +17,7 @@ from pathlib import Path
 
 import can
 
+from .blf import BLFReader
 from .errors import NotClassicFrame, TraceError
 from .files import file_problem
 from .trace_frames import TraceFrames
@@ -446,7 +447,7 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
         raise TraceError(str(path), None, f"unknown trace format '{path.suffix}'{hint} (the bench reads "
                          f"{FORMATS_SAID})")
     try:
-        reader = can.LogReader(str(path))
+        reader = BLFReader(str(path)) if suffix == ".blf" else can.LogReader(str(path))  # BLF: CAN_ERROR objects too
         recorded = getattr(reader, "file_size", 0) if suffix == ".blf" else 0
         if recorded > path.stat().st_size:  # python-can reads a cut BLF to its cut, silently
             fail(None, f"truncated: its header says {recorded} bytes, the file has {path.stat().st_size} "
