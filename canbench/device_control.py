@@ -4,13 +4,15 @@ process group and start the command again; the orchestrator, in a container, can
 processes. Two FIFOs in the run's directory (the host's and the orchestrator's, both mounted),
 made and held open by bench-run for a run with DEVICE_CMD:
 
-  device.request  the orchestrator writes "ACTION HOLD_S\\n" (one write: atomic in a pipe)
-  device.reply    bench-run answers "ok STOPPED_NS STARTED_NS\\n" (wall clock: when the signal
-                  went and when the command was started again) or "error WHY\\n"
+  device.request  the orchestrator writes "SEQ ACTION HOLD_S\\n" (one write: atomic in a pipe)
+  device.reply    bench-run answers "SEQ ok STOPPED_NS STARTED_NS\\n" (wall clock: when the signal
+                  went and when the command was started again) or "SEQ error WHY\\n"
 
-bench-run serves one request at a time from its watch loop (scripts/bench-run, device_fault)."""
+bench-run serves one request at a time from its watch loop (scripts/bench-run, device_fault); an
+answer to an earlier request, given up on, is told apart by its SEQ."""
 from __future__ import annotations
 
+import itertools
 import os
 import select
 import time
@@ -19,7 +21,9 @@ from pathlib import Path
 REQUEST, REPLY = "device.request", "device.reply"
 ACTIONS = ("bridge_term", "bridge_kill")  # the steps served so (bench-run refuses any other)
 # bench-run's stop waits DEVICE_STOP_S (default 10 s) before it kills; the reply comes after the hold
+# (a DEVICE_STOP_S near this long makes a device that ignores TERM a bench error)
 REPLY_MARGIN_S = 60.0
+_requests = itertools.count(1)
 
 
 def restart(run_dir: Path, action: str, hold_s: float, margin_s: float = REPLY_MARGIN_S) -> tuple[int, int]:
@@ -36,11 +40,16 @@ def restart(run_dir: Path, action: str, hold_s: float, margin_s: float = REPLY_M
             request = os.open(run_dir / REQUEST, os.O_WRONLY | os.O_NONBLOCK)
         except OSError as e:  # ENXIO: no reader, bench-run is not serving
             raise RuntimeError(f"bench-run does not serve {run_dir / REQUEST}: {e}") from None
+        seq = str(next(_requests))
         try:
-            os.write(request, f"{action} {hold_s:.3f}\n".encode())  # bench-run reads a plain decimal
+            os.write(request, f"{seq} {action} {hold_s:.3f}\n".encode())  # bench-run reads a plain decimal
         finally:
             os.close(request)
-        line = _line(reply, time.monotonic() + hold_s + margin_s)
+        deadline = time.monotonic() + hold_s + margin_s
+        while True:
+            answer, _, line = _line(reply, deadline).partition(" ")
+            if answer == seq:
+                break
     finally:
         os.close(reply)
     word, _, rest = line.partition(" ")
@@ -56,13 +65,14 @@ def _drain(fd: int) -> None:
 
 
 def _line(fd: int, deadline: float) -> str:
-    """One line from a non-blocking FIFO, waiting for it until deadline (monotonic s)."""
+    """One line from a non-blocking FIFO, waiting for it until deadline (monotonic s). Reads a byte
+    at a time: what follows the line stays in the pipe for the next call."""
     got = b""
     while not got.endswith(b"\n"):
         left = deadline - time.monotonic()
         if left <= 0 or not select.select([fd], [], [], left)[0]:
             raise RuntimeError(f"no answer from bench-run in time (got {got.decode(errors='replace')!r})")
-        chunk = os.read(fd, 4096)
+        chunk = os.read(fd, 1)
         if not chunk:  # every writer gone: bench-run stopped serving
             raise RuntimeError("bench-run closed the device's reply before answering")
         got += chunk

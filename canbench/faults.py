@@ -118,12 +118,13 @@ class Injector:
         for fault in sorted(self.faults, key=lambda f: f.at_s):
             if self._stop.wait(max(0.0, t0 + fault.at_s - time.monotonic())):
                 return  # the run ended first
-            service = fault.target and f"ecu-{fault.target}" or ACTION_SERVICE[fault.action]
+            on_device = self.device_dir is not None and fault.action in device_control.ACTIONS
+            service = "device" if on_device else fault.target and f"ecu-{fault.target}" or ACTION_SERVICE[fault.action]
             window = Window(fault.action, service, time.time_ns())
             self.windows.append(window)
             exact = None
             try:
-                if self.device_dir and fault.action in device_control.ACTIONS:
+                if on_device and self.device_dir:
                     exact = device_control.restart(self.device_dir, fault.action, fault.duration_s)
                 else:
                     exact = self._inject(fault, None if fault.action == "can_flood" else self.container(service))

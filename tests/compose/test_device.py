@@ -109,14 +109,21 @@ def test_a_device_that_stops_before_the_run_ends_fails_it_and_its_stray_child_is
     nothing_left(proc, run_dir)
 
 
-def test_the_routers_faults_run_against_a_device_and_its_memory_is_not_judged(built):
-    # the device reconnects through the port published for it; what only the bench's own bridge
-    # container shows (memory, descriptors) is skipped with the reason, never passed
-    proc, run_dir, _ = run_device(str(FIRMWARE / "zenoh-node"), REPO / "scenarios" / "router-faults.yaml")
+def faults_pass(name: str) -> tuple[subprocess.CompletedProcess, Path, dict[str, str]]:
+    """The host's zenoh-node as the device through a shipped fault scenario: passed, the faults'
+    checks and the stats' included."""
+    proc, run_dir, _ = run_device(str(FIRMWARE / "zenoh-node"), REPO / "scenarios" / name)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
     cases = junit_cases(run_dir)
     for check in ("faults_injected", "recovery", "integrity", "bridge_stats_agree"):
         assert cases[f"test_check[{check}]"] == "passed", cases
+    return proc, run_dir, cases
+
+
+def test_the_routers_faults_run_against_a_device_and_its_memory_is_not_judged(built):
+    # the device reconnects through the port published for it; what only the bench's own bridge
+    # container shows (memory, descriptors) is skipped with the reason, never passed
+    proc, run_dir, cases = faults_pass("router-faults.yaml")
     assert cases["test_check[bridge_memory]"] == "skipped"
     assert "not a device of your own" in (run_dir / "junit.xml").read_text()
     assert "reconnected to the Zenoh router" in (run_dir / "device.log").read_text()
@@ -195,10 +202,6 @@ def test_a_device_that_does_not_come_back_after_a_stop_fails_the_run(built):
 def test_a_partition_cuts_a_devices_link_and_it_reconnects(built):
     # the device is published to the router's listener that the partition drops: its session is cut
     # (it says so when it reconnects), the captures' are not
-    proc, run_dir, _ = run_device(str(FIRMWARE / "zenoh-node"), REPO / "scenarios" / "network-partition.yaml")
-    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-4000:]
-    cases = junit_cases(run_dir)
-    for check in ("faults_injected", "recovery", "integrity", "bridge_stats_agree"):
-        assert cases[f"test_check[{check}]"] == "passed", cases
+    proc, run_dir, _ = faults_pass("network-partition.yaml")
     assert "reconnected to the Zenoh router" in (run_dir / "device.log").read_text()
     nothing_left(proc, run_dir)

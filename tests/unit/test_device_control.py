@@ -5,6 +5,7 @@ tests/compose/test_device.py."""
 from __future__ import annotations
 
 import os
+import re
 import threading
 import time
 
@@ -16,7 +17,8 @@ pytestmark = pytest.mark.unit
 
 
 class FakeBenchRun:
-    """The FIFOs as bench-run makes and holds them (open both ways), answering each request."""
+    """The FIFOs as bench-run makes and holds them (open both ways), answering a request with
+    answer(seq): what bench-run writes back, its own SEQ included."""
 
     def __init__(self, run_dir, answer):
         self.requests: list[str] = []
@@ -31,8 +33,8 @@ class FakeBenchRun:
     def serve(self) -> None:
         line = os.read(self.request, 4096).decode()
         self.requests.append(line)
-        answer = self.answer(line)
-        if answer is not None:
+        answer = self.answer(line.split()[0])
+        if answer:
             os.write(self.reply, answer.encode())
 
     def close(self) -> None:
@@ -42,28 +44,30 @@ class FakeBenchRun:
 
 
 def test_the_request_says_the_step_and_its_hold_and_the_answer_is_the_window(tmp_path):
-    host = FakeBenchRun(tmp_path, lambda line: "ok 1000 2500000000\n")
+    host = FakeBenchRun(tmp_path, lambda seq: f"{seq} ok 1000 2500000000\n")
     assert device_control.restart(tmp_path, "bridge_kill", 0.5) == (1000, 2_500_000_000)
     host.close()
-    assert host.requests == ["bridge_kill 0.500\n"]  # one line, a plain decimal bench-run's shell reads
+    [request] = host.requests  # one line, a plain decimal bench-run's shell reads
+    assert re.fullmatch(r"\d+ bridge_kill 0\.500\n", request)
 
 
 def test_an_answer_given_up_on_is_not_taken_for_the_next_one(tmp_path):
-    host = FakeBenchRun(tmp_path, lambda line: "ok 5 6\n")
-    os.write(host.reply, b"ok 1 2\n")  # left by an earlier request that timed out
+    # an earlier request's answer, in the pipe before the request, or arriving late after it
+    host = FakeBenchRun(tmp_path, lambda seq: f"{seq}0 ok 3 4\n{seq} ok 5 6\n")
+    os.write(host.reply, b"0 ok 1 2\n")
     assert device_control.restart(tmp_path, "bridge_term", 0) == (5, 6)
     host.close()
 
 
 def test_bench_runs_error_is_said(tmp_path):
-    host = FakeBenchRun(tmp_path, lambda line: "error bridge_pause is not a fault step on the device\n")
+    host = FakeBenchRun(tmp_path, lambda seq: f"{seq} error bridge_pause is not a fault step on the device\n")
     with pytest.raises(RuntimeError, match="could not bridge_term the device: bridge_pause is not a fault step"):
         device_control.restart(tmp_path, "bridge_term", 0)
     host.close()
 
 
 def test_no_answer_in_time_is_an_error_not_a_hang(tmp_path):
-    host = FakeBenchRun(tmp_path, lambda line: None)
+    host = FakeBenchRun(tmp_path, lambda seq: None)
     started = time.monotonic()
     with pytest.raises(RuntimeError, match="no answer from bench-run in time"):
         device_control.restart(tmp_path, "bridge_term", 0.1, margin_s=0.2)

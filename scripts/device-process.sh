@@ -1,0 +1,70 @@
+# device-process.sh - a device of your own's process group, for scripts/bench-run (sourced): start
+# DEVICE_CMD, stop it, and the fault steps the orchestrator asks for (canbench.device_control).
+# Uses bench-run's variables: DEVICE_CMD, DEVICE_STOP_S, identities, device_endpoint, canbus_dir,
+# repo, caller_dir, run_dir; sets device_pid and device_group; requests and replies, once set, are
+# the orchestrator's FIFOs' descriptors (never the device's).
+
+stop_device() {  # its whole process group, its leader gone or not: TERM, then KILL after DEVICE_STOP_S
+	[ -n "$device_group" ] || return 0
+	if kill -TERM -- -"$device_group" 2>/dev/null; then
+		local deadline=$((SECONDS + ${DEVICE_STOP_S:-10}))
+		while kill -0 -- -"$device_group" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.1; done
+		kill -KILL -- -"$device_group" 2>/dev/null || true
+	fi
+	device_group=''
+}
+launch_device() {  # DEVICE_CMD in a process group of its own, its output added to device.log
+	(
+		# the scenario's settings only: none the caller's shell holds (a ZENOH_LISTEN would open a listener)
+		unset LD_PRELOAD $(compgen -e | grep -E '^(ZENOH_|UCAN_)' || true)
+		set -a
+		. "$identities/device.env"
+		ZENOH_CONFIG=$identities/device/zenoh.json5 ZENOH_ROUTER_ADDRESS=$device_endpoint UCAN_DIR=$canbus_dir
+		LD_PRELOAD=$repo/build/ucan/libucan-preload.so
+		set +a
+		cd "$caller_dir"  # DEVICE_CMD's relative paths are the caller's
+		# the orchestrator's channel to bench-run is not the device's
+		[ -z "${requests:-}" ] || exec {requests}<&- {replies}<&-
+		exec setsid bash -c "$DEVICE_CMD"
+	) >>"$run_dir/device.log" 2>&1 </dev/null &
+	device_pid=$! device_group=$!  # setsid: the device leads its own group (never a leader here, so no fork)
+	# a signal to its group finds it only once setsid ran (microseconds; bounded all the same)
+	local deadline=$((SECONDS + 5))
+	until device_grouped || [ $SECONDS -ge $deadline ]; do sleep 0.01; done
+}
+device_grouped() {  # the device leads its own process group by now, or it is gone already
+	local stat
+	stat=$(cat "/proc/$device_pid/stat" 2>/dev/null) || return 0
+	set -- ${stat##*) }  # after the command's name: state, parent, process group
+	[ "$3" = "$device_pid" ]
+}
+# A fault step on the device, asked by the orchestrator (canbench.device_control): "SEQ ACTION HOLD_S"
+# in, "SEQ ok STOPPED_NS STARTED_NS" or "SEQ error WHY" out. Served from the watch loop below, one
+# at a time; never on a device that already exited (its exit is the run's verdict, not a restart).
+device_fault() {
+	local action=$2 hold=$3 stopped
+	case $hold in '' | *[!0-9.]* | *.*.*) echo "$1 error hold '$hold': not a number of seconds"; return ;; esac
+	case $action in bridge_term | bridge_kill) ;; *) echo "$1 error $action is not a fault step on the device"; return ;; esac
+	if ! kill -0 "$device_pid" 2>/dev/null; then
+		echo "$1 error the device had exited before $action"
+		return
+	fi
+	stopped=$(date +%s%N)
+	if [ "$action" = bridge_term ]; then
+		stop_device  # TERM, then KILL after DEVICE_STOP_S, as at the run's end
+	else
+		{
+			kill -KILL -- -"$device_group" || true
+			# gone once the kernel has reaped every member (bounded: KILL cannot be ignored)
+			local deadline=$((SECONDS + 10))
+			while kill -0 -- -"$device_group" && [ $SECONDS -lt $deadline ]; do sleep 0.05; done
+		} 2>/dev/null  # (and bash's word that its job was killed)
+		device_group=''
+	fi
+	{ wait "$device_pid" || true; } 2>/dev/null
+	echo "bench-run: device: $action, started again after ${hold}s" >>"$run_dir/device.log"
+	sleep "$hold"  # the fault's length, as the scenario says
+	launch_device
+	echo "bench-run: device: $action at $(date -u -d "@${stopped%?????????}" +%T), started again (pid $device_pid)" >&2
+	echo "$1 ok $stopped $(date +%s%N)"
+}

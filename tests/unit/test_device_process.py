@@ -1,0 +1,104 @@
+"""bench-run's side of a fault step on a device of your own (scripts/device-process.sh, sourced
+as bench-run sources it): a kill and a stop of the device's whole process group and the command
+run again, the window answered; a device that ignores TERM killed after DEVICE_STOP_S; a device
+that had already exited not started again (its exit stays the run's verdict); the orchestrator's
+FIFOs never the device's; bad requests answered with why. The orchestrator's side is
+tests/unit/test_device_control.py, the whole run tests/compose/test_device.py."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.unit
+
+LIB = Path(__file__).resolve().parents[2] / "scripts" / "device-process.sh"
+# says it is ready (the file "ignoring") once TERM is ignored: a TERM before would end it
+IGNORES_TERM = (f"exec {sys.executable} -c 'import signal, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+                "open(\"ignoring\", \"w\").close(); time.sleep(300)'")
+
+
+def bench_run(tmp_path: Path, command: str, steps: str, **env: str) -> list[str]:
+    """The library with bench-run's variables, DEVICE_CMD launched, then `steps` (bash); what they
+    print, line by line. Whatever the device left is killed at the end."""
+    (tmp_path / "ids" / "device").mkdir(parents=True)
+    (tmp_path / "ids" / "device.env").write_text("ZENOH_NODE_CAN=vcan0\n")
+    script = f"""set -euo pipefail
+. {LIB}
+identities={tmp_path}/ids device_endpoint=tls/127.0.0.1:1 canbus_dir={tmp_path} repo={tmp_path}
+caller_dir={tmp_path} run_dir={tmp_path} device_pid='' device_group=''
+trap 'stop_device' EXIT
+gone() {{  # until process $1 is gone (bounded)
+	local deadline=$((SECONDS + 10))
+	while kill -0 -- "$1" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.02; done
+}}
+launch_device
+{steps}
+"""
+    proc = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "DEVICE_CMD": command, "DEVICE_STOP_S": "1", **env})
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.splitlines()
+
+
+def alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("action", ["bridge_kill", "bridge_term"])
+def test_a_stop_or_a_kill_restarts_the_devices_command_and_answers_the_window(tmp_path, action):
+    first, answer, second = bench_run(tmp_path, "exec sleep 300", f"""
+echo $device_pid
+device_fault 7 {action} 0.2
+echo $device_pid""")
+    seq, word, stopped, started = answer.split()
+    assert (seq, word) == ("7", "ok")
+    assert int(started) - int(stopped) >= 0.2e9  # the step's hold
+    assert first != second and not alive(int(first))
+    assert f"device: {action}, started again after 0.2s" in (tmp_path / "device.log").read_text()
+
+
+def test_a_device_that_ignores_term_is_killed_after_device_stop_s(tmp_path):
+    [answer] = bench_run(tmp_path, IGNORES_TERM, """
+deadline=$((SECONDS + 10)); until [ -e "$caller_dir/ignoring" ] || [ $SECONDS -ge $deadline ]; do sleep 0.02; done
+device_fault 1 bridge_term 0""", DEVICE_STOP_S="2")
+    _, word, stopped, started = answer.split()
+    # (bash's clock for DEVICE_STOP_S is in whole seconds: 2 is 1-2 s)
+    assert word == "ok" and 1e9 <= int(started) - int(stopped) < 5e9
+
+
+def test_a_device_that_had_exited_is_not_started_again_and_its_exit_stays(tmp_path):
+    answer, status = bench_run(tmp_path, "exit 3", """
+gone $device_pid
+device_fault 2 bridge_term 0
+wait $device_pid && echo 0 || echo $?""")
+    assert answer == "2 error the device had exited before bridge_term"
+    assert status == "3"  # what bench-run's verdict says: the device exited with 3
+    assert "started again" not in (tmp_path / "device.log").read_text()
+
+
+def test_the_orchestrators_fifos_are_not_the_devices(tmp_path):
+    [fds] = bench_run(tmp_path, "exec sleep 300", f"""
+mkfifo {tmp_path}/device.request {tmp_path}/device.reply
+exec {{requests}}<>{tmp_path}/device.request {{replies}}<>{tmp_path}/device.reply
+device_fault 1 bridge_kill 0 >/dev/null
+ls -l /proc/$device_pid/fd | tr '\\n' ' '""")
+    assert "device.re" not in fds and "sleep" not in fds, fds
+
+
+@pytest.mark.parametrize("request_, says", [("1 bridge_pause 1", "1 error bridge_pause is not a fault step"),
+                                            ("2 bridge_kill x", "2 error hold 'x': not a number of seconds"),
+                                            ("3 bridge_kill 1.2.3", "3 error hold '1.2.3'")])
+def test_a_request_that_is_not_a_step_is_answered_with_why(tmp_path, request_, says):
+    [answer, same] = bench_run(tmp_path, "exec sleep 300", f"""
+first=$device_pid
+device_fault {request_}
+[ "$device_pid" = "$first" ] && kill -0 $first && echo same""")
+    assert answer.startswith(says) and same == "same"  # the device untouched
