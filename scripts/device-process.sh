@@ -42,14 +42,14 @@ device_grouped() {  # the device leads its own process group by now, or it is go
 # in, "SEQ ok STOPPED_NS STARTED_NS" or "SEQ error WHY" out. Served from the watch loop below, one
 # at a time; never on a device that already exited (its exit is the run's verdict, not a restart).
 device_fault() {
-	local action=$2 hold=$3 stopped
+	local action=$2 hold=$3 stopped started
 	case $hold in '' | *[!0-9.]* | *.*.*) echo "$1 error hold '$hold': not a number of seconds"; return ;; esac
 	case $action in bridge_term | bridge_kill) ;; *) echo "$1 error $action is not a fault step on the device"; return ;; esac
 	if ! kill -0 "$device_pid" 2>/dev/null; then
 		echo "$1 error the device had exited before $action"
 		return
 	fi
-	stopped=$(date +%s%N)
+	stopped=${EPOCHREALTIME//[!0-9]/}000  # the wall clock in ns as the captures stamp (bash's: no fork)
 	if [ "$action" = bridge_term ]; then
 		stop_device  # TERM, then KILL after DEVICE_STOP_S, as at the run's end
 	else
@@ -64,7 +64,10 @@ device_fault() {
 	{ wait "$device_pid" || true; } 2>/dev/null
 	echo "bench-run: device: $action, started again after ${hold}s" >>"$run_dir/device.log"
 	sleep "$hold"  # the fault's length, as the scenario says
+	# taken before the start: the new incarnation's first frame may come within milliseconds, and
+	# the checks count its frames (its counters) from the window's end on
+	started=${EPOCHREALTIME//[!0-9]/}000
 	launch_device
 	echo "bench-run: device: $action at $(date -u -d "@${stopped%?????????}" +%T), started again (pid $device_pid)" >&2
-	echo "$1 ok $stopped $(date +%s%N)"
+	echo "$1 ok $stopped $started"
 }

@@ -54,13 +54,18 @@ def alive(pid: int) -> bool:
 
 @pytest.mark.parametrize("action", ["bridge_kill", "bridge_term"])
 def test_a_stop_or_a_kill_restarts_the_devices_command_and_answers_the_window(tmp_path, action):
-    first, answer, second = bench_run(tmp_path, "exec sleep 300", f"""
+    # the device notes when it starts: the window's end comes before its new incarnation's first act
+    # (the checks count the new incarnation's frames from there on)
+    first, answer, second = bench_run(tmp_path, "date +%s%N >>starts; exec sleep 300", f"""
 echo $device_pid
 device_fault 7 {action} 0.2
-echo $device_pid""")
+echo $device_pid
+deadline=$((SECONDS + 10))
+until [ "$(wc -l <"$caller_dir/starts")" -ge 2 ] || [ $SECONDS -ge $deadline ]; do sleep 0.02; done""")
     seq, word, stopped, started = answer.split()
     assert (seq, word) == ("7", "ok")
     assert int(started) - int(stopped) >= 0.2e9  # the step's hold
+    assert int(started) <= int((tmp_path / "starts").read_text().split()[-1])
     assert first != second and not alive(int(first))
     assert f"device: {action}, started again after 0.2s" in (tmp_path / "device.log").read_text()
 
