@@ -112,7 +112,8 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
                         "--save", "/reports/${RUN_ID}/traffic.rrd"],
         }, tmp=True)
         orchestrator_env["BENCH_VIEWER"] = "1"
-    if any(f.action == "partition" for f in sc.faults):
+    partitioned = any(f.action == "partition" for f in sc.faults)
+    if partitioned:
         # the bridge gets a listener of its own on the router: the partition drops that port only
         services["router"] = {"command": ["--config", "/run/zenoh/zenohd.json5", "--listen", f"{SCHEME}/0.0.0.0:7447",
                                           "--listen", f"{SCHEME}/0.0.0.0:{faults.PARTITION_PORT}"]}
@@ -142,7 +143,6 @@ def compose_override(sc: scenario.Scenario, scenario_in_container: str, viewer: 
     out: dict = {"services": services}
     if device:
         # a partition drops the bridge's own listener: the device reaches the router there
-        partitioned = any(f.action == "partition" for f in sc.faults)
         extra = device_override(device, canbus_dir, faults.PARTITION_PORT if partitioned else PORT)
         services["router"] = {**services.get("router", {}), **extra["services"]["router"]}
         out["volumes"] = extra["volumes"]

@@ -23,8 +23,6 @@ from . import device_control, scenario
 IDENTITY = "device"  # its directory among the run's identities; its certificate's CN is "bridge" (the ACL's)
 SPEC = re.compile(r"host:(\d{1,5})")
 LOWEST_PORT = 1024  # an unprivileged port: the bench never needs root on the host for it
-# fault steps that stop the bridge: on a device, bench-run's, which can only stop what it started
-RESTARTS = device_control.ACTIONS
 
 
 @dataclass(frozen=True)
@@ -53,7 +51,7 @@ def refusals(sc: scenario.Scenario, can_mode: str, restartable: bool = False) ->
     restartable: bench-run starts the device (DEVICE_CMD), so it can stop it and start it again."""
     where = str(sc.path)
     out = []
-    restarts = sorted({f.action for f in sc.faults if f.action in RESTARTS})
+    restarts = sorted({f.action for f in sc.faults if f.action in device_control.ACTIONS})
     if restarts and not restartable:
         out.append(f"{where}: fault steps {', '.join(restarts)} stop the device and start it again, which the "
                    f"bench does only for a device it started: give DEVICE_CMD")

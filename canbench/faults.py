@@ -118,14 +118,15 @@ class Injector:
         for fault in sorted(self.faults, key=lambda f: f.at_s):
             if self._stop.wait(max(0.0, t0 + fault.at_s - time.monotonic())):
                 return  # the run ended first
-            on_device = self.device_dir is not None and fault.action in device_control.ACTIONS
-            service = "device" if on_device else fault.target and f"ecu-{fault.target}" or ACTION_SERVICE[fault.action]
+            # a stop or a kill of a device of your own is bench-run's (device_control)
+            device_dir = self.device_dir if fault.action in device_control.ACTIONS else None
+            service = "device" if device_dir else fault.target and f"ecu-{fault.target}" or ACTION_SERVICE[fault.action]
             window = Window(fault.action, service, time.time_ns())
             self.windows.append(window)
             exact = None
             try:
-                if on_device and self.device_dir:
-                    exact = device_control.restart(self.device_dir, fault.action, fault.duration_s)
+                if device_dir:
+                    exact = device_control.restart(device_dir, fault.action, fault.duration_s)
                 else:
                     exact = self._inject(fault, None if fault.action == "can_flood" else self.container(service))
             except Exception as e:  # noqa: BLE001 - reported as the bench's failure, never lost in a thread

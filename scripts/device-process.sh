@@ -7,11 +7,14 @@
 stop_device() {  # its whole process group, its leader gone or not: TERM, then KILL after DEVICE_STOP_S
 	[ -n "$device_group" ] || return 0
 	if kill -TERM -- -"$device_group" 2>/dev/null; then
-		local deadline=$((SECONDS + ${DEVICE_STOP_S:-10}))
-		while kill -0 -- -"$device_group" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.1; done
+		group_gone "${DEVICE_STOP_S:-10}"
 		kill -KILL -- -"$device_group" 2>/dev/null || true
 	fi
 	device_group=''
+}
+group_gone() {  # until the device's process group is empty, at most $1 s
+	local deadline=$((SECONDS + $1))
+	while kill -0 -- -"$device_group" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.05; done
 }
 launch_device() {  # DEVICE_CMD in a process group of its own, its output added to device.log
 	(
@@ -55,9 +58,7 @@ device_fault() {
 	else
 		{
 			kill -KILL -- -"$device_group" || true
-			# gone once the kernel has reaped every member (bounded: KILL cannot be ignored)
-			local deadline=$((SECONDS + 10))
-			while kill -0 -- -"$device_group" && [ $SECONDS -lt $deadline ]; do sleep 0.05; done
+			group_gone 10  # once the kernel has reaped every member (KILL cannot be ignored)
 		} 2>/dev/null  # (and bash's word that its job was killed)
 		device_group=''
 	fi

@@ -8,7 +8,6 @@ import sys
 import time
 from collections import deque
 
-sys.path.insert(0, os.environ.get("REPO", "."))
 from canbench import wire  # noqa: E402
 from canbench.distribution import Distribution  # noqa: E402
 

@@ -1,7 +1,6 @@
 """Old vs new oracle on adversarial seeded runs (OLD_ORACLE, NEW_ORACLE: paths of oracle.py)."""
 import random, sys, time, json
 from collections import Counter
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness as H
 MS, US = H.MS, H.US
 

@@ -1,6 +1,5 @@
 import os
 import sys
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness as H
 from canbench import wire
 MS = 1_000_000

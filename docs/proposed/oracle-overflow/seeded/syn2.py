@@ -2,7 +2,6 @@
 (backlog > DOUBT_FRAMES). B: 2 constant ids, a 100 ms stall released at once, then latency lasting +R ms."""
 import os
 import sys
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness as H
 from canbench import wire
 MS = 1_000_000

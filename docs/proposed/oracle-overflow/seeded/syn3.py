@@ -3,7 +3,6 @@ dropped: losses inside the cut, excused), and the bridge publishes the first liv
 a fault, never excused). Does the oracle still name the duplicate?"""
 import os
 import sys
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import syn2
 B, MS = syn2.B, syn2.MS
 import harness as H
