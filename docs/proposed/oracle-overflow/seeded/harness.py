@@ -61,6 +61,11 @@ def make_ids(rng, shape):
         cycles = [10, 20, 50, 100]
         kinds = (lambda: "const") if shape == "fewconst" else \
             (lambda: rng.choices(("const", "counter", "slow"), (50, 25, 25))[0])
+    return draw_ids(rng, n, cycles, kinds)
+
+
+def draw_ids(rng, n, cycles, kinds):
+    """n distinct 11-bit ids, each with its cycle, phase and content of kind kinds()."""
     ids = []
     used = set()
     for _ in range(n):

@@ -1,25 +1,18 @@
 """Old vs new oracle on adversarial seeded runs (OLD_ORACLE, NEW_ORACLE: paths of oracle.py)."""
-import random, sys, time, json
+import json
+import os
+import random
+import sys
+import time
 from collections import Counter
 import harness as H
 MS, US = H.MS, H.US
 
 OLD = H.load_oracle(os.environ["OLD_ORACLE"], "o_old")
-import os
-NEW = H.load_oracle(os.environ.get("NEW_ORACLE", "canbench/oracle.py"), "o_new")
+NEW = H.load_oracle(os.environ.get("NEW_ORACLE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../canbench/oracle.py")), "o_new")
 
 
-def ids_n(rng, n, cycles, kinds):
-    out, used = [], set()
-    for _ in range(n):
-        i = rng.randrange(0x7FF)
-        while i in used:
-            i = rng.randrange(0x7FF)
-        used.add(i)
-        cyc = rng.choice(cycles)
-        dlc = rng.choice((8, 8, 8, 4, 2))
-        out.append((i, cyc * MS, rng.randrange(cyc * MS), H.content(rng, kinds(), dlc)))
-    return out
+ids_n = H.draw_ids
 
 
 def traffic_ids(rng, ids, dur):

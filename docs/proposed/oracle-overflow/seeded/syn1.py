@@ -4,7 +4,7 @@ import harness as H
 from canbench import wire
 MS = 1_000_000
 B = 1_700_000_000_000_000_000
-OLD = H.load_oracle(os.environ["OLD_ORACLE"], "xold"); NEW = H.load_oracle(os.environ.get("NEW_ORACLE", "canbench/oracle.py"), "xnew")
+OLD = H.load_oracle(os.environ["OLD_ORACLE"], "xold"); NEW = H.load_oracle(os.environ.get("NEW_ORACLE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../canbench/oracle.py")), "xnew")
 def case(jt, delay, out=(3100, 3600), cycles=(100, 30, 70, 110, 50)):
     sent = []
     for j, cyc in enumerate(cycles):

@@ -6,7 +6,7 @@ import harness as H
 from canbench import wire
 MS = 1_000_000
 B = 1_700_000_000_000_000_000
-OLD = H.load_oracle(os.environ["OLD_ORACLE"], "yold"); NEW = H.load_oracle(os.environ.get("NEW_ORACLE", "canbench/oracle.py"), "ynew")
+OLD = H.load_oracle(os.environ["OLD_ORACLE"], "yold"); NEW = H.load_oracle(os.environ.get("NEW_ORACLE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../canbench/oracle.py")), "ynew")
 
 
 def build(ids, dur_ms):
