@@ -352,7 +352,7 @@ images: base
 # its own compose project; SHARD=k/n: this runner's share; one summary in reports/<suite>/
 JOBS  ?= 1
 SHARD ?=
-# DEVICE=host:PORT [DEVICE_CMD=...] [DEVICE_ANNOUNCES=0]: a device of your own in the bridge's place
+# DEVICE=host:PORT [DEVICE_CMD=... | DEVICE_HOOK=...] [DEVICE_ANNOUNCES=0]: a device of your own in the bridge's place
 # (scripts/bench-run; DEVICE_ANNOUNCES=0 for one with no liveliness token and no stats queryable);
 # a host process joins the userspace bus through the host's build of the preload library
 test: images $(if $(DEVICE),ucan)

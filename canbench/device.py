@@ -8,8 +8,9 @@ for a device that announces nothing, DEVICE_ANNOUNCES=0, for its subscription to
 
 Fault steps on the bridge act on the device: a partition cuts the device's own listener on the
 router (its published port leads there), a stop or a kill is bench-run's, which started the device
-(DEVICE_CMD) and starts it again (canbench.device_control). What a device cannot stand in for yet is
-refused before anything starts: a stop or a kill of a device started by hand, the bridge as the
+(DEVICE_CMD) and starts it again, or calls the user's DEVICE_HOOK for a device it does not start
+(canbench.device_control). What a device cannot stand in for yet is refused before anything starts:
+a stop or a kill of a device started by hand with no hook, the bridge as the
 consumer's endpoint or listening where the scenario says (that would be the host's interfaces),
 kernel vcan (a host process cannot reach the bus container's namespace)."""
 from __future__ import annotations
@@ -48,13 +49,14 @@ def parse(spec: str) -> Device:
 
 def refusals(sc: scenario.Scenario, can_mode: str, restartable: bool = False) -> list[str]:
     """Why this scenario cannot run against a device of your own (empty: it can), each at its file.
-    restartable: bench-run starts the device (DEVICE_CMD), so it can stop it and start it again."""
+    restartable: bench-run can stop the device and start it again (it started it, DEVICE_CMD, or the
+    user's DEVICE_HOOK does it)."""
     where = str(sc.path)
     out = []
     restarts = sorted({f.action for f in sc.faults if f.action in device_control.ACTIONS})
     if restarts and not restartable:
         out.append(f"{where}: fault steps {', '.join(restarts)} stop the device and start it again, which the "
-                   f"bench does only for a device it started: give DEVICE_CMD")
+                   f"bench does only for a device it started (give DEVICE_CMD) or through your hook (DEVICE_HOOK)")
     if sc.consumer == "bridge":
         out.append(f"{where}: topology consumer: bridge reaches the bench's bridge in the bus's namespace; "
                    f"a device of your own is reached through the router")

@@ -1,12 +1,14 @@
 """A stop or a kill of a device of your own (fault steps bridge_term, bridge_kill), asked of
 bench-run: it started the device on the host (DEVICE_CMD), so only it can signal the device's
-process group and start the command again; the orchestrator, in a container, cannot reach host
-processes. Two FIFOs in the run's directory (the host's and the orchestrator's, both mounted),
-made and held open by bench-run for a run with DEVICE_CMD:
+process group and start the command again, and it runs the user's DEVICE_HOOK for a device it does
+not start (a board's power); the orchestrator, in a container, reaches neither. Two FIFOs in the
+run's directory (the host's and the orchestrator's, both mounted), made and held open by bench-run
+for a run with DEVICE_CMD or DEVICE_HOOK:
 
   device.request  the orchestrator writes "SEQ ACTION HOLD_S\\n" (one write: atomic in a pipe)
   device.reply    bench-run answers "SEQ ok STOPPED_NS STARTED_NS\\n" (wall clock: when the signal
-                  went and when the command was started again) or "SEQ error WHY\\n"
+                  went, or the hook was called to stop it, and when the command was started
+                  again, or the hook called to start it) or "SEQ error WHY\\n"
 
 bench-run serves one request at a time from its watch loop (scripts/bench-run, device_fault); an
 answer to an earlier request, given up on, is told apart by its SEQ."""
@@ -33,7 +35,7 @@ def restart(run_dir: Path, action: str, hold_s: float, margin_s: float = REPLY_M
         reply = os.open(run_dir / REPLY, os.O_RDONLY | os.O_NONBLOCK)
     except FileNotFoundError:
         raise RuntimeError(f"no {REPLY} in {run_dir}: bench-run stops and starts only a device it started "
-                           "(DEVICE_CMD)") from None
+                           "(DEVICE_CMD) or one with a hook (DEVICE_HOOK)") from None
     try:
         _drain(reply)  # nothing a request given up on left behind is taken for this one's answer
         try:

@@ -1,8 +1,10 @@
 # device-process.sh - a device of your own's process group, for scripts/bench-run (sourced): start
-# DEVICE_CMD, stop it, and the fault steps the orchestrator asks for (canbench.device_control).
-# Uses bench-run's variables: DEVICE_CMD, DEVICE_STOP_S, identities, device_endpoint, canbus_dir,
-# repo, caller_dir, run_dir; sets device_pid and device_group; requests and replies, once set, are
-# the orchestrator's FIFOs' descriptors (never the device's).
+# DEVICE_CMD, stop it, and the fault steps the orchestrator asks for (canbench.device_control), on
+# that group or, for a device the bench does not start, through the user's DEVICE_HOOK.
+# Uses bench-run's variables: DEVICE_CMD, DEVICE_HOOK, DEVICE_STOP_S, DEVICE_HOOK_TIMEOUT_S,
+# identities, device_endpoint, canbus_dir, repo, caller_dir, run_dir; sets device_pid, device_group
+# and hook_stopped; requests and replies, once set, are the orchestrator's FIFOs' descriptors (never
+# the device's nor the hook's).
 
 stop_device() {  # its whole process group, its leader gone or not: TERM, then KILL after DEVICE_STOP_S
 	[ -n "$device_group" ] || return 0
@@ -48,6 +50,10 @@ device_fault() {
 	local action=$2 hold=$3 stopped started
 	case $hold in '' | *[!0-9.]* | *.*.*) echo "$1 error hold '$hold': not a number of seconds"; return ;; esac
 	case $action in bridge_term | bridge_kill) ;; *) echo "$1 error $action is not a fault step on the device"; return ;; esac
+	if [ -n "${DEVICE_HOOK:-}" ]; then
+		hook_fault "$@"
+		return
+	fi
 	if ! kill -0 "$device_pid" 2>/dev/null; then
 		echo "$1 error the device had exited before $action"
 		return
@@ -71,4 +77,44 @@ device_fault() {
 	launch_device
 	echo "bench-run: device: $action at $(date -u -d "@${stopped%?????????}" +%T), started again (pid $device_pid)" >&2
 	echo "$1 ok $stopped $started"
+}
+
+# The same step on a device the bench did not start (a board, a program started by hand): the user's
+# DEVICE_HOOK does it, run as `DEVICE_HOOK stop ACTION`, then after the hold `DEVICE_HOOK start
+# ACTION`. The window: from just before the stop to just before the start (the device's own boot and
+# reconnection after it are inside the fault's settling, as a restarted bridge's are).
+hook_fault() {
+	local action=$2 hold=$3 stopped started rc=0
+	stopped=${EPOCHREALTIME//[!0-9]/}000
+	hook_stopped=$action  # from here on the run's end gives the device back (bench-run's cleanup)
+	run_hook stop "$action" || rc=$?
+	if [ $rc -ne 0 ]; then
+		echo "$1 error DEVICE_HOOK stop $action $(hook_failed $rc)"
+		return
+	fi
+	sleep "$hold"
+	started=${EPOCHREALTIME//[!0-9]/}000
+	run_hook start "$action" || rc=$?
+	hook_stopped=''
+	if [ $rc -ne 0 ]; then
+		echo "$1 error DEVICE_HOOK start $action $(hook_failed $rc)"
+		return
+	fi
+	echo "bench-run: device: $action through DEVICE_HOOK at $(date -u -d "@${stopped%?????????}" +%T), started again after ${hold}s" >&2
+	echo "$1 ok $stopped $started"
+}
+run_hook() {  # DEVICE_HOOK with its two words, in the caller's directory, its output added to device.log, bounded
+	echo "bench-run: device: DEVICE_HOOK $*" >>"$run_dir/device.log"
+	(
+		cd "$caller_dir"  # the hook's relative paths are the caller's
+		[ -z "${requests:-}" ] || exec {requests}<&- {replies}<&-
+		exec timeout -k 5 "${DEVICE_HOOK_TIMEOUT_S:-30}" bash -c "$DEVICE_HOOK"' "$@"' device-hook "$@"
+	) >>"$run_dir/device.log" 2>&1 </dev/null
+}
+hook_failed() {  # why a hook's call failed, from its exit status
+	if [ "$1" -eq 124 ] || [ "$1" -eq 137 ]; then
+		echo "did not finish within DEVICE_HOOK_TIMEOUT_S=${DEVICE_HOOK_TIMEOUT_S:-30} s (see device.log)"
+	else
+		echo "exited with $1 (see device.log)"
+	fi
 }

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from test_compose import REPO, bench_run, junit_cases, leftovers
+from test_compose import REPO, attempts, bench_run, junit_cases, leftovers
 
 pytestmark = pytest.mark.compose
 
@@ -205,3 +205,62 @@ def test_a_partition_cuts_a_devices_link_and_it_reconnects(built):
     proc, run_dir, _ = faults_pass("network-partition.yaml")
     assert "reconnected to the Zenoh router" in (run_dir / "device.log").read_text()
     nothing_left(proc, run_dir)
+
+
+def test_the_bridges_stop_and_kill_call_the_hook_of_a_device_the_bench_does_not_start(built, tmp_path):
+    # a device started by hand (as a board would be powered up) with DEVICE_HOOK: bench-run calls the
+    # hook to stop it and, after the step's hold, to start it again; here the hook is a power relay's
+    # stand-in that signals the host's zenoh-node and runs it again
+    (tmp_path / "hook.sh").write_text(f"""#!/usr/bin/env bash
+set -eu
+cd {tmp_path}
+echo "$1 $2" >>calls
+if [ "$1" = stop ]; then
+	pid=$(cat pid)
+	kill -$([ "$2" = bridge_kill ] && echo KILL || echo TERM) -- -"$pid"
+	for _ in $(seq 200); do kill -0 -- -"$pid" 2>/dev/null || exit 0; sleep 0.05; done
+	exit 1
+fi
+exec ./start.sh
+""")
+    (tmp_path / "hook.sh").chmod(0o755)
+    proc = subprocess.Popen([str(REPO / "scripts" / "bench-run"), str(REPO / "scenarios" / "bridge-faults.yaml")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+                            env={**os.environ, "DEVICE": f"host:{free_port()}",
+                                 "DEVICE_HOOK": str(tmp_path / "hook.sh"), "BENCH_READY_TIMEOUT_S": "120"})
+    said = []
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:  # bench-run says what to start, then waits for it
+            said.append(line)
+            wanted = re.search(r"start it with (.*) and the settings in (\S+)$", line.strip())
+            if wanted:
+                break
+        assert wanted, "".join(said) + (proc.stderr.read() if proc.stderr else "")
+        exports = "".join(f"export {setting}\n" for setting in wanted.group(1).split())
+        (tmp_path / "start.sh").write_text(f"""#!/usr/bin/env bash
+set -a; . {wanted.group(2)}; set +a
+{exports}setsid {FIRMWARE / 'zenoh-node'} >>{tmp_path}/device.out 2>&1 </dev/null &
+echo $! >{tmp_path}/pid
+""")
+        (tmp_path / "start.sh").chmod(0o755)
+        subprocess.run([str(tmp_path / "start.sh")], check=True, timeout=10)
+        out, err = proc.communicate(timeout=900)
+    finally:
+        proc.kill()
+        if (tmp_path / "pid").exists():  # the device is the caller's: the test stops it
+            subprocess.run(["kill", "-KILL", "--", f"-{(tmp_path / 'pid').read_text().strip()}"], capture_output=True)
+    out = "".join(said) + out
+    assert proc.returncode == 0, out[-4000:] + err[-4000:]
+    run_dir = REPO / attempts(subprocess.CompletedProcess([], 0, out, ""))[-1]
+    cases = junit_cases(run_dir)
+    for check in ("faults_injected", "recovery", "integrity", "ordering", "zenoh_to_can", "bridge_stats_agree"):
+        assert cases[f"test_check[{check}]"] == "passed", cases
+    assert (tmp_path / "calls").read_text().splitlines() == [
+        "stop bridge_term", "start bridge_term", "stop bridge_kill", "start bridge_kill"]
+    windows = json.loads((run_dir / "metrics.json").read_text())["faults"]["windows"]
+    stops = [w for w in windows if w["action"].startswith("bridge_")]
+    assert all(not w["error"] and w["end_ns"] - w["start_ns"] >= 0.5e9 for w in stops), stops  # the hold's 0.5 s
+    assert (tmp_path / "device.out").read_text().count("ready: zid") == 3  # started by hand, then twice by the hook
+    assert "DEVICE_HOOK start bridge_kill" in (run_dir / "device.log").read_text()
+    assert leftovers(run_dir) == [] and not list(run_dir.glob("device.re*"))

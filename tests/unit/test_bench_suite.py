@@ -211,13 +211,15 @@ def test_a_device_of_your_own_runs_what_it_can_and_says_what_it_cannot(bench):
     assert len([e for e in events() if e[0] == "start"]) == 1
 
 
-def test_a_device_the_bench_starts_runs_the_steps_that_stop_it(bench):
-    # with DEVICE_CMD bench-run stops the device and starts it again: a bridge_kill is no reason to leave out
+@pytest.mark.parametrize("how", [{"DEVICE_CMD": "./my-gateway"}, {"DEVICE_HOOK": "./power.sh"}])
+def test_a_device_the_bench_starts_or_has_a_hook_for_runs_the_steps_that_stop_it(bench, how):
+    # with DEVICE_CMD bench-run stops the device and starts it again, with DEVICE_HOOK the user's hook
+    # does: a bridge_kill is no reason to leave out
     run, add, events, root = bench
     (root / "build" / "ucan").mkdir(parents=True)
     (root / "build" / "ucan" / "libucan-preload.so").write_text("")
     add("faulted", text=FAULTED.format(name="faulted"))
-    proc = run(["faulted"], DEVICE="host:7448", DEVICE_CMD="./my-gateway")
+    proc = run(["faulted"], DEVICE="host:7448", **how)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert [name for kind, name, _ in events() if kind == "start"] == ["faulted"]
     assert "not run against" not in proc.stderr + proc.stdout
@@ -239,6 +241,10 @@ def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
     ({"DEVICE": "host:7448"}, "libucan-preload.so is missing (make ucan)"),
     ({"DEVICE": "host:7448 ", "DEVICE_CMD": "x"}, "expected host:PORT"),
     ({"DEVICE_ANNOUNCES": "0"}, "DEVICE_ANNOUNCES is set but DEVICE is not"),
+    ({"DEVICE_HOOK": "./power.sh"}, "DEVICE_HOOK is set but DEVICE is not"),
+    ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh", "DEVICE_CMD": "x"},
+     "DEVICE_HOOK and DEVICE_CMD are both set"),
+    ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh", "DEVICE_HOOK_TIMEOUT_S": "0"}, "DEVICE_HOOK_TIMEOUT_S=0"),
     ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "no"}, "DEVICE_ANNOUNCES=no: expected 1"),
     ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "0", "VIEWER": "1"}, "VIEWER with DEVICE_ANNOUNCES=0"),
 ])

@@ -107,3 +107,67 @@ first=$device_pid
 device_fault {request_}
 [ "$device_pid" = "$first" ] && kill -0 $first && echo same""")
     assert answer.startswith(says) and same == "same"  # the device untouched
+
+
+# --- a device the bench does not start: the user's DEVICE_HOOK stops and starts it
+
+
+def hook_run(tmp_path: Path, hook: str, steps: str, **env: str) -> list[str]:
+    """The library with bench-run's variables and DEVICE_HOOK, no DEVICE_CMD (nothing launched),
+    then `steps`; what they print, line by line. The hook's calls are in the caller's directory."""
+    script = f"""set -euo pipefail
+. {LIB}
+caller_dir={tmp_path} run_dir={tmp_path} device_pid='' device_group='' hook_stopped=''
+{steps}
+"""
+    proc = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "DEVICE_HOOK": hook, **env})
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.splitlines()
+
+
+# the hook notes each call with its arguments and the time it began (the window's check)
+NOTING_HOOK = 'f() { echo "$* $(date +%s%N)" >>calls; }; f'
+
+
+@pytest.mark.parametrize("action", ["bridge_kill", "bridge_term"])
+def test_a_hook_is_called_to_stop_then_after_the_hold_to_start_and_the_window_answered(tmp_path, action):
+    [answer, left] = hook_run(tmp_path, NOTING_HOOK, f"""
+device_fault 4 {action} 0.2
+echo "left=$hook_stopped" """)
+    seq, word, stopped, started = answer.split()
+    assert (seq, word) == ("4", "ok") and left == "left="
+    (stop, stop_action, stop_ns), (start, start_action, start_ns) = \
+        (line.split() for line in (tmp_path / "calls").read_text().splitlines())
+    assert (stop, stop_action, start, start_action) == ("stop", action, "start", action)
+    # the window opens before the stop's call and ends before the start's, the hold between
+    assert int(stopped) <= int(stop_ns) and int(started) <= int(start_ns)
+    assert int(started) - int(stopped) >= 0.2e9
+    assert f"DEVICE_HOOK stop {action}" in (tmp_path / "device.log").read_text()
+
+
+@pytest.mark.parametrize("hook, says", [
+    ('f() { [ "$1" = start ] || exit 5; }; f', "DEVICE_HOOK stop bridge_kill exited with 5"),
+    ('f() { [ "$1" = stop ] || exit 6; }; f', "DEVICE_HOOK start bridge_kill exited with 6"),
+    ('f() { [ "$1" = start ] || exec sleep 30; }; f',
+     "DEVICE_HOOK stop bridge_kill did not finish within DEVICE_HOOK_TIMEOUT_S=1 s")])
+def test_a_hook_that_fails_or_hangs_is_answered_with_why(tmp_path, hook, says):
+    [answer] = hook_run(tmp_path, hook, "device_fault 9 bridge_kill 0", DEVICE_HOOK_TIMEOUT_S="1")
+    assert answer.startswith("9 error " + says), answer
+
+
+def test_a_stop_by_the_hook_without_its_start_is_what_the_runs_end_gives_back(tmp_path):
+    # a stop that failed (the device's state unknown) leaves its start to bench-run's cleanup
+    [left] = hook_run(tmp_path, 'f() { [ "$1" = start ] || exit 5; }; f', """
+device_fault 9 bridge_term 0 >/dev/null
+echo "$hook_stopped" """)
+    assert left == "bridge_term"
+
+
+def test_the_orchestrators_fifos_are_not_the_hooks(tmp_path):
+    hook_run(tmp_path, 'f() { ls -l /proc/self/fd >>fds; }; f', f"""
+mkfifo {tmp_path}/device.request {tmp_path}/device.reply
+exec {{requests}}<>{tmp_path}/device.request {{replies}}<>{tmp_path}/device.reply
+device_fault 1 bridge_kill 0 >/dev/null""")
+    fds = (tmp_path / "fds").read_text()
+    assert fds.count("total") == 2 and "device.re" not in fds, fds
