@@ -307,7 +307,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                     "cannot stand in for (canbench.device)")
     q.add_argument("--can-mode", choices=("userspace", "kernel"), default="userspace")
     q.add_argument("--device-restartable", action="store_true",
-                   help="bench-run starts the device (DEVICE_CMD): fault steps may stop it and start it again")
+                   help="bench-run can stop the device and start it again (DEVICE_CMD or DEVICE_HOOK)")
     q = sub.add_parser("summary", help="index.html, junit.xml and summary.json of a suite's runs")
     q.add_argument("suite_dir", type=Path)
     q = sub.add_parser("compare", help="canbench compare of every scenario against the baseline suites")

@@ -94,8 +94,9 @@ hook_fault() {
 	fi
 	sleep "$hold"
 	started=${EPOCHREALTIME//[!0-9]/}000
-	run_hook start "$action" || rc=$?
+	# cleared first: an interrupt lets the call finish, and the run's end must not call it again
 	hook_stopped=''
+	run_hook start "$action" || rc=$?
 	if [ $rc -ne 0 ]; then
 		echo "$1 error DEVICE_HOOK start $action $(hook_failed $rc)"
 		return
@@ -105,15 +106,20 @@ hook_fault() {
 }
 run_hook() {  # DEVICE_HOOK with its two words, in the caller's directory, its output added to device.log, bounded
 	echo "bench-run: device: DEVICE_HOOK $*" >>"$run_dir/device.log"
+	hook_began=$SECONDS
 	(
 		cd "$caller_dir"  # the hook's relative paths are the caller's
 		[ -z "${requests:-}" ] || exec {requests}<&- {replies}<&-
-		exec timeout -k 5 "${DEVICE_HOOK_TIMEOUT_S:-30}" bash -c "$DEVICE_HOOK"' "$@"' device-hook "$@"
+		# what a hook restarting a program on this machine needs (the run's identity, router, bus)
+		export DEVICE_HOOK_ACTION=$1 DEVICE_HOOK_STEP=$2 DEVICE_ZENOH_CONFIG=${identities:-}/device/zenoh.json5 \
+			DEVICE_ENV_FILE=${identities:-}/device.env DEVICE_ROUTER_ADDRESS=${device_endpoint:-} \
+			DEVICE_UCAN_DIR=${canbus_dir:-} DEVICE_PRELOAD=${repo:-}/build/ucan/libucan-preload.so
+		exec timeout -k 5 "${DEVICE_HOOK_TIMEOUT_S:-20}" bash -c "$DEVICE_HOOK"' "$@"' device-hook "$@"
 	) >>"$run_dir/device.log" 2>&1 </dev/null
 }
-hook_failed() {  # why a hook's call failed, from its exit status
-	if [ "$1" -eq 124 ] || [ "$1" -eq 137 ]; then
-		echo "did not finish within DEVICE_HOOK_TIMEOUT_S=${DEVICE_HOOK_TIMEOUT_S:-30} s (see device.log)"
+hook_failed() {  # why a hook's call failed, from its exit status and how long it ran
+	if { [ "$1" -eq 124 ] || [ "$1" -eq 137 ]; } && [ $((SECONDS - hook_began)) -ge "${DEVICE_HOOK_TIMEOUT_S:-20}" ]; then
+		echo "did not finish within DEVICE_HOOK_TIMEOUT_S=${DEVICE_HOOK_TIMEOUT_S:-20} s (see device.log)"
 	else
 		echo "exited with $1 (see device.log)"
 	fi

@@ -44,7 +44,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--device", help="host:PORT: a device of your own in the bridge's place, the router on "
                                     "127.0.0.1:PORT (exit 2 when the scenario cannot run against one)")
     p.add_argument("--device-restartable", action="store_true",
-                   help="bench-run starts the device (DEVICE_CMD): fault steps may stop it and start it again")
+                   help="bench-run can stop the device and start it again (DEVICE_CMD or DEVICE_HOOK)")
     p.add_argument("--device-canbus", help="the host directory bound as the hub's socket directory")
     p.add_argument("--device-env", type=Path, help="write the scenario's bridge settings here (KEY=value lines)")
     p.set_defaults(func=cmd_compose_override)

@@ -210,7 +210,7 @@ def test_a_partition_cuts_a_devices_link_and_it_reconnects(built):
 def test_the_bridges_stop_and_kill_call_the_hook_of_a_device_the_bench_does_not_start(built, tmp_path):
     # a device started by hand (as a board would be powered up) with DEVICE_HOOK: bench-run calls the
     # hook to stop it and, after the step's hold, to start it again; here the hook is a power relay's
-    # stand-in that signals the host's zenoh-node and runs it again
+    # stand-in that signals the host's zenoh-node and runs it again with what bench-run tells it
     (tmp_path / "hook.sh").write_text(f"""#!/usr/bin/env bash
 set -eu
 cd {tmp_path}
@@ -221,7 +221,10 @@ if [ "$1" = stop ]; then
 	for _ in $(seq 200); do kill -0 -- -"$pid" 2>/dev/null || exit 0; sleep 0.05; done
 	exit 1
 fi
-exec ./start.sh
+set -a; . "$DEVICE_ENV_FILE"; set +a
+ZENOH_CONFIG=$DEVICE_ZENOH_CONFIG ZENOH_ROUTER_ADDRESS=$DEVICE_ROUTER_ADDRESS UCAN_DIR=$DEVICE_UCAN_DIR \\
+	LD_PRELOAD=$DEVICE_PRELOAD setsid {FIRMWARE / 'zenoh-node'} >>device.out 2>&1 </dev/null &
+echo $! >pid
 """)
     (tmp_path / "hook.sh").chmod(0o755)
     proc = subprocess.Popen([str(REPO / "scripts" / "bench-run"), str(REPO / "scenarios" / "bridge-faults.yaml")],

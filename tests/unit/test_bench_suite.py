@@ -245,6 +245,10 @@ def test_a_device_of_your_own_runs_one_scenario_at_a_time(bench):
     ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh", "DEVICE_CMD": "x"},
      "DEVICE_HOOK and DEVICE_CMD are both set"),
     ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh", "DEVICE_HOOK_TIMEOUT_S": "0"}, "DEVICE_HOOK_TIMEOUT_S=0"),
+    ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh", "DEVICE_HOOK_TIMEOUT_S": "26"}, "expected 1-25 s"),
+    ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh  # relay 2"}, "no comment, newline or trailing"),
+    ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh;"}, "no comment, newline or trailing"),
+    ({"DEVICE": "host:7448", "DEVICE_HOOK": "./power.sh\n"}, "no comment, newline or trailing"),
     ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "no"}, "DEVICE_ANNOUNCES=no: expected 1"),
     ({"DEVICE": "host:7448", "DEVICE_ANNOUNCES": "0", "VIEWER": "1"}, "VIEWER with DEVICE_ANNOUNCES=0"),
 ])

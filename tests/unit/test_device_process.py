@@ -118,6 +118,7 @@ def hook_run(tmp_path: Path, hook: str, steps: str, **env: str) -> list[str]:
     script = f"""set -euo pipefail
 . {LIB}
 caller_dir={tmp_path} run_dir={tmp_path} device_pid='' device_group='' hook_stopped=''
+identities={tmp_path}/ids device_endpoint=tls/127.0.0.1:7448 canbus_dir={tmp_path}/bus repo={tmp_path}
 {steps}
 """
     proc = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=60,
@@ -150,7 +151,8 @@ echo "left=$hook_stopped" """)
     ('f() { [ "$1" = start ] || exit 5; }; f', "DEVICE_HOOK stop bridge_kill exited with 5"),
     ('f() { [ "$1" = stop ] || exit 6; }; f', "DEVICE_HOOK start bridge_kill exited with 6"),
     ('f() { [ "$1" = start ] || exec sleep 30; }; f',
-     "DEVICE_HOOK stop bridge_kill did not finish within DEVICE_HOOK_TIMEOUT_S=1 s")])
+     "DEVICE_HOOK stop bridge_kill did not finish within DEVICE_HOOK_TIMEOUT_S=1 s"),
+    ('f() { [ "$1" = start ] || exit 124; }; f', "DEVICE_HOOK stop bridge_kill exited with 124")])
 def test_a_hook_that_fails_or_hangs_is_answered_with_why(tmp_path, hook, says):
     [answer] = hook_run(tmp_path, hook, "device_fault 9 bridge_kill 0", DEVICE_HOOK_TIMEOUT_S="1")
     assert answer.startswith("9 error " + says), answer
@@ -171,3 +173,36 @@ exec {{requests}}<>{tmp_path}/device.request {{replies}}<>{tmp_path}/device.repl
 device_fault 1 bridge_kill 0 >/dev/null""")
     fds = (tmp_path / "fds").read_text()
     assert fds.count("total") == 2 and "device.re" not in fds, fds
+
+
+def test_a_hook_is_told_the_step_and_the_runs_identity_router_and_bus(tmp_path):
+    hook_run(tmp_path, 'f() { env | grep -E "^DEVICE_(HOOK_|ZENOH|ENV|ROUTER|UCAN|PRELOAD)" | sort >>env; }; f',
+             "device_fault 1 bridge_term 0 >/dev/null")
+    told = (tmp_path / "env").read_text().splitlines()
+    assert told[:7] == [
+        f"DEVICE_ENV_FILE={tmp_path}/ids/device.env", "DEVICE_HOOK_ACTION=stop", "DEVICE_HOOK_STEP=bridge_term",
+        f"DEVICE_PRELOAD={tmp_path}/build/ucan/libucan-preload.so", "DEVICE_ROUTER_ADDRESS=tls/127.0.0.1:7448",
+        f"DEVICE_UCAN_DIR={tmp_path}/bus", f"DEVICE_ZENOH_CONFIG={tmp_path}/ids/device/zenoh.json5"]
+    assert told[7:] == [line.replace("=stop", "=start") for line in told[:7]]
+
+
+def test_an_interrupt_during_the_hooks_start_does_not_call_it_again_at_the_runs_end(tmp_path):
+    # bench-run's traps: an interrupt lets the start's call finish, then its cleanup gives back a
+    # device left stopped; the one already being started is not started twice
+    hook = 'f() { echo "$1 began" >>calls; [ "$1" = stop ] || sleep 1; echo "$1" >>calls; }; f'
+    hook_run(tmp_path, hook, """
+(
+\ttrap - EXIT
+\tcleanup() { [ -z "${hook_stopped:-}" ] || run_hook start "$hook_stopped" || true; }
+\ttrap cleanup EXIT
+\ttrap 'exit 130' TERM
+\tme=$BASHPID
+\t(
+\t\tdeadline=$((SECONDS + 10))  # until the start's call began, then an interrupt
+\t\tuntil grep -q "start began" "$caller_dir/calls" 2>/dev/null || [ $SECONDS -ge $deadline ]; do sleep 0.02; done
+\t\tkill -TERM $me
+\t) &
+\tdevice_fault 1 bridge_kill 0.1 >/dev/null
+) || true""")
+    calls = (tmp_path / "calls").read_text().splitlines()
+    assert calls == ["stop began", "stop", "start began", "start"], calls
