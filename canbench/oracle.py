@@ -268,6 +268,8 @@ DOUBT_BACKLOGS = 4  # backlogs a doubtful frame's stories are followed across wh
 DOUBT_FRAMES = 4096  # ... and received frames at most (each matched again after it)
 OUTAGE_HOLD = 2  # cycles of its content an outage's doubt is held at least
 RECENT = 64  # matches per block of the recent latency range (an outage's doubt: _outage_copy)
+BACKLOG_PACE = 1.25  # a backlog comes at least this many times faster than it was sent (backlog_end in _classify)
+BACKLOG_LIVE = 2  # ... and where it ends is followed by live frames (the jumped one and one at least)
 REMATCH_SHARE = 2  # frames matched again for doubts, at most this many per frame received (+ REMATCH_FLOOR):
 REMATCH_FLOOR = 4 * DOUBT_FRAMES  # past that the run's rest is matched greedily, so the cost stays a few
 #                                   times the greedy match's whatever the traffic (stalls full of duplicates)
@@ -429,7 +431,8 @@ class _Doubt:
     (duplicate_story in _classify)."""
 
     __slots__ = ("frame", "copies", "index", "frontier", "reach", "suspect", "inner", "cycle", "backlogs", "faults",
-                 "oldest", "queue", "marks", "marked", "arrived", "late", "until")
+                 "oldest", "queue", "marks", "marked", "arrived", "late", "until", "recent", "outage", "ended",
+                 "bounded")
 
     def __init__(self, r: Observed, copies: _Copies, at: int, frontier: int) -> None:
         s = copies.frames[at]
@@ -452,6 +455,10 @@ class _Doubt:
         self.arrived: dict[int, tuple[_Copies, int | None]] = {id(copies): (copies, r.t_ns)}
         self.late: int | None = None  # an outage's doubt (_outage_copy): the copy it may be instead
         self.until = 0  # an outage's doubt: weighed no earlier (a second backlog right after the first)
+        self.recent = 0  # an outage's doubt: the recent latency range when it opened (before the fault)
+        self.outage = False  # an outage's doubt (late: None if only a backlog's end may tell, backlog_end)
+        self.ended = 0  # an outage's doubt: when the fault it is in ended
+        self.bounded = False  # an outage's doubt weighed at the bound (DOUBT_FRAMES, the window), not its pace
 
     def undo(self) -> None:
         """The marks since it undone, each content's pace as before it."""
@@ -470,7 +477,7 @@ def _cycle(times: list[int], at: int) -> int:
 
 
 def _outage_copy(copies: _Copies, at: int, t_ns: int, recent_ns: int,
-                 cuts: list[tuple[int, int]]) -> tuple[int, int] | None:
+                 cuts: list[tuple[int, int]]) -> tuple[int | None, int] | None:
     """A frame that took the copy at position `at` may instead be a later copy of its content, the
     ones between lost in an outage (a cut link, a router restarted): the bus index of the earliest
     copy sent by its arrival whose latency is within the recent range (recent_ns, the highest of
@@ -478,7 +485,9 @@ def _outage_copy(copies: _Copies, at: int, t_ns: int, recent_ns: int,
     cycle, with frames of other contents sent between them (none received yet: the taken copy is
     ahead of every match), and the copies between them sent around a fault that cut the link (cuts:
     start - FAULT_LEAD_NS to end + FAULT_SETTLE_NS, where their loss is the fault's), and the latest
-    such end + FAULT_SETTLE_NS (the doubt is weighed no earlier). None: no such doubt. Only there:
+    such end + FAULT_SETTLE_NS (the doubt is weighed no earlier). No such copy (None, the copy around
+    the fault): the frame may still be the first of a backlog whose queue overflowed (backlog_end in
+    _classify). None: no such doubt. Only there:
     elsewhere a lasting rise of latency with nothing lost reads the same on repeating frames, and
     the greedy match reads that one right (docs/bench.md, "The oracle")."""
     times, indices, used = copies.times, copies.indices, copies.used
@@ -488,14 +497,14 @@ def _outage_copy(copies: _Copies, at: int, t_ns: int, recent_ns: int,
     if t_ns - times[at] <= recent_ns + half_cycle:
         return None
     late = bisect.bisect_left(times, t_ns - recent_ns - half_cycle, at + 1)  # the earliest one in range
-    if late >= len(times) or times[late] > t_ns or used[late]:
-        return None
-    if indices[late] - indices[at] - (late - at) < 1:
-        return None  # no frame of another content between: a run of identical frames, not an outage
-    ends = [end for start, end in cuts if times[at] < end + FAULT_SETTLE_NS and times[late] > start - FAULT_LEAD_NS]
+    # none, or no frame of another content between (a run of identical frames): no outage's story
+    found = late < len(times) and times[late] <= t_ns and not used[late] and \
+        indices[late] - indices[at] - (late - at) >= 1
+    last = times[late] if found else times[at]
+    ends = [end for start, end in cuts if times[at] < end + FAULT_SETTLE_NS and last > start - FAULT_LEAD_NS]
     if not ends:
         return None
-    return indices[late], max(ends) + FAULT_SETTLE_NS
+    return indices[late] if found else None, max(ends) + FAULT_SETTLE_NS
 
 
 def _faults(queue: list[tuple[int, Observed, Observed | None, int]], top: int) -> int:
@@ -785,6 +794,9 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                 (outage := _outage_copy(copies, at, r.t_ns, max(recent[0], recent[1]), cuts)) is not None:
             doubt = _Doubt(r, copies, at, frontier)
             doubt.late, settled = outage
+            doubt.outage = True
+            doubt.ended = settled - FAULT_SETTLE_NS
+            doubt.recent = max(recent[0], recent[1])
             doubt.cycle = _cycle(copies.times, at)
             # held for OUTAGE_HOLD cycles at least (backlogs released one after the other, overlapping
             # stalls, break the outage's story only with the second one), and until the fault settled:
@@ -865,23 +877,138 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         greedy_again(d, greedy)
         return False
 
+    def backlog_end(d: _Doubt) -> tuple[int, _Copies, int] | None:
+        """Where the live frames start after a backlog, when the link's queue overflowed during the
+        fault: (the queue's frame, the copy it is instead of the one the greedy match took). The last
+        frame is the copy of its content at the latency before the fault (d.recent); from there back,
+        received frames and sent copies are aligned one for one (the link keeps order and, once its
+        queue drains, loses nothing) down to the first copy sent after the backlog's first frame
+        arrived, less that latency (the queue drains from then on, what was sent before and did not
+        fit is lost). None: no such place, or the greedy match's."""
+        if d.bounded:
+            return None  # weighed at the bound, perhaps mid-backlog: its end not seen
+        kind, r, s, _ = d.queue[-1]
+        if kind != _MATCHED:
+            return None
+        assert s is not None
+        copies = waiting.get(_key(r.frame))
+        if copies is None:
+            return None
+        at = copies.at(s.index)
+        times = copies.times
+        cycle = _cycle(times, at) if at + 1 < len(times) else times[at] - times[at - 1] if at > copies.start else 0
+        live = bisect.bisect_left(times, r.t_ns - d.recent - cycle // 2, at)
+        if live >= len(times) or times[live] > r.t_ns or (live != at and copies.used[live]):
+            return None
+        first = rank - len(window)  # the rank of window[0]
+        q, rk = len(d.queue) - 1, copies.ranks[live]
+        since = d.frame.t_ns - d.recent
+        while q > 1 and rk > first:
+            r2 = d.queue[q - 1][1]
+            back = rk - 1 - first - len(window)  # from the right end, nearer: a deque walks from there
+            if window[back].key != _key(r2.frame) or not since <= window_t[back] <= r2.t_ns + slack:
+                break
+            q, rk = q - 1, rk - 1
+        if q <= 1 or rk <= first or window_t[rk - 1 - first - len(window)] >= d.ended:
+            # paired back to the doubtful frame: no backlog's end found (nothing lost, a latency that
+            # rose pairs so on periodic contents); or the copies it skips were sent after the fault
+            return None
+        kind, r, s, s_rank = d.queue[q]
+        if kind == _MATCHED and s_rank == rk:
+            return None  # the greedy match already reads it so
+        before = d.queue[q - 1]
+        if window_t[rk - 1 - first - len(window)] > before[1].t_ns:
+            return None  # a copy it skips sent after the backlog's last frame arrived: the queue had room
+        # the backlog: the first copies sent in the fault, kept in order (a FIFO that drops what does
+        # not fit), so matched to copies one after the other; else not this story (a frame published
+        # twice at the backlog's end: its first took a lost copy of its content)
+        if any(entry[0] != _MATCHED for entry in d.queue[:q]) or \
+                any(d.queue[i + 1][3] != d.queue[i][3] + 1 for i in range(q - 1)):
+            return None
+        # two frames of one content next to each other in it, the second much faster than the backlog
+        # comes: published twice (the story would take a lost copy for it, hiding the duplicate)
+        pace = (d.queue[q - 1][1].t_ns - d.frame.t_ns) // max(1, q - 1)
+        if any(_key(d.queue[i][1].frame) == _key(d.queue[i + 1][1].frame) and
+               DUPLICATE_PACE * (d.queue[i + 1][1].t_ns - d.queue[i][1].t_ns) < pace for i in range(q - 1)):
+            return None
+        jumped = window[rk - first - len(window)]
+        where = bisect.bisect_left(jumped.ranks, rk, jumped.start)
+        if _key(before[1].frame) == jumped.key and where + 1 < len(jumped.times) and \
+                DUPLICATE_PACE * (r.t_ns - before[1].t_ns) < _cycle(jumped.times, where):
+            return None  # the frame before it is its content at a duplicate's pace
+        if len(d.queue) - q < BACKLOG_LIVE:
+            return None  # no live frame after the jump: the backlog's end not seen
+        # the backlog came faster than it was sent (a burst, or a queue drained): not a latency that
+        # rose and stays, whose frames come at their pace and align as well on periodic contents
+        last = next((entry for entry in reversed(d.queue[:q]) if entry[0] == _MATCHED), None)
+        s_first, s_last = d.queue[0][2], last[2] if last else None
+        if last is None or s_first is None or s_last is None or \
+                BACKLOG_PACE * (last[1].t_ns - d.frame.t_ns) > s_last.t_ns - s_first.t_ns:
+            return None
+        return q, jumped, jumped.indices[where]
+
+    def overflow_story(d: _Doubt, at: int, jumped: _Copies, index: int) -> bool:
+        """Matches the frames from d.queue[at] again as if it were the copy at bus position index
+        (a queue that overflowed: backlog_end), the frames before it as the greedy match read them,
+        and tells if that story is the one: no fault at all (the link keeps order, the queue kept its
+        first frames: nothing reordered, nothing twice). If so its marks stay, else the greedy story's
+        are back."""
+        nonlocal frontier, rematched
+        rematched += len(d.queue)
+        top = previous.index if previous is not None else -1
+        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
+        d.undo()
+        frontier = d.frontier
+        before = sum(1 for entry in d.queue[:at] if entry[0] == _MATCHED)
+        d.marks = greedy[0][:before]
+        for copies, i in d.marks:
+            copies.mark(i, True)
+            frontier = max(frontier, i)
+        for kind, r, _, _ in d.queue[:at]:
+            if kind == _MATCHED:
+                waiting[_key(r.frame)].arrived = r.t_ns
+        where = jumped.at(index)
+        r = d.queue[at][1]
+        if jumped.used[where]:
+            greedy_again(d, greedy)
+            return False
+        jumped.mark(index, True)
+        d.marks.append((jumped, index))
+        frontier = max(frontier, index)
+        jumped.arrived = r.t_ns
+        story = d.queue[:at] + [(_MATCHED, r, jumped.frames[where], jumped.ranks[where])] + \
+            [step(r2, False) for _, r2, _, _ in d.queue[at + 1:]]
+        if _faults(story, top) == 0:  # in order, nothing twice (the link keeps order): else not this story
+            return True
+        greedy_again(d, greedy)
+        return False
+
     def resolve() -> None:
         """The doubtful frame is the copy it took (the greedy match), or a duplicate if suspect and
-        that story is the better one. If a frame since was doubtful too, or the story changed,
+        that story is the better one (an outage's doubt: the later copy, or the greedy match up to
+        the backlog's end and a later copy there). If a frame since was doubtful too, or the story changed,
         every change since is undone and the frames after it are matched again."""
         nonlocal doubt, frontier, doubts, rematched
         d = doubt
         assert d is not None
-        duplicate = d.suspect and d.late is None and duplicate_story(d)
+        duplicate = d.suspect and not d.outage and duplicate_story(d)
         outage = d.suspect and d.late is not None and outage_story(d)
+        overflow = None
+        if d.suspect and d.outage and not outage:
+            end = backlog_end(d)
+            if end is not None and overflow_story(d, *end):
+                overflow = end
         doubt = None
         if doubts and rematched > REMATCH_SHARE * c.received + REMATCH_FLOOR:
             doubts = False  # the budget spent: no new doubt, the run's rest matched greedily (said in counts)
             counts["doubts_budget_spent_at"] = c.received
-        if not duplicate and not outage and not d.inner:  # the greedy match stands: its verdicts as they were
+        # the greedy match stands, its verdicts as they were; not an outage's doubt opened with no later copy
+        # (a frame merely late around a cut): its frames matched again, another doubt may open among them
+        if not duplicate and not outage and not overflow and not d.inner and not (d.outage and d.late is None):
             for entry in d.queue:
                 emit(*entry)
             return
+        kept = iter(d.marks)  # the story taken: the greedy match's marks up to the backlog's end first
         d.undo()
         frontier = d.frontier
         if duplicate:
@@ -895,6 +1022,22 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             assert s_late is not None
             frontier = max(frontier, d.late)
             settle(s_late, d.frame, d.copies.ranks[at])
+        elif overflow:
+            j, jumped, index = overflow
+            for entry in d.queue[:j]:  # the greedy match's verdicts up to the backlog's end
+                if entry[0] == _MATCHED:
+                    copies, i = next(kept)
+                    copies.mark(i, True)
+                    copies.arrived = entry[1].t_ns
+                    frontier = max(frontier, i)
+                emit(*entry)
+            at = jumped.at(index)
+            s_live = jumped.frames[at]
+            assert s_live is not None
+            jumped.mark(index, True)
+            jumped.arrived = d.queue[j][1].t_ns
+            frontier = max(frontier, index)
+            settle(s_live, d.queue[j][1], jumped.ranks[at])
         else:
             _, r, s, s_rank = d.queue[0]
             assert s is not None
@@ -902,7 +1045,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             frontier = max(frontier, s.index)
             settle(s, r, s_rank)
         rematched += len(d.queue)
-        todo.extendleft(r for _, r, _, _ in reversed(d.queue[1:]))
+        todo.extendleft(r for _, r, _, _ in reversed(d.queue[overflow[0] + 1 if overflow else 1:]))
 
     def weigh_outage(d: _Doubt) -> None:
         """An outage's doubt decided: the outage's story against the greedy one on the frames since
@@ -917,7 +1060,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         if doubt is not None and window_ns is not None and doubt.oldest < r.t_ns - window_ns:
             todo.appendleft(r)
             # before a copy it marked leaves the window (an outage's doubt weighed: a cut of ~20 s)
-            if doubt.late is not None:
+            if doubt.outage:
+                doubt.bounded = True  # weighed before its live traffic came: no backlog's end (backlog_end)
                 weigh_outage(doubt)
             else:
                 resolve()
@@ -933,11 +1077,12 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             return
         k = _key(r.frame)
         again = k == doubt.copies.key
-        if doubt.late is not None:
+        if doubt.outage:
             pace = doubt.copies.arrived  # its arrival (the content's last)
             entry = step(r, doubts)  # a frame doubtful as a duplicate meanwhile: all matched again after
             doubt.queue.append(entry)
             if len(doubt.queue) >= DOUBT_FRAMES:
+                doubt.bounded = True  # perhaps mid-backlog: no backlog's end (backlog_end)
                 weigh_outage(doubt)  # a busy bus: weighed on what the bound let it see
             elif again and pace is not None and DUPLICATE_PACE * (r.t_ns - pace) >= doubt.cycle and \
                     r.t_ns >= doubt.until:
@@ -986,7 +1131,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         while todo:
             match(todo.popleft())
     while doubt is not None:
-        if doubt.late is not None:
+        if doubt.outage:
             weigh_outage(doubt)  # the run ended before the fault settled: weighed on what it saw
         else:
             resolve()
