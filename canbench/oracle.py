@@ -270,6 +270,10 @@ OUTAGE_HOLD = 2  # cycles of its content an outage's doubt is held at least
 RECENT = 64  # matches per block of the recent latency range (an outage's doubt: _outage_copy)
 BACKLOG_PACE = 1.25  # a backlog comes at least this many times faster than it was sent (backlog_end in _classify)
 BACKLOG_LIVE = 2  # ... and where it ends is followed by live frames (the jumped one and one at least)
+LATE_ONLY_DOUBTS = 4  # doubts with no later copy (only a backlog's end may tell) per fault the greedy match
+#                      keeps, at most: each matches the frames after it again (a link throttled in the
+#                      fault: every frame late and none lost would open one after the other)
+QUEUED_NS = 1_000_000  # ... which, where they came later than the latency before it by this much, were draining
 REMATCH_SHARE = 2  # frames matched again for doubts, at most this many per frame received (+ REMATCH_FLOOR):
 REMATCH_FLOOR = 4 * DOUBT_FRAMES  # past that the run's rest is matched greedily, so the cost stays a few
 #                                   times the greedy match's whatever the traffic (stalls full of duplicates)
@@ -751,6 +755,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
     doubt: _Doubt | None = None
     recent = [0, 0, 0]  # the highest latency (ns) of the last block of RECENT matches, of this one, matches in it
     doubts = explained is None  # Zenoh -> CAN and round trips keep the greedy match alone
+    late_only: Counter = Counter()  # a fault's settling -> its doubts with no later copy the greedy match kept
     rematched = 0  # frames matched again for doubts so far (REMATCH_SHARE)
     todo: deque[Observed] = deque()  # received frames to match again, once a doubt is resolved
 
@@ -791,7 +796,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             else:
                 doubt.inner = True
         elif cuts and may_doubt and doubt is None and recent[0] and copies.indices[at] > frontier and \
-                (outage := _outage_copy(copies, at, r.t_ns, max(recent[0], recent[1]), cuts)) is not None:
+                (outage := _outage_copy(copies, at, r.t_ns, max(recent[0], recent[1]), cuts)) is not None and \
+                (outage[0] is not None or late_only.get(outage[1], 0) < LATE_ONLY_DOUBTS):
             doubt = _Doubt(r, copies, at, frontier)
             doubt.late, settled = outage
             doubt.outage = True
@@ -938,6 +944,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             return None  # the frame before it is its content at a duplicate's pace
         if len(d.queue) - q < BACKLOG_LIVE:
             return None  # no live frame after the jump: the backlog's end not seen
+        if queued_at_pace(d, q, rk - first - len(window)):
+            return None
         # the backlog came faster than it was sent (a burst, or a queue drained): not a latency that
         # rose and stays, whose frames come at their pace and align as well on periodic contents
         last = next((entry for entry in reversed(d.queue[:q]) if entry[0] == _MATCHED), None)
@@ -946,6 +954,26 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                 BACKLOG_PACE * (last[1].t_ns - d.frame.t_ns) > s_last.t_ns - s_first.t_ns:
             return None
         return q, jumped, jumped.indices[where]
+
+    def queued_at_pace(d: _Doubt, q: int, back: int) -> bool:
+        """The live frames from d.queue[q] on, paired one for one with the sent copies from window
+        position back (from the right), hold a stretch of queued frames (later than the latency
+        before the fault by more than half the gap to the next copy, and by QUEUED_NS) that came at
+        about the pace they were sent: a FIFO queue draining delivers faster than that (BACKLOG_PACE,
+        as the backlog). Such a plateau is the pairing shifted by a frame published twice among
+        identical ones, each frame before it paired with the copy before its own (the story would
+        take a lost copy for the duplicate)."""
+        stretch: list[tuple[int, int]] = []  # (arrival, sent) of the stretch's first and last queued frames
+        for k in range(len(d.queue) - q + 1):
+            if k < len(d.queue) - q and back + k + 1 < 0:
+                arrival, sent = d.queue[q + k][1].t_ns, window_t[back + k]
+                if arrival - sent - d.recent > max(QUEUED_NS, (window_t[back + k + 1] - sent) // 2):
+                    stretch[1:] = [(arrival, sent)] if stretch else [(arrival, sent), (arrival, sent)]
+                    continue
+            if stretch and BACKLOG_PACE * (stretch[1][0] - stretch[0][0]) > stretch[1][1] - stretch[0][1] + QUEUED_NS:
+                return True
+            stretch = []
+        return False
 
     def overflow_story(d: _Doubt, at: int, jumped: _Copies, index: int) -> bool:
         """Matches the frames from d.queue[at] again as if it were the copy at bus position index
@@ -1004,6 +1032,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             counts["doubts_budget_spent_at"] = c.received
         # the greedy match stands, its verdicts as they were; not an outage's doubt opened with no later copy
         # (a frame merely late around a cut): its frames matched again, another doubt may open among them
+        if d.outage and d.late is None and not overflow:
+            late_only[d.ended + FAULT_SETTLE_NS] += 1
         if not duplicate and not outage and not overflow and not d.inner and not (d.outage and d.late is None):
             for entry in d.queue:
                 emit(*entry)
@@ -1088,6 +1118,10 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                     r.t_ns >= doubt.until:
                 # its content again at its own pace (not in the burst of a backlog or of a batch), the
                 # fault settled: both stories weighed on everything since
+                weigh_outage(doubt)
+            elif doubt.late is None and r.t_ns >= doubt.until + doubt.cycle:
+                # only a backlog's end may tell, and its content did not come again a cycle after the
+                # fault settled (a signal that changed): weighed now, not held to the bound
                 weigh_outage(doubt)
             return
         passed = False
