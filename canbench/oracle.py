@@ -925,6 +925,16 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         before = d.queue[q - 1]
         if window_t[rk - 1 - first - len(window)] > before[1].t_ns:
             return None  # a copy it skips sent after the backlog's last frame arrived: the queue had room
+        # the backlog's last frame came at the backlog's pace, and so did the jumped one if its copy
+        # was sent before that frame came: a queue drains its frames one after the other, never
+        # idle while it holds one (a live frame taken for the backlog's last, or the jump taken a
+        # copy early, by a frame published twice among the first live ones)
+        if q >= 3:
+            pace = 2 * (d.queue[q - 2][1].t_ns - d.frame.t_ns) // (q - 2) + max(QUEUED_NS, d.recent)
+            if before[1].t_ns - d.queue[q - 2][1].t_ns > pace or \
+                    window_t[rk - first - len(window)] < before[1].t_ns - d.recent and \
+                    d.queue[q][1].t_ns - before[1].t_ns > pace:
+                return None
         # the backlog: the first copies sent in the fault, kept in order (a FIFO that drops what does
         # not fit), so matched to copies one after the other; else not this story (a frame published
         # twice at the backlog's end: its first took a lost copy of its content)
