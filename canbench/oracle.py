@@ -270,10 +270,11 @@ OUTAGE_HOLD = 2  # cycles of its content an outage's doubt is held at least
 RECENT = 64  # matches per block of the recent latency range (an outage's doubt: _outage_copy)
 BACKLOG_PACE = 1.25  # a backlog comes at least this many times faster than it was sent (backlog_end in _classify)
 BACKLOG_LIVE = 2  # ... and where it ends is followed by live frames (the jumped one and one at least)
+LIVE_TAIL = 16  # ... and its last frames came at the pace they were sent, not faster (a backlog still draining)
+QUEUED_NS = 1_000_000  # ... which, where they came later than the latency before it by this much, were draining
 LATE_ONLY_DOUBTS = 4  # doubts with no later copy (only a backlog's end may tell) per fault the greedy match
 #                      keeps, at most: each matches the frames after it again (a link throttled in the
 #                      fault: every frame late and none lost would open one after the other)
-QUEUED_NS = 1_000_000  # ... which, where they came later than the latency before it by this much, were draining
 REMATCH_SHARE = 2  # frames matched again for doubts, at most this many per frame received (+ REMATCH_FLOOR):
 REMATCH_FLOOR = 4 * DOUBT_FRAMES  # past that the run's rest is matched greedily, so the cost stays a few
 #                                   times the greedy match's whatever the traffic (stalls full of duplicates)
@@ -954,7 +955,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             return None  # the frame before it is its content at a duplicate's pace
         if len(d.queue) - q < BACKLOG_LIVE:
             return None  # no live frame after the jump: the backlog's end not seen
-        if queued_at_pace(d, q, rk - first - len(window)):
+        if queued_at_pace(d, q, rk - first - len(window)) or still_draining(d, q, rk - first - len(window)):
             return None
         # the backlog came faster than it was sent (a burst, or a queue drained): not a latency that
         # rose and stays, whose frames come at their pace and align as well on periodic contents
@@ -984,6 +985,19 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                 return True
             stretch = []
         return False
+
+    def still_draining(d: _Doubt, q: int, back: int) -> bool:
+        """The last LIVE_TAIL frames (of those from d.queue[q] on, paired one for one with the sent
+        copies from window position back) came faster than those copies were sent: a backlog still
+        draining when the doubt was weighed, its last frame taken for a live one at the latency
+        before the fault (on repeating contents a recent copy of it is always there), not the
+        backlog's end."""
+        k = max(0, len(d.queue) - q - LIVE_TAIL)
+        last = len(d.queue) - q - 1
+        if last - k < 1:
+            return False
+        arrived = d.queue[q + last][1].t_ns - d.queue[q + k][1].t_ns
+        return BACKLOG_PACE * arrived < window_t[back + last] - window_t[back + k]
 
     def overflow_story(d: _Doubt, at: int, jumped: _Copies, index: int) -> bool:
         """Matches the frames from d.queue[at] again as if it were the copy at bus position index

@@ -425,3 +425,23 @@ def test_a_link_throttled_in_a_cut_does_not_spend_the_doubts_before_a_later_outa
         assert (c.counts["lost"], c.counts["lost_in_faults"], c.counts["duplicates"], c.counts["reordered"]) == \
             (0, lost, 0, 0)
         assert "doubts_budget_spent_at" not in c.counts
+
+
+def test_a_long_stall_drained_with_nothing_lost_is_a_latency_on_few_constant_frames():
+    # five constant frames (two every 10 ms, three every 20), a 2.9 s stall, nothing lost, its backlog
+    # drained at 3.3 times the bus's rate: still draining when the fault settled. Its last frame had a
+    # copy at the latency before the fault (they repeat), the story took it for the backlog's end,
+    # and 112 frames were named reordered
+    bus = sorted((BASE + phase + k * cycle * MS, n) for n, (cycle, phase) in enumerate(
+        ((10, 3_389_000), (10, 3_850_000), (20, 15_754_000), (20, 18_283_000), (20, 19_071_000)))
+        for k in range(8180 // cycle))
+    sent = [Observed(wire.Frame(0x2C0 + n, 8, bytes([n] * 8)), t, i, line=i + 1) for i, (t, n) in enumerate(bus)]
+    stall = (BASE + 1813 * MS, BASE + 4679 * MS)
+    arrivals, last = [], 0
+    for s in sent:
+        ready = s.t_ns + 300_000
+        at = max(ready, last + (855_000 if last > ready or stall[0] <= ready < stall[1] else 1000))
+        last = max(at, stall[1]) if stall[0] <= ready < stall[1] else at
+        arrivals.append((last, s))
+    got = [Observed(s.frame, at, n, key="vehicle/can/rx", seq=s.index) for n, (at, s) in enumerate(arrivals)]
+    assert verdicts(sent, got, (BASE + 1758 * MS, BASE + 4764 * MS)) == [(0, 0, 0, 0)] * 2
