@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import importlib.util
-import random
 import os
+import random
 import sys
 import time
 from collections import deque
@@ -14,6 +14,10 @@ from canbench.distribution import Distribution  # noqa: E402
 MS, US = 1_000_000, 1_000
 BASE = 1_700_000_000_000_000_000
 LEAD = SETTLE = 1_000_000_000
+
+
+# the oracle of this checkout (NEW_ORACLE in the comparing scripts overrides it)
+CHECKOUT_ORACLE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../canbench/oracle.py")
 
 
 def load_oracle(path, name):
@@ -98,7 +102,7 @@ def deliver(sent, rng, *, stall=None, queue=None, drain=None, lose=None, lose2=N
     out = []
     prev = 0
     deps = deque()
-    for n, (t, f) in enumerate(sent):
+    for n, (t, _f) in enumerate(sent):
         if (lose and lose[0] <= t < lose[1]) or (lose2 and lose2[0] <= t < lose2[1]) or n in drops:
             continue
         ready = t + 300 * US + rng.randrange(50 * US) + (extra(t) if extra else 0)
@@ -130,7 +134,7 @@ def truth_of(sent, delivered, window):
     back-to-back frames the delivered copies are the run's first ones: nothing tells them apart).
     Lost frames compare as runs; latency and split may be either's (or in between)."""
     run_of = []
-    for n, (t, f) in enumerate(sent):
+    for n, (_t, f) in enumerate(sent):
         run_of.append(run_of[-1] if n and sent[n - 1][1] == f else n)
     seen = {}
     true, canon = [], []
@@ -315,7 +319,7 @@ def main():
     import argparse
     import json
     ap = argparse.ArgumentParser()
-    ap.add_argument("--oracle", default="canbench/oracle.py")
+    ap.add_argument("--oracle", default=CHECKOUT_ORACLE)
     ap.add_argument("--runs", type=int, default=50)
     ap.add_argument("--configs", default=",".join(CONFIGS))
     ap.add_argument("--stream", action="store_true")

@@ -1,15 +1,15 @@
 """Old vs new oracle on adversarial seeded runs (OLD_ORACLE, NEW_ORACLE: paths of oracle.py)."""
-import json
 import os
 import random
-import sys
 import time
 from collections import Counter
+
 import harness as H
+
 MS, US = H.MS, H.US
 
 OLD = H.load_oracle(os.environ["OLD_ORACLE"], "o_old")
-NEW = H.load_oracle(os.environ.get("NEW_ORACLE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../canbench/oracle.py")), "o_new")
+NEW = H.load_oracle(os.environ.get("NEW_ORACLE", H.CHECKOUT_ORACLE), "o_new")
 
 
 ids_n = H.draw_ids
@@ -287,7 +287,8 @@ def main():
                       f"new {vn} lat {res['new']['latency']['max_ms']:.1f} {mark}")
         print(f"{name:22s} verdict-flags old {stats['flag_old']}/{a.runs} new {stats['flag_new']}  exact old "
               f"{stats['exact_old']} new {stats['exact_new']}  FLAG_REGRESS {stats['FLAG_REGRESS']} exact_regress "
-              f"{stats['exact_regress']} hid o/n {stats['hid_old']}/{stats['HID_NEW']} ff o/n {stats['ff_old']}/{stats['FF_NEW']} stream_diff {stats['STREAM_DIFF']}  cpu old {tt[0]:.1f} new {tt[1]:.1f}",
+              f"{stats['exact_regress']} hid o/n {stats['hid_old']}/{stats['HID_NEW']} ff o/n {stats['ff_old']}/"
+              f"{stats['FF_NEW']} stream_diff {stats['STREAM_DIFF']}  cpu old {tt[0]:.1f} new {tt[1]:.1f}",
               flush=True)
 
 

@@ -2,11 +2,15 @@
 (backlog > DOUBT_FRAMES). B: 2 constant ids, a 100 ms stall released at once, then latency lasting +R ms."""
 import os
 import sys
+
 import harness as H
+
 from canbench import wire
+
 MS = 1_000_000
 B = 1_700_000_000_000_000_000
-OLD = H.load_oracle(os.environ["OLD_ORACLE"], "yold"); NEW = H.load_oracle(os.environ.get("NEW_ORACLE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../canbench/oracle.py")), "ynew")
+OLD = H.load_oracle(os.environ["OLD_ORACLE"], "yold")
+NEW = H.load_oracle(os.environ.get("NEW_ORACLE", H.CHECKOUT_ORACLE), "ynew")
 
 
 def build(ids, dur_ms):
@@ -22,7 +26,7 @@ def build(ids, dur_ms):
 
 def deliver(sent, stall, rise_ms=0):
     deliv, prev = [], 0
-    for n, (t, f) in enumerate(sent):
+    for n, (t, _f) in enumerate(sent):
         ready = t + 300_000 + (rise_ms * MS if t >= stall[1] else 0)
         dep = max(ready, prev + 1000)
         if stall[0] <= ready < stall[1]:
@@ -54,8 +58,10 @@ if __name__ == "__main__":
             deliv = deliver(sent, stall)
             deliv.sort()
             cut = (stall[0] - 50 * MS, stall[1] + 50 * MS)
-            print("A", n_ids, "ids @10ms, stall", stall_ms, "backlog", sum(1 for t, _ in sent if stall[0] <= t + 300_000 < stall[1]),
-                  "old/new (lost, in_faults, dup, reord, lat max)", run(sent, deliv, cut), "truth (0,0,0,0,%d)" % stall_ms)
+            backlog = sum(1 for t, _ in sent if stall[0] <= t + 300_000 < stall[1])
+            print("A", n_ids, "ids @10ms, stall", stall_ms, "backlog", backlog,
+                  "old/new (lost, in_faults, dup, reord, lat max)", run(sent, deliv, cut),
+                  f"truth (0,0,0,0,{stall_ms})")
     else:
         for rise in (12, 15, 25, 40):
             for st in (60, 100, 300):

@@ -1,10 +1,15 @@
+"""A merely late frame near a cut, then a real outage in the same window (the first review's
+regression: the late frame's doubt held the outage's own off): old and new oracle side by side."""
 import os
-import sys
+
 import harness as H
+
 from canbench import wire
+
 MS = 1_000_000
 B = 1_700_000_000_000_000_000
-OLD = H.load_oracle(os.environ["OLD_ORACLE"], "xold"); NEW = H.load_oracle(os.environ.get("NEW_ORACLE", os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../../../canbench/oracle.py")), "xnew")
+OLD = H.load_oracle(os.environ["OLD_ORACLE"], "xold")
+NEW = H.load_oracle(os.environ.get("NEW_ORACLE", H.CHECKOUT_ORACLE), "xnew")
 def case(jt, delay, out=(3100, 3600), cycles=(100, 30, 70, 110, 50)):
     sent = []
     for j, cyc in enumerate(cycles):
@@ -14,7 +19,7 @@ def case(jt, delay, out=(3100, 3600), cycles=(100, 30, 70, 110, 50)):
     sent.sort(key=lambda x: x[0])
     deliv, prev = [], 0
     jn = min(range(len(sent)), key=lambda n: abs(sent[n][0] - B - jt * MS))
-    for n, (t, f) in enumerate(sent):
+    for n, (t, _f) in enumerate(sent):
         if B + out[0] * MS <= t < B + out[1] * MS:
             continue
         ready = t + 300_000 + (delay * MS if n == jn else 0)
