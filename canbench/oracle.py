@@ -271,7 +271,7 @@ RECENT = 64  # matches per block of the recent latency range (an outage's doubt:
 BACKLOG_PACE = 1.25  # a backlog comes at least this many times faster than it was sent (backlog_end in _classify)
 BACKLOG_LIVE = 2  # ... and where it ends is followed by live frames (the jumped one and one at least)
 LIVE_TAIL = 16  # ... and its last frames came at the pace they were sent, not faster (a backlog still draining)
-QUEUED_NS = 1_000_000  # ... which, where they came later than the latency before it by this much, were draining
+QUEUED_NS = 1_000_000  # ... a live frame this much later than the latency before the fault waited in a queue
 LATE_ONLY_DOUBTS = 4  # doubts with no later copy (only a backlog's end may tell) per fault the greedy match
 #                      keeps, at most: each matches the frames after it again (a link throttled in the
 #                      fault: every frame late and none lost would open one after the other)
@@ -931,10 +931,10 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         # idle while it holds one (a live frame taken for the backlog's last, or the jump taken a
         # copy early, by a frame published twice among the first live ones)
         if q >= 3:
-            pace = 2 * (d.queue[q - 2][1].t_ns - d.frame.t_ns) // (q - 2) + max(QUEUED_NS, d.recent)
-            if before[1].t_ns - d.queue[q - 2][1].t_ns > pace or \
-                    window_t[rk - first - len(window)] < before[1].t_ns - d.recent and \
-                    d.queue[q][1].t_ns - before[1].t_ns > pace:
+            gap = 2 * (d.queue[q - 2][1].t_ns - d.frame.t_ns) // (q - 2) + max(QUEUED_NS, d.recent)
+            if before[1].t_ns - d.queue[q - 2][1].t_ns > gap or \
+                    (window_t[rk - first - len(window)] < before[1].t_ns - d.recent and
+                     d.queue[q][1].t_ns - before[1].t_ns > gap):
                 return None
         # the backlog: the first copies sent in the fault, kept in order (a FIFO that drops what does
         # not fit), so matched to copies one after the other; else not this story (a frame published
