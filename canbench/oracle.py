@@ -829,6 +829,18 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         else:
             leftovers.append((r, n))
 
+    def begin_story(d: _Doubt) -> tuple[int, tuple]:
+        """Another story than the greedy one is to be matched on the doubt's frames: its cost
+        counted (REMATCH_SHARE), the greedy story kept (greedy_again), every mark since the doubt
+        undone, the frontier back to the doubt's. The index of the frame before the doubt's, and the
+        greedy story."""
+        nonlocal frontier, rematched
+        rematched += len(d.queue)
+        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
+        d.undo()
+        frontier = d.frontier
+        return (previous.index if previous is not None else -1), greedy
+
     def greedy_again(d: _Doubt, greedy: tuple) -> None:
         """The greedy story back after another was matched: its marks, frontier and paces."""
         nonlocal frontier
@@ -844,12 +856,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         that story is the better one: fewer faults than the greedy story, and no copy left behind
         that the greedy story matched (a late frame the greedy match read as a later copy would
         become a duplicate and a loss). If so its marks stay, else the greedy story's are back."""
-        nonlocal frontier, rematched
-        rematched += len(d.queue)
-        top = previous.index if previous is not None else -1
-        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
-        d.undo()
-        frontier = d.frontier
+        nonlocal frontier
+        top, greedy = begin_story(d)
         story = [unmatched(d.frame, d.copies.key)] + [step(r, False) for _, r, _, _ in d.queue[1:]]
         matched = {index for _, index in d.marks}
         # nor a copy of its own content before the one it took left unmatched in the window: the
@@ -866,12 +874,9 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         """Matches the frames after the doubtful one again as if it were the later copy (d.late,
         the ones between lost), and tells if that story is the better one: no more faults than the
         greedy story. If so its marks stay, else the greedy story's are back."""
-        nonlocal frontier, rematched
+        nonlocal frontier
         assert d.late is not None
-        rematched += len(d.queue)
-        top = previous.index if previous is not None else -1
-        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
-        d.undo()
+        top, greedy = begin_story(d)
         frontier = max(d.frontier, d.late)
         d.copies.mark(d.late, True)
         d.marks.append((d.copies, d.late))
@@ -1005,12 +1010,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         and tells if that story is the one: no fault at all (the link keeps order, the queue kept its
         first frames: nothing reordered, nothing twice). If so its marks stay, else the greedy story's
         are back."""
-        nonlocal frontier, rematched
-        rematched += len(d.queue)
-        top = previous.index if previous is not None else -1
-        greedy = d.marks, frontier, [(copies, copies.arrived) for copies, _ in d.arrived.values()]
-        d.undo()
-        frontier = d.frontier
+        nonlocal frontier
+        top, greedy = begin_story(d)
         before = sum(1 for entry in d.queue[:at] if entry[0] == _MATCHED)
         d.marks = greedy[0][:before]
         for copies, i in d.marks:
