@@ -954,6 +954,11 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
                DUPLICATE_PACE * (d.queue[i + 1][1].t_ns - d.queue[i][1].t_ns) < pace for i in range(q - 1)):
             return None
         jumped = window[rk - first - len(window)]
+        if window[rk - 1 - first - len(window)] is jumped:
+            # the copy before the jumped one is of the same content: a story jumping one copy earlier
+            # pairs as well, and a frame published twice among the first live ones would shift it so,
+            # unseen (the duplicate taken for a copy lost in the stall): the contents cannot tell
+            return None
         where = bisect.bisect_left(jumped.ranks, rk, jumped.start)
         if _key(before[1].frame) == jumped.key and where + 1 < len(jumped.times) and \
                 DUPLICATE_PACE * (r.t_ns - before[1].t_ns) < _cycle(jumped.times, where):
