@@ -921,7 +921,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             if window[back].key != _key(r2.frame) or not since <= window_t[back] <= r2.t_ns + slack:
                 break
             q, rk = q - 1, rk - 1
-        if q <= 1 or rk <= first or window_t[rk - 1 - first - len(window)] >= d.ended:
+        jump = rk - first - len(window)  # the jumped copy's place in the window, from its right end
+        if q <= 1 or rk <= first or window_t[jump - 1] >= d.ended:
             # paired back to the doubtful frame: no backlog's end found (nothing lost, a latency that
             # rose pairs so on periodic contents); or the copies it skips were sent after the fault
             return None
@@ -929,7 +930,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         if kind == _MATCHED and s_rank == rk:
             return None  # the greedy match already reads it so
         before = d.queue[q - 1]
-        if window_t[rk - 1 - first - len(window)] > before[1].t_ns:
+        if window_t[jump - 1] > before[1].t_ns:
             return None  # a copy it skips sent after the backlog's last frame arrived: the queue had room
         # the backlog's last frame came at the backlog's pace, and so did the jumped one if its copy
         # was sent before that frame came: a queue drains its frames one after the other, never
@@ -938,7 +939,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         if q >= 3:
             gap = 2 * (d.queue[q - 2][1].t_ns - d.frame.t_ns) // (q - 2) + max(QUEUED_NS, d.recent)
             if before[1].t_ns - d.queue[q - 2][1].t_ns > gap or \
-                    (window_t[rk - first - len(window)] < before[1].t_ns - d.recent and
+                    (window_t[jump] < before[1].t_ns - d.recent and
                      d.queue[q][1].t_ns - before[1].t_ns > gap):
                 return None
         # the backlog: the first copies sent in the fault, kept in order (a FIFO that drops what does
@@ -953,8 +954,8 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
         if any(_key(d.queue[i][1].frame) == _key(d.queue[i + 1][1].frame) and
                DUPLICATE_PACE * (d.queue[i + 1][1].t_ns - d.queue[i][1].t_ns) < pace for i in range(q - 1)):
             return None
-        jumped = window[rk - first - len(window)]
-        if window[rk - 1 - first - len(window)] is jumped:
+        jumped = window[jump]
+        if window[jump - 1] is jumped:
             # the copy before the jumped one is of the same content: a story jumping one copy earlier
             # pairs as well, and a frame published twice among the first live ones would shift it so,
             # unseen (the duplicate taken for a copy lost in the stall): the contents cannot tell
@@ -965,7 +966,7 @@ def _classify(sent: Iterable[Observed], received: Iterable[Observed], explained:
             return None  # the frame before it is its content at a duplicate's pace
         if len(d.queue) - q < BACKLOG_LIVE:
             return None  # no live frame after the jump: the backlog's end not seen
-        if queued_at_pace(d, q, rk - first - len(window)) or still_draining(d, q, rk - first - len(window)):
+        if queued_at_pace(d, q, jump) or still_draining(d, q, jump):
             return None
         # the backlog came faster than it was sent (a burst, or a queue drained): not a latency that
         # rose and stays, whose frames come at their pace and align as well on periodic contents

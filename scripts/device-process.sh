@@ -2,9 +2,9 @@
 # DEVICE_CMD, stop it, and the fault steps the orchestrator asks for (canbench.device_control), on
 # that group or, for a device the bench does not start, through the user's DEVICE_HOOK.
 # Uses bench-run's variables: DEVICE_CMD, DEVICE_HOOK, DEVICE_STOP_S, DEVICE_HOOK_TIMEOUT_S,
-# identities, device_endpoint, canbus_dir, repo, caller_dir, run_dir; sets device_pid, device_group
-# and hook_stopped; requests and replies, once set, are the orchestrator's FIFOs' descriptors (never
-# the device's nor the hook's).
+# identities, device_endpoint, canbus_dir, repo, caller_dir, run_dir; sets device_pid, device_group,
+# hook_stopped (and device_paths: device_config, device_settings, device_preload); requests and
+# replies, once set, are the orchestrator's FIFOs' descriptors (never the device's nor the hook's).
 
 stop_device() {  # its whole process group, its leader gone or not: TERM, then KILL after DEVICE_STOP_S
 	[ -n "$device_group" ] || return 0
@@ -18,14 +18,18 @@ group_gone() {  # until the device's process group is empty, at most $1 s
 	local deadline=$((SECONDS + $1))
 	while kill -0 -- -"$device_group" 2>/dev/null && [ $SECONDS -lt $deadline ]; do sleep 0.05; done
 }
+device_paths() {  # the device's identity (its Zenoh config), the scenario's settings, the preload library
+	device_config=${identities:-}/device/zenoh.json5 device_settings=${identities:-}/device.env
+	device_preload=${repo:-}/build/ucan/libucan-preload.so
+}
 launch_device() {  # DEVICE_CMD in a process group of its own, its output added to device.log
 	(
+		device_paths
 		# the scenario's settings only: none the caller's shell holds (a ZENOH_LISTEN would open a listener)
 		unset LD_PRELOAD $(compgen -e | grep -E '^(ZENOH_|UCAN_)' || true)
 		set -a
-		. "$identities/device.env"
-		ZENOH_CONFIG=$identities/device/zenoh.json5 ZENOH_ROUTER_ADDRESS=$device_endpoint UCAN_DIR=$canbus_dir
-		LD_PRELOAD=$repo/build/ucan/libucan-preload.so
+		. "$device_settings"
+		ZENOH_CONFIG=$device_config ZENOH_ROUTER_ADDRESS=$device_endpoint UCAN_DIR=$canbus_dir LD_PRELOAD=$device_preload
 		set +a
 		cd "$caller_dir"  # DEVICE_CMD's relative paths are the caller's
 		# the orchestrator's channel to bench-run is not the device's
@@ -111,9 +115,10 @@ run_hook() {  # DEVICE_HOOK with its two words, in the caller's directory, its o
 		cd "$caller_dir"  # the hook's relative paths are the caller's
 		[ -z "${requests:-}" ] || exec {requests}<&- {replies}<&-
 		# what a hook restarting a program on this machine needs (the run's identity, router, bus)
-		export DEVICE_HOOK_ACTION=$1 DEVICE_HOOK_STEP=$2 DEVICE_ZENOH_CONFIG=${identities:-}/device/zenoh.json5 \
-			DEVICE_ENV_FILE=${identities:-}/device.env DEVICE_ROUTER_ADDRESS=${device_endpoint:-} \
-			DEVICE_UCAN_DIR=${canbus_dir:-} DEVICE_PRELOAD=${repo:-}/build/ucan/libucan-preload.so
+		device_paths
+		export DEVICE_HOOK_ACTION=$1 DEVICE_HOOK_STEP=$2 DEVICE_ZENOH_CONFIG=$device_config \
+			DEVICE_ENV_FILE=$device_settings DEVICE_ROUTER_ADDRESS=${device_endpoint:-} DEVICE_UCAN_DIR=${canbus_dir:-} \
+			DEVICE_PRELOAD=$device_preload
 		exec timeout -k 5 "${DEVICE_HOOK_TIMEOUT_S:-20}" bash -c "$DEVICE_HOOK"' "$@"' device-hook "$@"
 	) >>"$run_dir/device.log" 2>&1 </dev/null
 }

@@ -218,8 +218,7 @@ echo "$1 $2" >>calls
 if [ "$1" = stop ]; then
 	pid=$(cat pid)
 	kill -$([ "$2" = bridge_kill ] && echo KILL || echo TERM) -- -"$pid"
-	for _ in $(seq 200); do kill -0 -- -"$pid" 2>/dev/null || exit 0; sleep 0.05; done
-	exit 1
+	exec timeout 10 tail -s 0.05 --pid="$pid" -f /dev/null  # until it exited (a relay: until the power is off)
 fi
 set -a; . "$DEVICE_ENV_FILE"; set +a
 ZENOH_CONFIG=$DEVICE_ZENOH_CONFIG ZENOH_ROUTER_ADDRESS=$DEVICE_ROUTER_ADDRESS UCAN_DIR=$DEVICE_UCAN_DIR \\

@@ -188,9 +188,12 @@ def test_a_hook_is_told_the_step_and_the_runs_identity_router_and_bus(tmp_path):
 
 def test_an_interrupt_during_the_hooks_start_does_not_call_it_again_at_the_runs_end(tmp_path):
     # bench-run's traps: an interrupt lets the start's call finish, then its cleanup gives back a
-    # device left stopped; the one already being started is not started twice
-    hook = 'f() { echo "$1 began" >>calls; [ "$1" = stop ] || sleep 1; echo "$1" >>calls; }; f'
+    # device left stopped; the one already being started is not started twice. The start's call
+    # says it began and then waits until the interrupt was sent (two FIFOs): the TERM lands in it
+    hook = ('f() { echo "$1 began" >>calls; '
+            'if [ "$1" = start ]; then echo >began; exec 3<>go; read -r -t 10 _ <&3; fi; echo "$1" >>calls; }; f')
     hook_run(tmp_path, hook, """
+mkfifo "$caller_dir/began" "$caller_dir/go"
 (
 \ttrap - EXIT
 \tcleanup() { [ -z "${hook_stopped:-}" ] || run_hook start "$hook_stopped" || true; }
@@ -198,9 +201,10 @@ def test_an_interrupt_during_the_hooks_start_does_not_call_it_again_at_the_runs_
 \ttrap 'exit 130' TERM
 \tme=$BASHPID
 \t(
-\t\tdeadline=$((SECONDS + 10))  # until the start's call began, then an interrupt
-\t\tuntil grep -q "start began" "$caller_dir/calls" 2>/dev/null || [ $SECONDS -ge $deadline ]; do sleep 0.02; done
+\t\texec 4<>"$caller_dir/began"
+\t\tread -r -t 10 _ <&4  # the start's call began
 \t\tkill -TERM $me
+\t\techo >"$caller_dir/go"
 \t) &
 \tdevice_fault 1 bridge_kill 0.1 >/dev/null
 ) || true""")

@@ -284,13 +284,14 @@ def periodic(ids: list[tuple[int, bool]], ms: int) -> list[Observed]:
     return [Observed(f, t, n, line=n + 1) for n, (t, f) in enumerate(bus)]
 
 
-def stalled(sent: list[Observed], stall: tuple[int, int], rise_ns: int = 0) -> list[Observed]:
-    """Nothing lost: what is ready in the stall comes when it ends, 1 us apart, the rest 0.3 ms
-    after it was sent (and rise_ns more from the stall's end on), in order."""
+def stalled(sent: list[Observed], stall: tuple[int, int], rise_ns: int = 0, drain_ns: int = 1000) -> list[Observed]:
+    """Nothing lost: what is ready in the stall comes when it ends, drain_ns apart (1 us: at once),
+    and so does what queued behind it; the rest 0.3 ms after it was sent (and rise_ns more from
+    the stall's end on), in order."""
     arrivals, last = [], 0
     for s in sent:
         ready = s.t_ns + 300_000 + (rise_ns if s.t_ns >= stall[1] else 0)
-        at = max(ready, last + 1000)
+        at = max(ready, last + (drain_ns if last > ready else 1000))
         if stall[0] <= ready < stall[1]:
             at = max(at, stall[1] + 1000)
         last = at
@@ -441,11 +442,5 @@ def test_a_long_stall_drained_with_nothing_lost_is_a_latency_on_few_constant_fra
         for k in range(8180 // cycle))
     sent = [Observed(wire.Frame(0x2C0 + n, 8, bytes([n] * 8)), t, i, line=i + 1) for i, (t, n) in enumerate(bus)]
     stall = (BASE + 1813 * MS, BASE + 4679 * MS)
-    arrivals, last = [], 0
-    for s in sent:
-        ready = s.t_ns + 300_000
-        at = max(ready, last + (855_000 if last > ready or stall[0] <= ready < stall[1] else 1000))
-        last = max(at, stall[1]) if stall[0] <= ready < stall[1] else at
-        arrivals.append((last, s))
-    got = [Observed(s.frame, at, n, key="vehicle/can/rx", seq=s.index) for n, (at, s) in enumerate(arrivals)]
+    got = stalled(sent, stall, drain_ns=855_000)
     assert verdicts(sent, got, (BASE + 1758 * MS, BASE + 4764 * MS)) == [(0, 0, 0, 0)] * 2
