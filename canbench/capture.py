@@ -80,8 +80,11 @@ class CanCapture:
         if clients is not None:
             pid = self.proc.pid
             mine = [c for c in clients if c.get("pid") == pid or c.get("cookie", "").startswith(f"ucan/{pid}/")]
+            # another reader's drops (the bridge's, a device's) explain a loss the oracle finds: kept to be named
+            others = [{k: c.get(k) for k in ("cookie", "pid", "iface", "queue_limit", "rx_frames", "rx_drops")}
+                      for c in clients if c not in mine and c.get("rx_drops")]
             write_capture_stats(self.path.parent, "can", {"hub_rx_drops": sum(c["rx_drops"] for c in mine),
-                                                       "hub_sockets": len(mine)})
+                                                       "hub_sockets": len(mine), "hub_other_drops": others})
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGINT)
             self.proc.wait(timeout=10)

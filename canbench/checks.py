@@ -10,6 +10,7 @@ from functools import wraps
 
 from . import rxqos, security, signals, validity, wire
 from .analysis import RunResult, bus_stats
+from .capture import read_capture_stats
 from .commands import explained_refusals, stale_at_put, stamp_ages_ns
 from .dbc import cycle_of_id, load_dbc, send_type_at_most
 from .faults import disruptive, last_bridge_restart_ns
@@ -92,7 +93,8 @@ def integrity(result: RunResult) -> list[str] | None:
         if not b.can_frames:
             problems.append(f"{b.bus}: no frames on the bus at all (did the ECUs run?)")
         if len(c.lost) > budget:
-            problems.append(f"{b.bus}: {len(c.lost)} frames lost (budget {budget}): {_frames(c.lost)}")
+            problems.append(f"{b.bus}: {len(c.lost)} frames lost (budget {budget}): {_frames(c.lost)}"
+                            + _readers_dropped(result, b.bus))
         if c.duplicates:
             problems.append(f"{b.bus}: {len(c.duplicates)} duplicates on {b.rx_key}: {_frames(c.duplicates)}")
         if c.corrupted:
@@ -106,6 +108,18 @@ def integrity(result: RunResult) -> list[str] | None:
             problems.append(f"{b.bus}: ... ({len(b.problems) - SHOW} more undecodable samples, "
                             f"{len(b.problems)} in all)")
     return problems
+
+
+def _readers_dropped(result: RunResult, bus: str) -> str:
+    """What the userspace hub dropped for readers of the bus other than the capture (the bridge's socket
+    among them) when their queue was full: a loss the bridge did not read at all (captures.json)."""
+    others = [c for c in read_capture_stats(result.run_dir).get("can", {}).get("hub_other_drops", [])
+              if c.get("iface") == bus]
+    if not others:
+        return ""
+    said = ", ".join(f"{c['rx_drops']} for {c['cookie']} (queue limit {c['queue_limit']})" for c in others[:SHOW])
+    return (f"; the userspace hub dropped frames for other readers of {bus} whose queue was full: {said} "
+            f"(the bridge's socket, if it is one of them, never read them)")
 
 
 def ordering(result: RunResult) -> list[str] | None:

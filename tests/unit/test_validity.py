@@ -150,3 +150,27 @@ def test_the_stats_check_is_skipped_with_its_reason_only_for_a_device_that_annou
     assert checks.bridge_stats_agree(r) is None
     assert checks.skip_reason(r, "bridge_stats_agree") == (
         "bridge_stats_agree not judged: the device (host:7448) has no stats queryable (DEVICE_ANNOUNCES=0)")
+
+
+def test_a_loss_the_hub_dropped_for_another_reader_is_named_with_it(tmp_path):
+    # the hub's drops for a reader other than the capture (the bridge's socket, when its queue was full):
+    # the bridge never read those frames, and the verdict says where to look instead of a bare loss
+    seeded(tmp_path)
+    lines = (tmp_path / "zenoh.tsv").read_text().splitlines(keepends=True)
+    (tmp_path / "zenoh.tsv").write_text("".join(lines[:50] + lines[51:]))
+    bridge = {"cookie": "ucan/1/0/0badf00d", "pid": 1, "iface": "vcan0", "queue_limit": 512,
+              "rx_frames": 388, "rx_drops": 1}
+    elsewhere = {**bridge, "cookie": "ucan/9/0/0000beef", "iface": "vcan1", "rx_drops": 40}
+    (tmp_path / "captures.json").write_text(json.dumps({"can": {"hub_rx_drops": 0, "hub_sockets": 1,
+                                                                "hub_other_drops": [bridge, elsewhere]}}))
+    sc = scenario.load(REPO / "scenarios" / "smoke.yaml")
+    r = run.analyse(sc, "seeded", tmp_path, "vehicle/can", {}, None, 2.0)
+    problems = checks.integrity(r)
+    assert len(problems) == 1 and "1 frames lost (budget 0)" in problems[0], problems
+    assert problems[0].endswith("; the userspace hub dropped frames for other readers of vcan0 whose queue was full: "
+                                "1 for ucan/1/0/0badf00d (queue limit 512) (the bridge's socket, if it is one of "
+                                "them, never read them)"), problems
+    # without such drops the loss is said as before
+    (tmp_path / "captures.json").write_text(json.dumps({"can": {"hub_rx_drops": 0, "hub_sockets": 1,
+                                                                "hub_other_drops": [elsewhere]}}))
+    assert checks.integrity(r)[0].endswith(")") and "userspace hub" not in checks.integrity(r)[0]

@@ -247,9 +247,9 @@ static void client_close(uint32_t idx, const char *why)
 	struct client *c = &hub.clients[idx];
 	if (c->fd < 0)
 		return;
-	if (hub.verbose || why)
-		hub_log("client %u (pid %d, %s) closed%s%s", idx, (int)c->pid, c->cookie[0] ? c->cookie : "-",
-		       why ? ": " : "", why ? why : "");
+	if (hub.verbose || why || c->rx_drops) /* a reader's drops said once it is gone: its counters go with it */
+		hub_log("client %u (pid %d, %s) closed%s%s; %" PRIu64 " frames dropped for it (queue full)", idx,
+			(int)c->pid, c->cookie[0] ? c->cookie : "-", why ? ": " : "", why ? why : "", c->rx_drops);
 	epoll_ctl(hub.epoll_fd, EPOLL_CTL_DEL, c->fd, NULL);
 	close(c->fd);
 	free(c->filters);
