@@ -62,3 +62,13 @@ def test_descriptor_closed_behind_the_librarys_back_is_not_can_any_more(bus):
     socket in the library's table: the pipe or UDP socket reusing it was treated as CAN."""
     probe = start_probe(bus, "stale", "vcan0")
     finish(probe, [])
+
+
+def test_socket_inherited_across_exec_after_the_switch_to_stamps_loses_no_frame(bus):
+    """Frames queued before SO_TIMESTAMPNS reach the socket bare, the hub's HEADER_MODE
+    behind them; a program exec'd with the socket took the hub's mode of now (headers) and
+    recvmmsg dropped the bare frames unseen (2 of 4), read() returned them as garbage (id 0)."""
+    probe = start_probe(bus, "exec", "vcan0")
+    lines = finish(probe, [])
+    assert sum(line.startswith("ok: recvmmsg frame") for line in lines) == 4, lines
+    assert sum(line.startswith("ok: read frame") for line in lines) == 4, lines

@@ -1015,6 +1015,16 @@ static void iov_gather(const struct iovec *iov, size_t n, void *out, size_t len)
 	}
 }
 
+static void iov_scatter(const struct iovec *iov, size_t n, const void *in, size_t len)
+{
+	for (size_t i = 0; i < n && len; i++) {
+		size_t k = iov[i].iov_len < len ? iov[i].iov_len : len;
+		memcpy(iov[i].iov_base, in, k);
+		in = (const uint8_t *)in + k;
+		len -= k;
+	}
+}
+
 /* An unbound socket that could not reach the hub: nothing ever arrives, but
  * O_NONBLOCK, MSG_DONTWAIT and SO_RCVTIMEO (set natively) apply as usual. */
 static int recv_nothing(int fd, int flags)
@@ -1033,6 +1043,16 @@ static int recv_nothing(int fd, int flags)
 		return -1; /* EINTR */
 	errno = EAGAIN;
 	return -1;
+}
+
+/* Hub messages are told apart by length alone (ucan_proto.h): 16 / 72 bytes a bare frame,
+ * 40 / 96 a frame behind its ucan_rxhdr. The socket's header_mode only says how the next
+ * read is laid out: a socket inherited across exec takes the hub's mode of now, yet may
+ * still hold bare frames queued before the switch (HEADER_MODE behind them, unread), and a
+ * thread may read on while another takes the switch. Each message is decoded by its length. */
+static int bare_frame_len(size_t len)
+{
+	return len == CAN_MTU || len == CANFD_MTU;
 }
 
 /* What a received frame tells the program besides its bytes, for recvmsg and
@@ -1117,10 +1137,24 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 				atomic_store(&cs->header_mode, 1);
 			continue;
 		}
-		if (header_mode)
-			n -= (ssize_t)sizeof(hdr);
 		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
-		frame_meta(cs, user, header_mode ? &hdr : NULL, msg.msg_controllen, controllen, msg.msg_flags);
+		int native_flags = msg.msg_flags;
+		if (header_mode && bare_frame_len((size_t)n)) {
+			/* a bare frame queued before the switch: its first bytes went to hdr, the
+			 * rest to the program's buffer; put them together there */
+			uint8_t frame[CANFD_MTU];
+			size_t head = (size_t)n < sizeof(hdr) ? (size_t)n : sizeof(hdr);
+			size_t want = (size_t)n < room ? (size_t)n : room;
+			memcpy(frame, &hdr, head);
+			if (want > head)
+				iov_gather(user->msg_iov, user->msg_iovlen, frame + head, want - head);
+			iov_scatter(user->msg_iov, user->msg_iovlen, frame, want);
+			native_flags = (native_flags & ~MSG_TRUNC) | ((size_t)n > room ? MSG_TRUNC : 0);
+			header_mode = 0;
+		} else if (header_mode) {
+			n -= (ssize_t)sizeof(hdr);
+		}
+		frame_meta(cs, user, header_mode ? &hdr : NULL, msg.msg_controllen, controllen, native_flags);
 		/* as raw_recvmsg: the copied length, MSG_TRUNC set when the frame was cut */
 		return (size_t)n > room ? (ssize_t)room : n;
 	}
@@ -1201,16 +1235,6 @@ PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
 #define MMSG_FIRST_MIN 4 /* a first read sized twice the last call's frames, at least this */
 #define RX_MSG_MAX (sizeof(struct ucan_rxhdr) + CANFD_MTU)
 
-static void iov_scatter(const struct iovec *iov, size_t n, const void *in, size_t len)
-{
-	for (size_t i = 0; i < n && len; i++) {
-		size_t k = iov[i].iov_len < len ? iov[i].iov_len : len;
-		memcpy(iov[i].iov_base, in, k);
-		in = (const uint8_t *)in + k;
-		len -= k;
-	}
-}
-
 /* One hub message into the program's mmsghdr; 0 if it was a control reply (skipped). */
 static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *data, size_t len, int native_flags)
 {
@@ -1222,7 +1246,7 @@ static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *da
 		return 0;
 	}
 	struct ucan_rxhdr hdr;
-	int header_mode = atomic_load(&cs->header_mode);
+	int header_mode = !bare_frame_len(len); /* by length, not the socket's mode: see bare_frame_len */
 	if (header_mode) {
 		if (len < sizeof(hdr))
 			return 0; /* not a frame the hub sends */

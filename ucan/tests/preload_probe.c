@@ -10,6 +10,9 @@
  *   preload_probe stamp <iface>    SIOCGSTAMP before any frame (ENOENT); read() + SIOCGSTAMP(NS)
  *                                  of a first frame, SCM_TIMESTAMPNS of a second (recvmsg with
  *                                  SO_TIMESTAMPNS); prints "stamp <sec>.<nsec>" per frame
+ *   preload_probe exec <iface>     a socket gets a classic and an FD frame, then SO_TIMESTAMPNS,
+ *                                  then two more, and is inherited across exec: the program
+ *                                  exec'd reads all four (recvmmsg, then read() on a second one)
  *
  * Prints one line per result; exit 0 when everything held, 1 otherwise. */
 #define _GNU_SOURCE
@@ -31,6 +34,7 @@
 #include <time.h>
 #include <unistd.h>
 #include <linux/can.h>
+#include <linux/can/raw.h>
 #include <linux/sockios.h>
 #include <netinet/in.h>
 
@@ -276,10 +280,105 @@ static void probe_stamp(const char *iface)
 	close(s);
 }
 
+/* ---- a socket inherited across exec after its switch to stamps ---- */
+
+#define EXEC_WAIT_MS 500
+
+/* A classic frame and an FD frame, ids 0x101 + first and 0x102 + first, the payload bytes their index. */
+static void send_pair(int tx, int first)
+{
+	struct can_frame f = { .can_id = 0x101 + first, .len = 1, .data = { (uint8_t)first } };
+	struct canfd_frame fd = { .can_id = 0x102 + first, .len = 12 };
+	memset(fd.data, first + 1, fd.len);
+	if (write(tx, &f, sizeof(f)) != (ssize_t)sizeof(f) || write(tx, &fd, sizeof(fd)) != (ssize_t)sizeof(fd))
+		result(0, "send 0x%03X and 0x%03X: %s", 0x101 + first, 0x102 + first, strerror(errno));
+	/* an option set on a bound socket is applied before setsockopt returns (on the userspace
+	 * bus a BARRIER, which reads the sender's frames first): both are in the reader's queue */
+	int on = 1;
+	setsockopt(tx, SOL_CAN_RAW, CAN_RAW_LOOPBACK, &on, sizeof(on));
+}
+
+static void probe_exec(const char *iface, const char *self)
+{
+	static const char *const modes[] = { "recvmmsg", "read" };
+	for (unsigned m = 0; m < 2; m++) {
+		int on = 1;
+		int rx = can_socket(); /* inherited: no SOCK_CLOEXEC */
+		setsockopt(rx, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on));
+		can_bind(rx, iface);
+		int tx = socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+		setsockopt(tx, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on));
+		can_bind(tx, iface);
+		send_pair(tx, 0); /* bare frames on the userspace bus: nothing asked for a header */
+		setsockopt(rx, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on)); /* the hub switches rx to headers */
+		send_pair(tx, 2);
+		close(tx);
+		fflush(stdout);
+		pid_t pid = fork();
+		if (pid == 0) {
+			char fd[16];
+			snprintf(fd, sizeof(fd), "%d", rx);
+			execl(self, self, "exec-child", fd, modes[m], (char *)NULL);
+			_exit(127);
+		}
+		close(rx);
+		int status = 0;
+		waitpid(pid, &status, 0);
+		result(WIFEXITED(status) && WEXITSTATUS(status) == 0, "%s after exec: the child read every frame (status %d)",
+		       modes[m], status);
+	}
+}
+
+/* The exec'd program: reads the inherited socket until EXEC_WAIT_MS pass without a frame. */
+static void probe_exec_child(int s, const char *mode)
+{
+	struct timeval tv = { 0, EXEC_WAIT_MS * 1000 };
+	setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
+	struct canfd_frame got[8];
+	unsigned size[8], n = 0;
+	memset(got, 0, sizeof(got));
+	while (n < 8) {
+		if (strcmp(mode, "recvmmsg") == 0) {
+			struct iovec iov[8];
+			struct mmsghdr mm[8];
+			for (unsigned i = 0; i < 8; i++) {
+				iov[i] = (struct iovec){ &got[i], sizeof(got[i]) };
+				mm[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iov[i], .msg_iovlen = 1 } };
+			}
+			int r = recvmmsg(s, mm + n, 8 - n, MSG_WAITFORONE, NULL);
+			if (r <= 0)
+				break;
+			for (int i = 0; i < r; i++)
+				size[n + i] = mm[n + i].msg_len;
+			n += (unsigned)r;
+		} else {
+			ssize_t r = read(s, &got[n], sizeof(got[n]));
+			if (r <= 0)
+				break;
+			size[n++] = (unsigned)r;
+		}
+	}
+	int ok = n == 4;
+	for (unsigned i = 0; i < n; i++) {
+		int fd = i % 2;
+		uint8_t byte = (uint8_t)i, len = fd ? 12 : 1; /* as send_pair sent it */
+		int good = got[i].can_id == 0x101 + i && size[i] == (fd ? CANFD_MTU : CAN_MTU) && got[i].len == len &&
+			   got[i].data[0] == byte && got[i].data[len - 1] == byte;
+		printf("%s: %s frame %u: id 0x%03X, %u bytes, len %u, data[0] %u\n", good ? "ok" : "FAIL", mode, i,
+		       got[i].can_id, size[i], got[i].len, got[i].data[0]);
+		ok &= good;
+	}
+	result(ok, "%s: %u frames from the inherited socket (4 sent)", mode, n);
+}
+
 int main(int argc, char **argv)
 {
+	if (argc == 4 && strcmp(argv[1], "exec-child") == 0) {
+		probe_exec_child(atoi(argv[2]), argv[3]);
+		return failures ? 1 : 0;
+	}
 	if (argc != 3) {
-		fprintf(stderr, "Usage: preload_probe fork|unbound|stale|stamp <iface>\n");
+		fprintf(stderr, "Usage: preload_probe fork|unbound|stale|stamp|exec <iface>\n");
 		return 2;
 	}
 	signal(SIGPIPE, SIG_IGN);
@@ -291,6 +390,8 @@ int main(int argc, char **argv)
 		probe_stale(argv[2]);
 	else if (strcmp(argv[1], "stamp") == 0)
 		probe_stamp(argv[2]);
+	else if (strcmp(argv[1], "exec") == 0)
+		probe_exec(argv[2], "/proc/self/exe");
 	else {
 		fprintf(stderr, "preload_probe: unknown probe '%s'\n", argv[1]);
 		return 2;
