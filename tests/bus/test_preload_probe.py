@@ -72,3 +72,13 @@ def test_socket_inherited_across_exec_after_the_switch_to_stamps_loses_no_frame(
     lines = finish(probe, [])
     assert sum(line.startswith("ok: recvmmsg frame") for line in lines) == 4, lines
     assert sum(line.startswith("ok: read frame") for line in lines) == 4, lines
+
+
+def test_a_reader_that_did_not_see_the_switch_to_stamps_reads_whole_frames(bus):
+    """A socket shared by two readers (threads, or here a child forked before): the one that
+    reads the hub's HEADER_MODE switches, the other read the frames behind it in the bare
+    layout: a 40-byte message cut to the program's 16 (a header's bytes as the frame)."""
+    probe = start_probe(bus, "switch", "vcan0")
+    lines = finish(probe, [])
+    assert sum(line.startswith("ok: recvmmsg frame") for line in lines) == 3, lines
+    assert sum(line.startswith("ok: read frame") for line in lines) == 3, lines

@@ -65,7 +65,6 @@ struct csock {
 	atomic_int refs; /* fds sharing this socket (dup) */
 	pthread_mutex_t lock;
 	int connected, bound;
-	atomic_int header_mode;
 	char cookie[UCAN_COOKIE_MAX];
 	dev_t dev; /* the unix socket's identity: tells a descriptor closed */
 	ino_t ino; /* behind the library's back and reused from ours */
@@ -556,8 +555,6 @@ PUBLIC int bind(int fd, const struct sockaddr *addr, socklen_t len)
 		goto out;
 	}
 	cs->bound = 1;
-	/* as the hub decides (needs_header): interface, own flag or stamp per frame */
-	atomic_store(&cs->header_mode, cs->opts.ifindex == 0 || cs->opts.recv_own || cs->opts.timestamps);
 	rc = 0;
 out:
 	pthread_mutex_unlock(&cs->lock);
@@ -1046,10 +1043,10 @@ static int recv_nothing(int fd, int flags)
 }
 
 /* Hub messages are told apart by length alone (ucan_proto.h): 16 / 72 bytes a bare frame,
- * 40 / 96 a frame behind its ucan_rxhdr. The socket's header_mode only says how the next
- * read is laid out: a socket inherited across exec takes the hub's mode of now, yet may
- * still hold bare frames queued before the switch (HEADER_MODE behind them, unread), and a
- * thread may read on while another takes the switch. Each message is decoded by its length. */
+ * 40 / 96 a frame behind its ucan_rxhdr, 8 a control reply. The hub switches a socket to
+ * headers (HEADER_MODE) when it needs them, but the library does not follow the switch: a
+ * socket inherited across exec may still hold bare frames queued before it, and a thread may
+ * read on while another takes it. Each message is decoded by its length. */
 static int bare_frame_len(size_t len)
 {
 	return len == CAN_MTU || len == CANFD_MTU;
@@ -1096,21 +1093,19 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 	}
 	size_t controllen = user->msg_controllen;
 	for (;;) {
+		/* Every message is read behind a header-sized buffer and decoded by its length
+		 * (bare_frame_len), whatever the socket's mode: a thread that reads while another
+		 * takes the switch to headers, or bare frames queued before it, come out whole. */
 		struct ucan_rxhdr hdr;
-		int header_mode = atomic_load(&cs->header_mode);
 		struct msghdr msg = {
 			.msg_iov = iov,
+			.msg_iovlen = user->msg_iovlen + 1,
 			.msg_control = user->msg_control,
 			.msg_controllen = controllen,
 		};
-		size_t n_iov = 0;
-		if (header_mode) {
-			iov[n_iov].iov_base = &hdr;
-			iov[n_iov++].iov_len = sizeof(hdr);
-		}
-		memcpy(&iov[n_iov], user->msg_iov, user->msg_iovlen * sizeof(struct iovec));
-		n_iov += user->msg_iovlen;
-		msg.msg_iovlen = n_iov;
+		iov[0].iov_base = &hdr;
+		iov[0].iov_len = sizeof(hdr);
+		memcpy(&iov[1], user->msg_iov, user->msg_iovlen * sizeof(struct iovec));
 
 		/* MSG_TRUNC: the message's own length, so a frame cut to 8 bytes by a small
 		 * buffer is not taken for a control reply (which is 8 bytes long) */
@@ -1124,24 +1119,20 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 			errno = ENETDOWN;
 			return -1;
 		}
-		if (n == (ssize_t)sizeof(struct ucan_ctl)) {
-			struct ucan_ctl ctl;
-			if (header_mode)
-				memcpy(&ctl, &hdr, sizeof(ctl));
-			else
-				iov_gather(user->msg_iov, user->msg_iovlen, &ctl, sizeof(ctl));
+		if (n == (ssize_t)sizeof(struct ucan_ctl)) { /* an ACK, or HEADER_MODE: frames are told by length */
 			if (flags & MSG_PEEK) { /* consume it so the peeked frame is the next one */
+				struct ucan_ctl ctl;
 				get_recv()(fd, &ctl, sizeof(ctl), MSG_DONTWAIT);
 			}
-			if (ctl.type == UCAN_MSG_HEADER_MODE)
-				atomic_store(&cs->header_mode, 1);
 			continue;
 		}
 		size_t room = iov_total(user->msg_iov, user->msg_iovlen);
 		int native_flags = msg.msg_flags;
-		if (header_mode && bare_frame_len((size_t)n)) {
-			/* a bare frame queued before the switch: its first bytes went to hdr, the
-			 * rest to the program's buffer; put them together there */
+		int headed = !bare_frame_len((size_t)n);
+		if (headed && (size_t)n < sizeof(hdr))
+			continue; /* not a message the hub sends */
+		if (!headed) {
+			/* its first bytes went to hdr, the rest to the program's buffer: put them together there */
 			uint8_t frame[CANFD_MTU];
 			size_t head = (size_t)n < sizeof(hdr) ? (size_t)n : sizeof(hdr);
 			size_t want = (size_t)n < room ? (size_t)n : room;
@@ -1150,11 +1141,10 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 				iov_gather(user->msg_iov, user->msg_iovlen, frame + head, want - head);
 			iov_scatter(user->msg_iov, user->msg_iovlen, frame, want);
 			native_flags = (native_flags & ~MSG_TRUNC) | ((size_t)n > room ? MSG_TRUNC : 0);
-			header_mode = 0;
-		} else if (header_mode) {
+		} else {
 			n -= (ssize_t)sizeof(hdr);
 		}
-		frame_meta(cs, user, header_mode ? &hdr : NULL, msg.msg_controllen, controllen, native_flags);
+		frame_meta(cs, user, headed ? &hdr : NULL, msg.msg_controllen, controllen, native_flags);
 		/* as raw_recvmsg: the copied length, MSG_TRUNC set when the frame was cut */
 		return (size_t)n > room ? (ssize_t)room : n;
 	}
@@ -1238,16 +1228,11 @@ PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
 /* One hub message into the program's mmsghdr; 0 if it was a control reply (skipped). */
 static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *data, size_t len, int native_flags)
 {
-	if (len == sizeof(struct ucan_ctl)) {
-		struct ucan_ctl ctl;
-		memcpy(&ctl, data, sizeof(ctl));
-		if (ctl.type == UCAN_MSG_HEADER_MODE)
-			atomic_store(&cs->header_mode, 1);
-		return 0;
-	}
+	if (len == sizeof(struct ucan_ctl))
+		return 0; /* an ACK, or HEADER_MODE: frames are told by length */
 	struct ucan_rxhdr hdr;
-	int header_mode = !bare_frame_len(len); /* by length, not the socket's mode: see bare_frame_len */
-	if (header_mode) {
+	int headed = !bare_frame_len(len);
+	if (headed) {
 		if (len < sizeof(hdr))
 			return 0; /* not a frame the hub sends */
 		memcpy(&hdr, data, sizeof(hdr));
@@ -1259,7 +1244,7 @@ static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *da
 	iov_scatter(user->msg_iov, user->msg_iovlen, data, len < room ? len : room);
 	if (len > room)
 		native_flags |= MSG_TRUNC;
-	frame_meta(cs, user, header_mode ? &hdr : NULL, 0, user->msg_controllen, native_flags);
+	frame_meta(cs, user, headed ? &hdr : NULL, 0, user->msg_controllen, native_flags);
 	out->msg_len = (unsigned)(len > room ? room : len); /* as raw_recvmsg: the copied length */
 	return 1;
 }
@@ -1627,7 +1612,6 @@ static void adopt_inherited(int fd)
 			if (opts.type == UCAN_MSG_GETOPT && opts.nfilters <= UCAN_MAX_FILTERS &&
 			    (size_t)n == sizeof(opts) + opts.nfilters * sizeof(struct can_filter)) {
 				cs->bound = opts.bound;
-				atomic_store(&cs->header_mode, opts.header_mode);
 				memcpy(cs->filters, reply + sizeof(opts), opts.nfilters * sizeof(struct can_filter));
 				opts.bound = opts.header_mode = 0;
 				cs->opts = opts;

@@ -13,6 +13,8 @@
  *   preload_probe exec <iface>     a socket gets a classic and an FD frame, then SO_TIMESTAMPNS,
  *                                  then two more, and is inherited across exec: the program
  *                                  exec'd reads all four (recvmmsg, then read() on a second one)
+ *   preload_probe switch <iface>   a socket shared across fork: the parent turns stamps on and
+ *                                  reads the first of four frames, the child the other three
  *
  * Prints one line per result; exit 0 when everything held, 1 otherwise. */
 #define _GNU_SOURCE
@@ -329,8 +331,8 @@ static void probe_exec(const char *iface, const char *self)
 	}
 }
 
-/* The exec'd program: reads the inherited socket until EXEC_WAIT_MS pass without a frame. */
-static void probe_exec_child(int s, const char *mode)
+/* Reads a socket until EXEC_WAIT_MS pass without a frame: send_pair's frames from index first to 3. */
+static void read_pairs(int s, const char *mode, unsigned first)
 {
 	struct timeval tv = { 0, EXEC_WAIT_MS * 1000 };
 	setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
@@ -358,27 +360,76 @@ static void probe_exec_child(int s, const char *mode)
 			size[n++] = (unsigned)r;
 		}
 	}
-	int ok = n == 4;
-	for (unsigned i = 0; i < n; i++) {
+	int ok = n == 4 - first;
+	for (unsigned k = 0; k < n; k++) {
+		unsigned i = first + k;
 		int fd = i % 2;
 		uint8_t byte = (uint8_t)i, len = fd ? 12 : 1; /* as send_pair sent it */
-		int good = got[i].can_id == 0x101 + i && size[i] == (fd ? CANFD_MTU : CAN_MTU) && got[i].len == len &&
-			   got[i].data[0] == byte && got[i].data[len - 1] == byte;
+		int good = got[k].can_id == 0x101 + i && size[k] == (fd ? CANFD_MTU : CAN_MTU) && got[k].len == len &&
+			   got[k].data[0] == byte && got[k].data[len - 1] == byte;
 		printf("%s: %s frame %u: id 0x%03X, %u bytes, len %u, data[0] %u\n", good ? "ok" : "FAIL", mode, i,
-		       got[i].can_id, size[i], got[i].len, got[i].data[0]);
+		       got[k].can_id, size[k], got[k].len, got[k].data[0]);
 		ok &= good;
 	}
-	result(ok, "%s: %u frames from the inherited socket (4 sent)", mode, n);
+	result(ok, "%s: %u frames from the shared socket (%u sent)", mode, n, 4 - first);
+}
+
+/* ---- a socket shared across fork, switched to stamps by the parent ---- */
+
+/* The parent turns stamps on and reads the first frame, taking the hub's switch to headers
+ * with it; the child forked before reads the other three: what one thread of a program sees
+ * while another takes the switch (the library decodes by length, not by a mode it was told). */
+static void probe_switch(const char *iface)
+{
+	static const char *const modes[] = { "recvmmsg", "read" };
+	for (unsigned m = 0; m < 2; m++) {
+		int on = 1, go[2];
+		int rx = can_socket();
+		setsockopt(rx, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on));
+		can_bind(rx, iface);
+		int tx = socket(PF_CAN, SOCK_RAW | SOCK_CLOEXEC, CAN_RAW);
+		setsockopt(tx, SOL_CAN_RAW, CAN_RAW_FD_FRAMES, &on, sizeof(on));
+		can_bind(tx, iface);
+		if (pipe(go) < 0)
+			result(0, "pipe: %s", strerror(errno));
+		fflush(stdout);
+		pid_t pid = fork();
+		if (pid == 0) {
+			char c;
+			close(go[1]);
+			if (read(go[0], &c, 1) == 1)
+				read_pairs(rx, modes[m], 1);
+			fflush(stdout);
+			_exit(failures ? 1 : 0);
+		}
+		close(go[0]);
+		setsockopt(rx, SOL_SOCKET, SO_TIMESTAMPNS, &on, sizeof(on)); /* the hub switches rx to headers */
+		send_pair(tx, 0);
+		send_pair(tx, 2);
+		struct canfd_frame f;
+		ssize_t n = read(rx, &f, sizeof(f));
+		result(n == CAN_MTU && f.can_id == 0x101, "the parent read frame 0 behind the switch (%zd bytes, id 0x%03X)",
+		       n, f.can_id);
+		if (write(go[1], "g", 1) != 1)
+			result(0, "pipe write: %s", strerror(errno));
+		close(go[1]);
+		close(tx);
+		close(rx);
+		int status = 0;
+		waitpid(pid, &status, 0);
+		result(WIFEXITED(status) && WEXITSTATUS(status) == 0, "%s in the child: every frame after the switch "
+		       "(status %d)", modes[m], status);
+	}
 }
 
 int main(int argc, char **argv)
 {
 	if (argc == 4 && strcmp(argv[1], "exec-child") == 0) {
-		probe_exec_child(atoi(argv[2]), argv[3]);
+		read_pairs(atoi(argv[2]), argv[3], 0);
 		return failures ? 1 : 0;
 	}
 	if (argc != 3) {
-		fprintf(stderr, "Usage: preload_probe fork|unbound|stale|stamp|exec <iface>\n");
+		fprintf(stderr, "Usage: preload_probe fork|unbound|stale|stamp|exec|switch <iface>\n");
 		return 2;
 	}
 	signal(SIGPIPE, SIG_IGN);
@@ -392,6 +443,8 @@ int main(int argc, char **argv)
 		probe_stamp(argv[2]);
 	else if (strcmp(argv[1], "exec") == 0)
 		probe_exec(argv[2], "/proc/self/exe");
+	else if (strcmp(argv[1], "switch") == 0)
+		probe_switch(argv[2]);
 	else {
 		fprintf(stderr, "preload_probe: unknown probe '%s'\n", argv[1]);
 		return 2;
