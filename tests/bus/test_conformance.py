@@ -282,7 +282,7 @@ def test_slow_reader_loses_frames_counted_without_slowing_others(bus):
     stalled.kill()
     stalled.wait()
     said = f"(pid {stalled.pid}, ucan/{stalled.pid}/"
-    closed = wait_for(lambda: [line for line in bus.hub_log.read_text().splitlines() if said in line and "closed" in line],
+    closed = wait_for(lambda: [ln for ln in bus.hub_log.read_text().splitlines() if said in ln and "closed" in ln],
                       "the hub's line on the stalled reader's close")
     assert closed[0].endswith(f"; {drops[stalled.pid]} frames dropped for it (queue full)"), closed
 
