@@ -159,6 +159,35 @@ static void test_flush_on_stop(void)
 	CHECK(mock_zenoh_put_count() == 1 && mock_zenoh_put(0)->len == 48);
 }
 
+/* Immediate mode: a frame the reader reads while the node stops is published, even when the
+ * publisher, watching the reader's direct puts, saw the stop first with nothing queued (it
+ * used to leave then, and the reader's last frames stayed in the queue: read, never published
+ * nor counted as dropped). */
+static void *stop_node(void *arg)
+{
+	(void)arg;
+	zn_node_stop();
+	return NULL;
+}
+
+static void test_immediate_stop_publishes_frames_read_meanwhile(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	can_message_t m = frame(0x10, 0, 0, 1, 1);
+	mock_can_inject("vcan0", &m, 1);
+	CHECK(mock_zenoh_wait_puts(1, WAIT_MS) == 1); /* put by the reader: the publisher now watches */
+	pthread_t t;
+	CHECK(pthread_create(&t, NULL, stop_node, NULL) == 0);
+	/* the publisher's watch (10 ms) sees the stop; the reader still waits in its read (200 ms) */
+	nanosleep(&(struct timespec){ .tv_nsec = 50000000 }, NULL);
+	m = frame(0x11, 0, 0, 1, 2);
+	mock_can_inject("vcan0", &m, 2);
+	pthread_join(t, NULL);
+	CHECK(mock_zenoh_put_count() == 2);
+}
+
 static void inject_paced(size_t frames, size_t per_burst, long gap_ns, int64_t first_stamp)
 {
 	can_message_t m[64];
@@ -401,6 +430,7 @@ int main(void)
 	test_filters();
 	test_batching();
 	test_flush_on_stop();
+	test_immediate_stop_publishes_frames_read_meanwhile();
 	test_burst_immediate();
 	test_burst_batching();
 	test_burst_port_capacity();

@@ -92,6 +92,7 @@ struct bus {
 	 * CAN port meanwhile, reader_back: the reader returned and waits on handback */
 	int direct, publishing, degraded, watching, rescuing, reader_back;
 	int long_stall_said; /* a put stalled 1 s was logged (once) */
+	int reader_gone;     /* stopping: the reader has been joined, so nothing more is queued */
 	int64_t direct_since, publish_since; /* ... and the publisher's current round started then */
 	uint64_t direct_puts;
 	zn_cond_t *handback;

@@ -225,6 +225,7 @@ void zn_node_stop(void)
 		struct bus *b = &zn_node.buses[i];
 		zn_thread_join(b->reader);
 		zn_mutex_lock(b->lock);
+		b->reader_gone = 1;
 		zn_cond_signal(b->nonempty);
 		zn_mutex_unlock(b->lock);
 		zn_thread_join(b->publisher); /* flushes the pending batch */
