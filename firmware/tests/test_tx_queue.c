@@ -396,6 +396,35 @@ static void test_stale_waiting_for_the_bus(void)
 	zn_node_stop();
 }
 
+/* A bus that takes one frame every 10 ms (a device queue draining onto a busy bus): a 64-frame
+ * command with a 100 ms deadline has about 10 of its frames written, the rest refused as stale
+ * once the deadline runs out, not written late. The port's timeout holds per frame, so a burst
+ * written with the deadline as its timeout went on for as long as the bus kept taking frames. */
+static void test_stale_on_a_slow_bus(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	cfg.tx_max_age_ms = 100;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_tx_room("vcan0", 0);
+	int64_t t0 = realtime_ns();
+	size_t len = command(big, 64, 0x100);
+	CHECK(mock_zenoh_deliver_at("vehicle/can/tx", big, len, NULL, 0, (uint64_t)t0) == 0);
+	while (realtime_ns() < t0 + 800 * 1000000LL) { /* bounded: 8 deadlines of one frame each 10 ms */
+		mock_can_tx_room("vcan0", 1);
+		nanosleep(&(struct timespec){ .tv_nsec = 10000000 }, NULL);
+	}
+	size_t sent = mock_can_tx_count("vcan0");
+	if (sent > 12)
+		fprintf(stderr, "test_stale_on_a_slow_bus: %zu of 64 frames written, within %lld ms\n", sent,
+			(long long)((realtime_ns() - t0) / 1000000));
+	CHECK(sent <= 12); /* 100 ms at one frame each 10 ms, and the one waiting when it ran out */
+	CHECK(stats_soon_has("\"stale\": 1}"));
+	CHECK(stats_soon_has("\"can_tx_errors\": 0"));
+	mock_can_tx_room("vcan0", -1);
+	zn_node_stop();
+}
+
 /* A command that finds the bus free is written by Zenoh's callback itself before it returns
  * (no transmitter wakeup): every frame from the delivering thread, in bursts, counted in
  * tx_direct_frames as well as tx_frames. */
@@ -565,6 +594,7 @@ int main(int argc, char **argv)
 		{ "future_arrival", test_future_refused_on_arrival },
 		{ "stale_queue", test_stale_in_queue },
 		{ "stale_waiting", test_stale_waiting_for_the_bus },
+		{ "stale_slow_bus", test_stale_on_a_slow_bus },
 		{ "direct", test_free_bus_written_by_the_callback },
 		{ "direct_rest", test_rest_of_a_direct_write_goes_first },
 		{ "together", test_queued_commands_written_together },

@@ -198,13 +198,13 @@ static void written(struct bus *b, struct tx_cmd *c, uint32_t n)
 	c->count -= n;
 }
 
-/* Writes the next burst of command c (up to ZN_CAN_BURST_MAX of its frames, copied to burst)
+/* Writes the next burst of command c (up to max <= ZN_CAN_BURST_MAX of its frames, copied to burst)
  * with zn_can_send_burst's timeout (0: what the bus takes at once). The frames written leave
  * the command (c->first, c->count) and their slots are released; counted in tx_frames. */
-static esp_err_t write_burst(struct bus *b, struct tx_cmd *c, can_message_t *burst, int timeout_ms)
+static esp_err_t write_burst(struct bus *b, struct tx_cmd *c, can_message_t *burst, uint32_t max, int timeout_ms)
 {
 	uint32_t k = 0;
-	for (uint32_t at = c->first; k < ZN_CAN_BURST_MAX && k < c->count; k++) {
+	for (uint32_t at = c->first; k < max && k < c->count; k++) {
 		burst[k] = b->txq[at].msg;
 		at = b->txq[at].next;
 	}
@@ -286,7 +286,7 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 	}
 	b->tx_direct = 1; /* the transmitter waits until this command is written or handed over */
 	zn_mutex_unlock(b->tx_lock);
-	while (c.count > 0 && write_burst(b, &c, b->tx_burst, 0) == ESP_OK)
+	while (c.count > 0 && write_burst(b, &c, b->tx_burst, ZN_CAN_BURST_MAX, 0) == ESP_OK)
 		;
 	COUNT_N(b->n.tx_direct_frames, count - c.count);
 	zn_mutex_lock(b->tx_lock);
@@ -339,7 +339,17 @@ static int transmit_command(struct bus *b, struct tx_cmd *c, can_message_t *burs
 		 * that goes stale waiting for the bus is refused, not written late */
 		int64_t left_ms = lifetime_left_ms(c), age_ms = 0;
 		int timeout_ms = left_ms >= 0 && left_ms < CAN_TRANSMIT_TIMEOUT_MS ? (int)left_ms : CAN_TRANSMIT_TIMEOUT_MS;
-		esp_err_t rc = stale(c->source_ns, &age_ms) ? ESP_ERR_TIMEOUT : write_burst(b, c, burst, timeout_ms);
+		esp_err_t rc = ESP_ERR_TIMEOUT; /* stale: refused below */
+		if (left_ms < 0) {
+			rc = write_burst(b, c, burst, ZN_CAN_BURST_MAX, timeout_ms);
+		} else if (!stale(c->source_ns, &age_ms)) {
+			/* the port's timeout holds per frame: a burst given the deadline as its timeout went
+			 * on past it while the bus took a frame now and then. So what the bus takes at once,
+			 * then one frame waiting at most what is left, and the deadline judged again */
+			rc = write_burst(b, c, burst, ZN_CAN_BURST_MAX, 0);
+			if (rc == ESP_ERR_TIMEOUT)
+				rc = write_burst(b, c, burst, 1, timeout_ms);
+		}
 		if (rc == ESP_OK)
 			continue;
 		uint32_t left = c->count;
