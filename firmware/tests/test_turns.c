@@ -288,6 +288,33 @@ static void test_rest_after_a_held_put(void)
 	zn_node_stop();
 }
 
+/* The bus lost while an early full batch's put is held: the period that would have published
+ * the rest of the queue is cancelled by the loss, so the rest must go out once the put returns
+ * (it used to wait in the queue for the next frame, or the stop: read, not published). */
+static void test_rest_after_a_bus_lost_during_a_held_put(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = batching();
+	cfg.publish_period_ms = 1000; /* the period does not end during the test */
+	cfg.batch_max_frames = 4;
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	can_message_t m[6];
+	memset(m, 0, sizeof(m));
+	for (uint32_t i = 0; i < 6; i++)
+		m[i] = (can_message_t){ .identifier = 0x100 + i, .data_length_code = 1, .data = { (uint8_t)i } };
+	gate(1);
+	mock_can_inject_burst("vcan0", m, 6, 7000); /* one drain: a full batch of 4 put at once, 2 queued */
+	CHECK(wait_held() == 1);
+	mock_can_lose("vcan0"); /* the other thread's next drain finds the bus gone and reopens it */
+	CHECK(counter_reaches("can_reopens", 1));
+	gate(0);
+	CHECK(counter_reaches("published_frames", 6));
+	if (counter("published_frames") != 6)
+		fprintf(stderr, "published_frames %lld of 6, rx_queued %lld, after a bus lost during a put\n",
+			counter("published_frames"), counter("rx_queued"));
+	zn_node_stop();
+}
+
 /* Immediate mode: the reader's own put held, the stats say how long it has run; once it
  * returns, no put runs. */
 static void test_immediate_put_running_in_stats(void)
@@ -315,5 +342,6 @@ int main(void)
 	test_one_wakeup_per_period();
 	test_stalled_put_keeps_reading();
 	test_stop_during_stalled_put();
+	test_rest_after_a_bus_lost_during_a_held_put();
 	CHECK_DONE("test_turns");
 }

@@ -673,6 +673,8 @@ static void drain_turn(struct bus *b, struct turns *t, int me, zn_can_rx_t *rx, 
 		t->flush_at = t->due = 0;
 		if (t->putter == NOBODY && b->queued)
 			publish_queue(b, t, me, taken, 1);
+		else if (t->putter == other)
+			t->flush_owed = 1; /* an early full batch's put: the period that was to publish the rest is gone */
 		zn_mutex_unlock(b->lock);
 		reopen(b, &t->backoff_ms); /* still t->port: nobody reads the port meanwhile */
 		zn_mutex_lock(b->lock);
