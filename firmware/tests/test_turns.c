@@ -24,6 +24,7 @@
 static pthread_mutex_t gate_lock = PTHREAD_MUTEX_INITIALIZER;
 static pthread_cond_t gate_cond = PTHREAD_COND_INITIALIZER;
 static int gate_closed, held; /* puts waiting at the gate now */
+static int failing;	       /* every put fails (as a closed session's) */
 
 int __real_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
 		  size_t attachment_len);
@@ -40,8 +41,9 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 			pthread_cond_wait(&gate_cond, &gate_lock);
 		held--;
 	}
+	int fail = failing;
 	pthread_mutex_unlock(&gate_lock);
-	return __real_zn_put(pub, payload, len, attachment, attachment_len);
+	return fail ? -1 : __real_zn_put(pub, payload, len, attachment, attachment_len);
 }
 
 static void gate(int closed)
@@ -315,6 +317,33 @@ static void test_rest_after_a_bus_lost_during_a_held_put(void)
 	zn_node_stop();
 }
 
+/* A batch whose put fails: publish_errors says how many frames went with it, as the bench
+ * reads it beside published_frames (it counted the sample: 1 for a batch of 3). */
+static void test_failed_batch_counted_in_frames(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = batching();
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	can_message_t m[3];
+	memset(m, 0, sizeof(m));
+	for (uint32_t i = 0; i < 3; i++)
+		m[i] = (can_message_t){ .identifier = 0x200 + i, .data_length_code = 1, .data = { (uint8_t)i } };
+	pthread_mutex_lock(&gate_lock);
+	failing = 1;
+	pthread_mutex_unlock(&gate_lock);
+	mock_can_inject_burst("vcan0", m, 3, 8000);
+	CHECK(counter_reaches("can_rx_frames", 3));
+	for (int waited_ms = 0; waited_ms < WAIT_MS && counter("publish_errors") == 0; waited_ms++)
+		pace_ms(1);
+	CHECK(counter("publish_errors") == 3 && counter("published_frames") == 0);
+	if (counter("publish_errors") != 3)
+		fprintf(stderr, "publish_errors %lld after a failed put of 3 frames\n", counter("publish_errors"));
+	pthread_mutex_lock(&gate_lock);
+	failing = 0;
+	pthread_mutex_unlock(&gate_lock);
+	zn_node_stop();
+}
+
 /* Immediate mode: the reader's own put held, the stats say how long it has run; once it
  * returns, no put runs. */
 static void test_immediate_put_running_in_stats(void)
@@ -343,5 +372,6 @@ int main(void)
 	test_stalled_put_keeps_reading();
 	test_stop_during_stalled_put();
 	test_rest_after_a_bus_lost_during_a_held_put();
+	test_failed_batch_counted_in_frames();
 	CHECK_DONE("test_turns");
 }

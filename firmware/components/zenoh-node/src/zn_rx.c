@@ -222,7 +222,7 @@ static void publish(struct bus *b, size_t cls, const struct rx_entry *frames, si
 		COUNT_N(b->n.published_frames, n);
 		COUNT_N(b->ring[cls].published_frames, n);
 	} else {
-		COUNT(b->n.publish_errors);
+		COUNT_N(b->n.publish_errors, n); /* frames, as lost: read beside published_frames */
 	}
 	if (b->ros_pub)
 		zn_ros2_publish(b, frames, n);
