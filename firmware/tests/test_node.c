@@ -178,6 +178,7 @@ static void test_immediate_stop_publishes_frames_read_meanwhile(void)
 	can_message_t m = frame(0x10, 0, 0, 1, 1);
 	mock_can_inject("vcan0", &m, 1);
 	CHECK(mock_zenoh_wait_puts(1, WAIT_MS) == 1); /* put by the reader: the publisher now watches */
+	CHECK(mock_can_wait_receiving("vcan0", WAIT_MS)); /* the reader back in its read */
 	pthread_t t;
 	CHECK(pthread_create(&t, NULL, stop_node, NULL) == 0);
 	/* the publisher's watch (10 ms) sees the stop; the reader still waits in its read (200 ms) */

@@ -27,6 +27,7 @@ struct mock_bus {
 	size_t capacity;     /* frames held before injected ones are dropped (0: MOCK_FRAMES) */
 	size_t rx_drops, reads, tx_calls; /* frames dropped; receive and transmit calls that moved frames */
 	size_t tx_empty;		  /* transmit calls with a timeout of 0 that moved none */
+	size_t rx_waiting;		  /* receive calls waiting for a frame now */
 };
 
 struct zn_can {
@@ -167,6 +168,11 @@ size_t mock_can_wait_tx_empty(const char *bus, size_t n, int timeout_ms)
 	return wait_counter(bus, offsetof(struct mock_bus, tx_empty), n, timeout_ms);
 }
 
+int mock_can_wait_receiving(const char *bus, int timeout_ms)
+{
+	return wait_counter(bus, offsetof(struct mock_bus, rx_waiting), 1, timeout_ms) > 0;
+}
+
 void mock_can_stall(const char *bus, int stalled)
 {
 	pthread_mutex_lock(&lock);
@@ -235,7 +241,13 @@ static esp_err_t wait_rx(zn_can_t *can, const struct timespec *deadline, int no_
 	while (b->rx_len == 0 || can->generation != b->generation) {
 		if (can->generation != b->generation)
 			return ESP_FAIL;
-		if (no_wait || pthread_cond_timedwait(&arrived, &lock, deadline) != 0)
+		if (no_wait)
+			return ESP_ERR_TIMEOUT;
+		b->rx_waiting++;
+		pthread_cond_broadcast(&sent); /* mock_can_wait_receiving */
+		int rc = pthread_cond_timedwait(&arrived, &lock, deadline);
+		b->rx_waiting--;
+		if (rc != 0)
 			return ESP_ERR_TIMEOUT;
 	}
 	return ESP_OK;

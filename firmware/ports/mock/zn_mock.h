@@ -77,6 +77,8 @@ size_t mock_can_reads(const char *bus);
 size_t mock_can_tx_calls(const char *bus);
 /* Waits until n transmit calls with a timeout of 0 took no frame (a full bus); returns how many did. */
 size_t mock_can_wait_tx_empty(const char *bus, size_t n, int timeout_ms);
+/* Waits until a receive call waits for a frame on bus (a reader back at its port); returns whether one does. */
+int mock_can_wait_receiving(const char *bus, int timeout_ms);
 
 /* Zenoh */
 size_t mock_zenoh_put_count(void);
