@@ -5,6 +5,7 @@ frames and where they came from (can.log:line). Used by the scenario tests
 for the fault it exists for."""
 from __future__ import annotations
 
+import bisect
 from collections.abc import Callable
 from functools import wraps
 
@@ -94,7 +95,7 @@ def integrity(result: RunResult) -> list[str] | None:
             problems.append(f"{b.bus}: no frames on the bus at all (did the ECUs run?)")
         if len(c.lost) > budget:
             problems.append(f"{b.bus}: {len(c.lost)} frames lost (budget {budget}): {_frames(c.lost)}"
-                            + _readers_dropped(result, b.bus))
+                            + _numbered_by_the_bridge(result, b) + _readers_dropped(result, b.bus))
         if c.duplicates:
             problems.append(f"{b.bus}: {len(c.duplicates)} duplicates on {b.rx_key}: {_frames(c.duplicates)}")
         if c.corrupted:
@@ -108,6 +109,31 @@ def integrity(result: RunResult) -> list[str] | None:
             problems.append(f"{b.bus}: ... ({len(b.problems) - SHOW} more undecodable samples, "
                             f"{len(b.problems)} in all)")
     return problems
+
+
+def _numbered_by_the_bridge(result: RunResult, b) -> str:
+    """Lost frames the bridge gave a sequence number (the frames that arrived either side of one, in the
+    same run of the bridge, are numbered as far apart as they are on the bus): it read them, so they were
+    dropped from its queue (rx_queue_drops) or lost after its put (the bridge's Zenoh session, the router,
+    the capture's session), never on the bus's side. Said with its stats' drops, the evidence of which."""
+    rank = {id(s): i for i, s in enumerate(b.can_frames)}
+    around = sorted((rank[id(s)], r.seq) for s, r in b.comparison.matched if r.seq >= 0 and id(s) in rank)
+    places = [p for p, _ in around]
+    numbered = []
+    for s in b.comparison.lost:
+        p = rank.get(id(s))
+        k = bisect.bisect(places, p) if p is not None else 0
+        if 0 < k < len(around):
+            (p0, q0), (p1, q1) = around[k - 1], around[k]
+            if q1 - q0 == p1 - p0:
+                numbered.append(f"{describe(s)} seq {q0 + p - p0}")
+    if not numbered:
+        return ""
+    stats = bus_stats(result.bridge_stats, b.bus) if result.bridge_stats else None
+    drops = (f"; its stats (its last start) count {stats.get('rx_queue_drops')} queue drops and "
+             f"{stats.get('publish_errors')} frames of failed puts" if stats else "")
+    return (f"; the bridge numbered {len(numbered)} of them ({_listed(numbered, str)}): it read them, so they were "
+            f"dropped from its queue or lost after its put (its Zenoh session, the router, the capture's){drops}")
 
 
 def _readers_dropped(result: RunResult, bus: str) -> str:

@@ -154,8 +154,8 @@ def test_the_stats_check_is_skipped_with_its_reason_only_for_a_device_that_annou
 
 def test_a_loss_the_hub_dropped_for_another_reader_is_named_with_it(tmp_path):
     # the hub's drops for a reader other than the capture (the bridge's socket, when its queue was full):
-    # the bridge never read those frames, and the verdict says where to look instead of a bare loss
-    seeded(tmp_path)
+    # the bridge never read those frames (its numbers go on without a gap), and the verdict says where to look
+    seeded(tmp_path, seq=lambda i: i if i < 50 else i - 1)
     lines = (tmp_path / "zenoh.tsv").read_text().splitlines(keepends=True)
     (tmp_path / "zenoh.tsv").write_text("".join(lines[:50] + lines[51:]))
     bridge = {"cookie": "ucan/1/0/0badf00d", "pid": 1, "iface": "vcan0", "queue_limit": 512,
@@ -174,3 +174,24 @@ def test_a_loss_the_hub_dropped_for_another_reader_is_named_with_it(tmp_path):
     (tmp_path / "captures.json").write_text(json.dumps({"can": {"hub_rx_drops": 0, "hub_sockets": 1,
                                                                 "hub_other_drops": [elsewhere]}}))
     assert checks.integrity(r)[0].endswith(")") and "userspace hub" not in checks.integrity(r)[0]
+
+
+def test_a_lost_frame_the_bridge_numbered_is_said_to_be_lost_after_its_read(tmp_path):
+    # the frames either side arrived numbered as far apart as they are on the bus: the bridge read the
+    # lost one and gave it its number, so it went from its queue or after its put, not on the bus's side
+    seeded(tmp_path)
+    lines = (tmp_path / "zenoh.tsv").read_text().splitlines(keepends=True)
+    (tmp_path / "zenoh.tsv").write_text("".join(lines[:50] + lines[51:]))
+    sc = scenario.load(REPO / "scenarios" / "smoke.yaml")
+    stats = {"buses": [{"bus": "vcan0", "rx_queue_drops": 0, "publish_errors": 0}]}
+    problems = checks.integrity(run.analyse(sc, "seeded", tmp_path, "vehicle/can", {}, stats, 2.0))
+    assert len(problems) == 1 and "1 frames lost (budget 0)" in problems[0], problems
+    assert "; the bridge numbered 1 of them (" in problems[0] and " seq 50): it read them, so they were dropped " \
+        "from its queue or lost after its put (its Zenoh session, the router, the capture's); its stats (its last " \
+        "start) count 0 queue drops and 0 frames of failed puts" in problems[0], problems
+    # a frame the bridge never read takes no number: the numbers go on one apart where it is missing
+    seeded(tmp_path, seq=lambda i: i if i < 50 else i - 1)
+    lines = (tmp_path / "zenoh.tsv").read_text().splitlines(keepends=True)
+    (tmp_path / "zenoh.tsv").write_text("".join(lines[:50] + lines[51:]))
+    problems = checks.integrity(run.analyse(sc, "seeded", tmp_path, "vehicle/can", {}, stats, 2.0))
+    assert len(problems) == 1 and "numbered" not in problems[0], problems
