@@ -247,9 +247,13 @@ static void client_close(uint32_t idx, const char *why)
 	struct client *c = &hub.clients[idx];
 	if (c->fd < 0)
 		return;
-	if (hub.verbose || why || c->rx_drops) /* a reader's drops said once it is gone: its counters go with it */
-		hub_log("client %u (pid %d, %s) closed%s%s; %" PRIu64 " frames dropped for it (queue full)", idx,
-			(int)c->pid, c->cookie[0] ? c->cookie : "-", why ? ": " : "", why ? why : "", c->rx_drops);
+	if (hub.verbose || why || c->rx_drops) { /* a reader's drops said once it is gone: its counters go with it */
+		char drops[64] = "";
+		if (c->rx_drops)
+			snprintf(drops, sizeof(drops), "; %" PRIu64 " frames dropped for it (queue full)", c->rx_drops);
+		hub_log("client %u (pid %d, %s) closed%s%s%s", idx, (int)c->pid, c->cookie[0] ? c->cookie : "-",
+			why ? ": " : "", why ? why : "", drops);
+	}
 	epoll_ctl(hub.epoll_fd, EPOLL_CTL_DEL, c->fd, NULL);
 	close(c->fd);
 	free(c->filters);
