@@ -304,8 +304,8 @@ static void wait_immediate(struct bus *b, zn_can_rx_t *rx)
 	uint64_t seen = b->direct_puts;
 	for (;;) {
 		/* stopping: the reader's last reads still queue frames, so the queue is done only
-		 * once the reader is gone */
-		if (!b->direct && (b->queued || (zn_node.stopping && b->reader_gone)))
+		 * once the reader is gone (set by zn_node_stop after joining it) */
+		if (!b->direct && (b->queued || b->reader_gone))
 			return;
 		/* stopping: the port is no longer read for a stuck reader (the rescue would end at
 		 * once and start again, never releasing the lock the reader needs to come back) */
@@ -347,7 +347,7 @@ void zn_rx_publisher_thread(void *arg)
 		zn_mutex_lock(b->lock);
 		wait_immediate(b, rx);
 		b->publishing = 1;
-		int stopping = zn_node.stopping && b->reader_gone;
+		int stopping = b->reader_gone;
 		/* a round: highest class first, starting over after the first class that had
 		 * frames (a higher one may have some by now) */
 		size_t round = 0;
