@@ -11,7 +11,10 @@ PYTEST         := $(PYTHON) -m pytest
 # Rust and zenohd builds outlive `make clean` and fresh clones: they take minutes.
 CACHE          ?= $(HOME)/.cache/canbench
 ZENOHD_VERSION := 1.10.2
-ZENOHD         ?= $(firstword $(shell command -v zenohd 2>/dev/null) $(CACHE)/zenohd-$(ZENOHD_VERSION)/bin/zenohd)
+# the bench's zenohd: the builder image's (the patched zenoh crates, firmware/ports/linux/zenoh_rust/
+# patched/README.md; their hash names the build), or ZENOHD=/path/to/zenohd for another
+ZENOHD_PATCHES := $(shell cat firmware/ports/linux/zenoh_rust/patched/*/src/*.rs 2>/dev/null | sha256sum | cut -c1-8)
+ZENOHD         ?= $(CACHE)/zenohd-$(ZENOHD_VERSION)-$(ZENOHD_PATCHES)/bin/zenohd
 CARGO_TARGET   ?= $(CACHE)/cargo-target
 FUZZ_SECONDS   ?= 30
 export ZENOHD
@@ -75,7 +78,7 @@ help:
 	@echo "make summarise TRACE=f | scaffold TRACE=f NAME=n | validate SCENARIO=f | open: canbench (venv or image)"
 	@echo "make ucan       build the userspace CAN bus (hub, preload library, ucanctl)"
 	@echo "make firmware   build zenoh-node for Linux (C component + Rust Zenoh port)"
-	@echo "make zenohd     install zenohd $(ZENOHD_VERSION) from crates.io into $(CACHE)"
+	@echo "make zenohd     zenohd $(ZENOHD_VERSION) with the patched zenoh crates, into $(CACHE)"
 	@echo "make fuzz       bounded libFuzzer runs (FUZZ_SECONDS=$(FUZZ_SECONDS) each)"
 	@echo "make fuzz-hub-proof  the stateful hub fuzzer from an empty corpus on the hub before a fixed defect (FUZZ_PROOF_HUB)"
 	@echo "make bench      benchmarks, ratios against baselines measured in the same run (not part of check)"
@@ -107,14 +110,14 @@ $(CACHE)/rust-port-%/libzn_port_zenoh.a:
 	@echo "Zenoh port: copied from canbench/builder:$(BENCH_TAG) into $(@D)"
 
 # zenohd is compiled once per cold machine: taken from the builder image when
-# Docker works (the images need it anyway), else installed from crates.io.
-$(CACHE)/zenohd-$(ZENOHD_VERSION)/bin/zenohd:
+# Docker works (the images need it anyway), else built by the host's cargo as the image does.
+$(CACHE)/zenohd-$(ZENOHD_VERSION)-$(ZENOHD_PATCHES)/bin/zenohd:
 	@if docker info >/dev/null 2>&1; then \
 	   $(MAKE) --no-print-directory images && mkdir -p $(@D) && \
 	   id=$$(docker create --pull never canbench/builder:$(BENCH_TAG)) && docker cp $$id:/opt/zenohd/bin/zenohd $@ && \
 	   docker rm $$id >/dev/null && echo "zenohd: copied from canbench/builder:$(BENCH_TAG)"; \
 	 else \
-	   cargo install zenohd --version $(ZENOHD_VERSION) --locked --root $(CACHE)/zenohd-$(ZENOHD_VERSION); \
+	   CARGO_TARGET_DIR=$(CARGO_TARGET)/zenohd scripts/build-zenohd $(ZENOHD_VERSION) $@; \
 	 fi
 
 zenohd: $(ZENOHD)

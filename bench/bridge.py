@@ -98,7 +98,7 @@ SWITCH_TARGET = 0.05  # context switches per frame in batching mode (issue #24)
 JUDGED_RUNS = 3
 SETTLE_S = 10.0
 # zenoh-node's per-bus counters that say where a frame went (docs/bridge.md, Keys, token, stats)
-CAN_TO_ZENOH_COUNTERS = ("can_rx_frames", "rx_queue_drops", "published_frames", "publish_errors")
+CAN_TO_ZENOH_COUNTERS = ("can_rx_frames", "rx_queue_drops", "published_frames", "publish_errors", "unrouted_frames")
 ZENOH_TO_CAN_COUNTERS = ("tx_samples", "tx_frames", "tx_queue_full", "can_tx_errors", "tx_abandoned")
 
 
@@ -285,8 +285,8 @@ def first_loss(results: list[dict], system: str) -> str:
     return f"{lossy[0]} buses" if lossy else f"none up to {highest} buses"
 
 
-LOSS_COUNTERS = ("hub_rx_drops", "rx_queue_drops", "publish_errors", "tx_rejected", "tx_queue_full", "can_tx_errors",
-                 "tx_abandoned")
+LOSS_COUNTERS = ("hub_rx_drops", "rx_queue_drops", "publish_errors", "unrouted_frames", "tx_rejected", "tx_queue_full",
+                 "can_tx_errors", "tx_abandoned")
 
 
 def lossless_cell(r: dict) -> str:

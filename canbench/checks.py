@@ -130,8 +130,15 @@ def _numbered_by_the_bridge(result: RunResult, b) -> str:
     if not numbered:
         return ""
     stats = bus_stats(result.bridge_stats, b.bus) if result.bridge_stats else None
-    drops = (f"; its stats (its last start) count {stats.get('rx_queue_drops')} queue drops and "
-             f"{stats.get('publish_errors')} frames of failed puts" if stats else "")
+    drops = (f"; its stats (its last start) count {stats.get('rx_queue_drops')} queue drops, "
+             f"{stats.get('publish_errors')} frames of failed puts and {stats.get('unrouted_frames', 'no count of')} "
+             f"frames read while it had no Zenoh connection" if stats else "")
+    # a connection to the router that closed and came back: puts made meanwhile returned Ok and went
+    # nowhere (a bridge older than the counter, or a device of your own, may not say)
+    closed = (result.bridge_stats or {}).get("connections_closed")
+    if stats and closed is not None:
+        drops += (f", and {closed} Zenoh connections of it closed (samples put while it had none are lost "
+                  f"though their put succeeded)" if closed else ", and no Zenoh connection of it closed")
     return (f"; the bridge numbered {len(numbered)} of them ({_listed(numbered, str)}): it read them, so they were "
             f"dropped from its queue or lost after its put (its Zenoh session, the router, the capture's){drops}")
 

@@ -227,7 +227,10 @@ class Execution:
             if not stats:
                 return False
             read = sum(b["can_rx_frames"] - b["filtered"] - b["rx_queue_drops"] for b in stats["buses"])
-            published = sum(b["published_frames"] + b["publish_errors"] for b in stats["buses"])
+            # frames put with no connection (unrouted_frames; a device of your own may not say) are
+            # worked off as surely as failed puts
+            published = sum(b["published_frames"] + b["publish_errors"] + b.get("unrouted_frames", 0)
+                            for b in stats["buses"])
             period_s = stats.get("publish_period_ms", 0) / 1000  # the bridge's own, whatever it was given
             return reading.for_s(read) >= max(2 * period_s, IMMEDIATE_QUIET_S) and published >= read
         _bounded(drained, DRAIN_TIMEOUT_S + 2 * max(self.period_s, 0.1), "the bridge to publish what it read")

@@ -33,6 +33,7 @@ typedef struct {
 /* zn_open's result when the configuration cannot work (invalid, or a file it
  * names cannot be read): no retry would heal it. Any other failure is -1. */
 #define ZN_PORT_ERR_CONFIG (-2)
+#define ZN_PORT_UNROUTED 1
 
 typedef enum { ZN_CONGESTION_DROP = 0, ZN_CONGESTION_BLOCK = 1 } zn_congestion_t;
 
@@ -58,6 +59,9 @@ typedef size_t (*zn_query_cb)(char *buf, size_t cap, void *ctx);
  * reason logged). Multicast scouting is always off; endpoints are explicit. */
 int zn_open(const zn_session_config_t *config, zn_session_t **out);
 int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
+/* 0: handed to Zenoh. ZN_PORT_UNROUTED: not sent, the session has no connection
+ * to a router or peer at all (Zenoh's own put would return Ok and drop it;
+ * a connection that failed an instant ago may still count as open). */
 int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out);
@@ -66,6 +70,11 @@ int zn_declare_queryable(zn_session_t *s, const char *key, zn_query_cb cb, void 
  * writes their Zenoh ids, sorted and comma separated, into ids. A restarted
  * router has a new id, so a restart faster than any poll is still seen. */
 int zn_routers(zn_session_t *s, char *ids, size_t cap);
+/* Connections (Zenoh transports) of this session to a router or peer that
+ * closed since it opened (the router's end, a failed write, a lost lease):
+ * Zenoh opens a new one within milliseconds, and samples put while none was
+ * up are lost though their put succeeded. */
+uint64_t zn_connections_closed(zn_session_t *s);
 /* The session's Zenoh id as hex, for logs. */
 int zn_session_id(zn_session_t *s, char *buf, size_t cap);
 

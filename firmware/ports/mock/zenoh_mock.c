@@ -41,6 +41,8 @@ static struct zn_subscriber *subs[MOCK_DECLS];
 static struct zn_token *tokens[MOCK_DECLS];
 static struct zn_queryable *queryables[MOCK_DECLS];
 static int open_result;
+static uint64_t connections_closed;
+static int unrouted;
 static zn_session_config_t last_open;
 
 void mock_can_reset(void);
@@ -56,6 +58,8 @@ void mock_reset(void)
 	memset(tokens, 0, sizeof(tokens));
 	memset(queryables, 0, sizeof(queryables));
 	open_result = 0;
+	__atomic_store_n(&connections_closed, 0, __ATOMIC_RELAXED);
+	unrouted = 0;
 	pthread_mutex_unlock(&lock);
 	mock_can_reset();
 }
@@ -115,6 +119,10 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 	if (len > MOCK_PAYLOAD_MAX || attachment_len > MOCK_ATTACHMENT_MAX)
 		return -1;
 	pthread_mutex_lock(&lock);
+	if (unrouted) {
+		pthread_mutex_unlock(&lock);
+		return ZN_PORT_UNROUTED;
+	}
 	if (nputs < MOCK_MAX_PUTS) {
 		struct mock_put *p = &puts_log[nputs++];
 		memcpy(p->key, pub->key, sizeof(p->key));
@@ -175,6 +183,24 @@ int zn_routers(zn_session_t *s, char *ids, size_t cap)
 	(void)s;
 	strncpy(ids, "mockrouter", cap);
 	return 1;
+}
+
+void mock_zenoh_unrouted(int on)
+{
+	pthread_mutex_lock(&lock);
+	unrouted = on;
+	pthread_mutex_unlock(&lock);
+}
+
+void mock_zenoh_close_connection(void)
+{
+	__atomic_add_fetch(&connections_closed, 1, __ATOMIC_RELAXED);
+}
+
+uint64_t zn_connections_closed(zn_session_t *s)
+{
+	(void)s;
+	return __atomic_load_n(&connections_closed, __ATOMIC_RELAXED);
 }
 
 int zn_session_id(zn_session_t *s, char *buf, size_t cap)

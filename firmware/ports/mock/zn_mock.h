@@ -96,6 +96,10 @@ size_t mock_zenoh_publisher_count(void);
 const struct mock_publisher *mock_zenoh_publisher(size_t i);
 /* What the next zn_open returns (0, -1, ZN_PORT_ERR_CONFIG); mock_reset sets 0. */
 void mock_zenoh_open_result(int rc);
+/* A connection of the session closed (and was replaced): zn_connections_closed counts it. */
+void mock_zenoh_close_connection(void);
+/* 1: the session has no connection; puts are refused with ZN_PORT_UNROUTED and not recorded. */
+void mock_zenoh_unrouted(int on);
 /* The session configuration of the last zn_open. */
 zn_session_config_t mock_zenoh_last_open(void);
 /* Queries a declared queryable: the reply's length, NUL-terminated in buf; 0 and "" when

@@ -50,6 +50,7 @@ struct tx_cmd {
 struct bus_counters {
 	uint64_t can_rx_frames, filtered, invalid_frames, rx_queue_drops;
 	uint64_t published_samples, published_frames, publish_errors;
+	uint64_t unrouted_frames; /* not put: the session had no connection (ZN_PORT_UNROUTED) */
 	uint64_t tx_samples, tx_frames, can_tx_errors, tx_queue_full, tx_abandoned;
 	uint64_t tx_rejected[ZN_WIRE_REASONS];
 	uint64_t can_reopens;
@@ -137,6 +138,7 @@ struct node {
 	int running;
 	int64_t start_ns;
 	uint64_t reconnects;
+	uint64_t connections_seen_closed; /* zn_connections_closed at the monitor's last poll: the monitor's only */
 	int connected, ever_connected;
 	char router_ids[512]; /* routers at the last poll; written by init, then by the monitor only */
 	uint8_t gid_seed[16]; /* from the session id: ROS 2 GIDs */

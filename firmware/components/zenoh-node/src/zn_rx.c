@@ -217,10 +217,13 @@ static void publish(struct bus *b, size_t cls, const struct rx_entry *frames, si
 		len += ZN_WIRE_FRAME_SIZE;
 		zn_attachment_set_time(attachment, i, frames[i].rx_time_ns);
 	}
-	if (zn_put(b->pub[cls], payload, len, attachment, ZN_ATTACHMENT_SIZE(n)) == 0) {
+	int rc = zn_put(b->pub[cls], payload, len, attachment, ZN_ATTACHMENT_SIZE(n));
+	if (rc == 0) {
 		COUNT(b->n.published_samples);
 		COUNT_N(b->n.published_frames, n);
 		COUNT_N(b->ring[cls].published_frames, n);
+	} else if (rc == ZN_PORT_UNROUTED) {
+		COUNT_N(b->n.unrouted_frames, n); /* lost as surely as a failed put, but said apart */
 	} else {
 		COUNT_N(b->n.publish_errors, n); /* frames, as lost: read beside published_frames */
 	}

@@ -26,9 +26,11 @@ size_t zn_node_stats_json(char *buf, size_t cap)
 	size_t off = 0;
 	off = append(buf, cap, off,
 		     "{\"node\": \"%s\", \"mode\": \"%s\", \"uptime_ms\": %" PRId64 ", \"connected\": %s, "
-		     "\"reconnects\": %" PRIu64 ", \"publish_period_ms\": %" PRIu32 ", \"buses\": [",
+		     "\"reconnects\": %" PRIu64 ", \"connections_closed\": %" PRIu64 ", \"publish_period_ms\": %" PRIu32
+		     ", \"buses\": [",
 		     zn_node.cfg.node_name, zn_mode_names[zn_node.cfg.mode], (zn_monotonic_ns() - zn_node.start_ns) / 1000000,
-		     READ(zn_node.connected) ? "true" : "false", READ(zn_node.reconnects), zn_node.cfg.publish_period_ms);
+		     READ(zn_node.connected) ? "true" : "false", READ(zn_node.reconnects), zn_connections_closed(zn_node.session),
+		     zn_node.cfg.publish_period_ms);
 	for (size_t i = 0; i < zn_node.cfg.bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
 		uint32_t queued;
@@ -38,14 +40,14 @@ size_t zn_node_stats_json(char *buf, size_t cap)
 			     "%s{\"bus\": \"%s\", \"rx_key\": \"%s\", \"tx_key\": \"%s\", \"can_rx_frames\": %" PRIu64
 			     ", \"filtered\": %" PRIu64 ", \"invalid_frames\": %" PRIu64 ", \"rx_queue_drops\": %" PRIu64
 			     ", \"published_samples\": %" PRIu64 ", \"published_frames\": %" PRIu64
-			     ", \"publish_errors\": %" PRIu64 ", \"tx_samples\": %" PRIu64 ", \"tx_frames\": %" PRIu64
+			     ", \"publish_errors\": %" PRIu64 ", \"unrouted_frames\": %" PRIu64 ", \"tx_samples\": %" PRIu64 ", \"tx_frames\": %" PRIu64
 			     ", \"can_tx_errors\": %" PRIu64 ", \"tx_queue_full\": %" PRIu64 ", \"tx_abandoned\": %" PRIu64
 			     ", \"can_reopens\": %" PRIu64 ", \"direct_frames\": %" PRIu64 ", \"direct_stalls\": %" PRIu64
 			     ", \"tx_direct_frames\": %" PRIu64 ", \"tx_unstamped\": %" PRIu64
 			     ", \"rx_queued\": %" PRIu32 ", \"put_running_ms\": %" PRId64 ", \"tx_rejected\": {",
 			     i ? ", " : "", b->name, b->rx_key, b->tx_key, READ(b->n.can_rx_frames), READ(b->n.filtered),
 			     READ(b->n.invalid_frames), READ(b->n.rx_queue_drops), READ(b->n.published_samples), READ(b->n.published_frames),
-			     READ(b->n.publish_errors), READ(b->n.tx_samples), READ(b->n.tx_frames),
+			     READ(b->n.publish_errors), READ(b->n.unrouted_frames), READ(b->n.tx_samples), READ(b->n.tx_frames),
 			     READ(b->n.can_tx_errors), READ(b->n.tx_queue_full), READ(b->n.tx_abandoned),
 			     READ(b->n.can_reopens), READ(b->n.direct_frames), READ(b->n.direct_stalls),
 			     READ(b->n.tx_direct_frames), READ(b->n.tx_unstamped), queued, put_ms);
@@ -100,7 +102,8 @@ size_t zn_stats_on_query(char *buf, size_t cap, void *ctx)
 }
 
 /* Counts reconnections: the router set going away and coming back, or
- * changing identity in between two polls (a router restarted quickly). */
+ * changing identity in between two polls (a router restarted quickly); and
+ * says when connections closed, which one replaced within a poll shows alone. */
 void zn_stats_monitor_thread(void *arg)
 {
 	(void)arg;
@@ -126,6 +129,12 @@ void zn_stats_monitor_thread(void *arg)
 			zn_log("I", "waiting for the Zenoh router at %s (retrying)", zn_node.cfg.router_address);
 			announced_wait = 1;
 		}
+		/* a connection replaced within a poll leaves the routers unchanged: only this count sees it */
+		uint64_t closed = zn_connections_closed(zn_node.session);
+		if (closed > zn_node.connections_seen_closed)
+			zn_log("W", "%" PRIu64 " Zenoh connection%s closed (%" PRIu64 " since start): samples put while none was up are lost",
+			       closed - zn_node.connections_seen_closed, closed - zn_node.connections_seen_closed > 1 ? "s" : "", closed);
+		zn_node.connections_seen_closed = closed;
 		if (routers > 0)
 			snprintf(zn_node.router_ids, sizeof(zn_node.router_ids), "%s", ids);
 		__atomic_store_n(&zn_node.connected, connected, __ATOMIC_RELAXED);

@@ -5,10 +5,12 @@
 //! the FFI boundary (panic = "abort" in the release profile as a backstop).
 
 use std::cell::RefCell;
+use std::collections::HashSet;
 use std::ffi::{c_char, c_int, c_void, CStr};
 use std::ptr;
 use std::slice;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use zenoh::bytes::ZBytes;
 use zenoh::key_expr::KeyExpr;
@@ -16,16 +18,42 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority, Reliability};
 use zenoh::query::Queryable;
-use zenoh::sample::Locality;
+use zenoh::sample::{Locality, SampleKind};
+use zenoh::session::ZenohId;
 use zenoh::{Config, Session, Wait};
 use zenoh_buffers::ZBuf;
 
 const ERR: c_int = -1;
 /// zn_open's result for a configuration that cannot work (ZN_PORT_ERR_CONFIG).
 const ERR_CONFIG: c_int = -2;
+/// zn_put's result for a sample not sent: the session has no connection (ZN_PORT_UNROUTED).
+const UNROUTED: c_int = 1;
 
-pub struct ZnSession(Session);
-pub struct ZnPublisher(Publisher<'static>);
+/// A session's connections (Zenoh transports) to routers and peers, from its transport events:
+/// Zenoh's put returns Ok whether or not one is open, and a connection closed and replaced
+/// within milliseconds is seen by no poll of the routers.
+#[derive(Default)]
+struct Connections {
+    peers: Mutex<HashSet<ZenohId>>,
+    open: AtomicUsize, // peers' size, read by every put without the lock
+    closed: AtomicU64, // since the session opened
+}
+
+impl Connections {
+    fn event(&self, kind: SampleKind, peer: ZenohId) {
+        let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
+        if kind == SampleKind::Delete {
+            peers.remove(&peer);
+            self.closed.fetch_add(1, Ordering::Relaxed);
+        } else {
+            peers.insert(peer); // the history's and a live event's Put for one transport: once
+        }
+        self.open.store(peers.len(), Ordering::Relaxed);
+    }
+}
+
+pub struct ZnSession(Session, Arc<Connections>);
+pub struct ZnPublisher(Publisher<'static>, Arc<Connections>);
 pub struct ZnSubscriber(Subscriber<()>);
 pub struct ZnToken(LivelinessToken);
 pub struct ZnQueryable(Queryable<()>);
@@ -257,7 +285,22 @@ pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession)
     loop {
         match zenoh::open(config.clone()).wait() {
             Ok(session) => {
-                unsafe { *out = Box::into_raw(Box::new(ZnSession(session))) };
+                let connections = Arc::new(Connections::default());
+                let seen = connections.clone();
+                // Transports, not links: one closed by its peer, or the low-latency transport's
+                // on a failure, tells no link event. history: the ones already open, as Puts.
+                let listening = session
+                    .info()
+                    .transport_events_listener()
+                    .history(true)
+                    .callback(move |event| seen.event(event.kind(), *event.transport().zid()))
+                    .background()
+                    .wait();
+                if let Err(e) = listening {
+                    eprintln!("zenoh-node: cannot listen to the session's transport events: {e}");
+                    return ERR;
+                }
+                unsafe { *out = Box::into_raw(Box::new(ZnSession(session, connections))) };
                 return 0;
             }
             // only a client needs its router to open; anything else is a real error
@@ -311,7 +354,7 @@ pub extern "C" fn zn_declare_publisher(
         .wait()
     {
         Ok(p) => {
-            unsafe { *out = Box::into_raw(Box::new(ZnPublisher(p))) };
+            unsafe { *out = Box::into_raw(Box::new(ZnPublisher(p, s.1.clone()))) };
             0
         }
         Err(e) => {
@@ -366,6 +409,10 @@ pub extern "C" fn zn_put(
     let Some(p) = (unsafe { p.as_ref() }) else { return ERR };
     if payload.is_null() && len > 0 {
         return ERR;
+    }
+    // no connection to anyone: the put would return Ok and go nowhere
+    if p.1.open.load(Ordering::Relaxed) == 0 {
+        return UNROUTED;
     }
     let data = if len == 0 { &[][..] } else { unsafe { slice::from_raw_parts(payload, len) } };
     let mut put = p.0.put(reused_bytes(PAYLOAD, data));
@@ -506,6 +553,12 @@ pub extern "C" fn zn_routers(s: *mut ZnSession, ids: *mut c_char, cap: usize) ->
     zids.sort();
     copy_c_string(&zids.join(","), ids, cap);
     zids.len() as c_int
+}
+
+#[no_mangle]
+pub extern "C" fn zn_connections_closed(s: *mut ZnSession) -> u64 {
+    let Some(s) = (unsafe { s.as_ref() }) else { return 0 };
+    s.1.closed.load(Ordering::Relaxed)
 }
 
 /// Writes text into a C buffer of cap bytes, truncated and NUL-terminated.
