@@ -132,7 +132,7 @@ def _numbered_by_the_bridge(result: RunResult, b) -> str:
     stats = bus_stats(result.bridge_stats, b.bus) if result.bridge_stats else None
     drops = (f"; its stats (its last start) count {stats.get('rx_queue_drops')} queue drops, "
              f"{stats.get('publish_errors')} frames of failed puts and {stats.get('unrouted_frames', 'no count of')} "
-             f"frames read while it had no Zenoh connection" if stats else "")
+             f"frames put while it had no Zenoh connection" if stats else "")
     # a connection to the router that closed and came back: puts made meanwhile returned Ok and went
     # nowhere (a bridge older than the counter, or a device of your own, may not say)
     closed = (result.bridge_stats or {}).get("connections_closed")

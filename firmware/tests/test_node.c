@@ -439,8 +439,8 @@ static void test_connections_closed(void)
 	zn_node_stop();
 }
 
-/* Frames read while the session has no connection are not put (Zenoh's put would return Ok and drop
- * them): counted apart from published and failed frames; once connected again they flow as before. */
+/* Frames put while the session has no connection went nowhere (Zenoh's put returns Ok): counted apart
+ * from published and failed frames; once connected again they flow as before. */
 static void test_unrouted_frames(void)
 {
 	mock_reset();
@@ -453,12 +453,11 @@ static void test_unrouted_frames(void)
 	}
 	CHECK(stats_soon_has("\"unrouted_frames\": 3,"));
 	CHECK(stats_has("\"published_frames\": 0,") && stats_has("\"publish_errors\": 0,"));
-	CHECK(mock_zenoh_put_count() == 0);
 	mock_zenoh_unrouted(0);
 	can_message_t m = frame(0x200, 0, 0, 1, 9);
 	mock_can_inject("vcan0", &m, 2000);
-	CHECK(mock_zenoh_wait_puts(1, WAIT_MS) == 1);
-	CHECK(le64(mock_zenoh_put(0)->attachment + 4) == 3); /* its sequence number: the gap says the loss */
+	CHECK(mock_zenoh_wait_puts(4, WAIT_MS) == 4);
+	CHECK(le64(mock_zenoh_put(3)->attachment + 4) == 3);
 	CHECK(stats_soon_has("\"published_frames\": 1,"));
 	zn_node_stop();
 }

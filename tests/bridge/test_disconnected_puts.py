@@ -1,6 +1,6 @@
 """Frames read while the bridge's client session has no router (docs/bridge.md, Behaviour under
-trouble: router unreachable). Zenoh's put returns Ok with no route: the port tells it from the
-session's transport events and the bridge counts such frames in unrouted_frames, never in
+trouble: router unreachable). Zenoh's put returns Ok with no connection: the port tells it from
+the session's transport events and the bridge counts such frames in unrouted_frames, never in
 published_frames (it did, so the stats showed no loss and only a subscriber's sequence gap did)."""
 from __future__ import annotations
 

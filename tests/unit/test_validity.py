@@ -188,14 +188,14 @@ def test_a_lost_frame_the_bridge_numbered_is_said_to_be_lost_after_its_read(tmp_
     assert len(problems) == 1 and "1 frames lost (budget 0)" in problems[0], problems
     assert "; the bridge numbered 1 of them (" in problems[0] and " seq 50): it read them, so they were dropped " \
         "from its queue or lost after its put (its Zenoh session, the router, the capture's); its stats (its last " \
-        "start) count 0 queue drops, 0 frames of failed puts and 0 frames read while it had no Zenoh connection" \
+        "start) count 0 queue drops, 0 frames of failed puts and 0 frames put while it had no Zenoh connection" \
         in problems[0], problems
     # and whether its connection to the router closed meanwhile (a put in the gap returns Ok and is lost)
     for closed, said in ((0, ", and no Zenoh connection of it closed"),
                          (2, ", and 2 Zenoh connections of it closed (samples put while it had none are lost")):
         problems = checks.integrity(run.analyse(sc, "seeded", tmp_path, "vehicle/can", {},
                                                 {**stats, "connections_closed": closed}, 2.0))
-        assert "0 frames read while it had no Zenoh connection" + said in problems[0], problems
+        assert "0 frames put while it had no Zenoh connection" + said in problems[0], problems
     # a frame the bridge never read takes no number: the numbers go on one apart where it is missing
     seeded(tmp_path, seq=lambda i: i if i < 50 else i - 1)
     lines = (tmp_path / "zenoh.tsv").read_text().splitlines(keepends=True)

@@ -59,9 +59,9 @@ typedef size_t (*zn_query_cb)(char *buf, size_t cap, void *ctx);
  * reason logged). Multicast scouting is always off; endpoints are explicit. */
 int zn_open(const zn_session_config_t *config, zn_session_t **out);
 int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
-/* 0: handed to Zenoh. ZN_PORT_UNROUTED: not sent, the session has no connection
- * to a router or peer at all (Zenoh's own put would return Ok and drop it;
- * a connection that failed an instant ago may still count as open). */
+/* 0: handed to Zenoh. ZN_PORT_UNROUTED: handed to Zenoh while the session had
+ * no connection to a router or peer at all, so it went nowhere (Zenoh's put
+ * returns Ok; a connection that failed an instant ago may still count as open). */
 int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out);

@@ -119,10 +119,6 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 	if (len > MOCK_PAYLOAD_MAX || attachment_len > MOCK_ATTACHMENT_MAX)
 		return -1;
 	pthread_mutex_lock(&lock);
-	if (unrouted) {
-		pthread_mutex_unlock(&lock);
-		return ZN_PORT_UNROUTED;
-	}
 	if (nputs < MOCK_MAX_PUTS) {
 		struct mock_put *p = &puts_log[nputs++];
 		memcpy(p->key, pub->key, sizeof(p->key));
@@ -134,8 +130,9 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 		p->publisher = pub->index;
 	}
 	pthread_cond_broadcast(&put_made);
+	int rc = unrouted ? ZN_PORT_UNROUTED : 0;
 	pthread_mutex_unlock(&lock);
-	return 0;
+	return rc;
 }
 
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out)

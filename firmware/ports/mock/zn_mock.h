@@ -98,7 +98,7 @@ const struct mock_publisher *mock_zenoh_publisher(size_t i);
 void mock_zenoh_open_result(int rc);
 /* A connection of the session closed (and was replaced): zn_connections_closed counts it. */
 void mock_zenoh_close_connection(void);
-/* 1: the session has no connection; puts are refused with ZN_PORT_UNROUTED and not recorded. */
+/* 1: the session has no connection; puts are recorded and answered ZN_PORT_UNROUTED. */
 void mock_zenoh_unrouted(int on);
 /* The session configuration of the last zn_open. */
 zn_session_config_t mock_zenoh_last_open(void);

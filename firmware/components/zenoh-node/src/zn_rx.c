@@ -223,7 +223,7 @@ static void publish(struct bus *b, size_t cls, const struct rx_entry *frames, si
 		COUNT_N(b->n.published_frames, n);
 		COUNT_N(b->ring[cls].published_frames, n);
 	} else if (rc == ZN_PORT_UNROUTED) {
-		COUNT_N(b->n.unrouted_frames, n); /* lost as surely as a failed put, but said apart */
+		COUNT_N(b->n.unrouted_frames, n); /* went nowhere as surely as a failed put's, said apart */
 	} else {
 		COUNT_N(b->n.publish_errors, n); /* frames, as lost: read beside published_frames */
 	}

@@ -5,7 +5,7 @@
 //! the FFI boundary (panic = "abort" in the release profile as a backstop).
 
 use std::cell::RefCell;
-use std::collections::HashSet;
+use std::collections::HashMap;
 use std::ffi::{c_char, c_int, c_void, CStr};
 use std::ptr;
 use std::slice;
@@ -26,16 +26,19 @@ use zenoh_buffers::ZBuf;
 const ERR: c_int = -1;
 /// zn_open's result for a configuration that cannot work (ZN_PORT_ERR_CONFIG).
 const ERR_CONFIG: c_int = -2;
-/// zn_put's result for a sample not sent: the session has no connection (ZN_PORT_UNROUTED).
+/// zn_put's result for a sample put while the session had no connection (ZN_PORT_UNROUTED).
 const UNROUTED: c_int = 1;
 
 /// A session's connections (Zenoh transports) to routers and peers, from its transport events:
 /// Zenoh's put returns Ok whether or not one is open, and a connection closed and replaced
 /// within milliseconds is seen by no poll of the routers.
+/// Counted per peer, not kept as a set: a new transport's Put before the old one's Delete still
+/// leaves one open. A transport in the history and in a live Put (opened as the listener was
+/// declared) counts twice and so stays open: an error only ever towards "connected".
 #[derive(Default)]
 struct Connections {
-    peers: Mutex<HashSet<ZenohId>>,
-    open: AtomicUsize, // peers' size, read by every put without the lock
+    peers: Mutex<HashMap<ZenohId, usize>>,
+    open: AtomicUsize, // peers with a transport, read by every put without the lock
     closed: AtomicU64, // since the session opened
 }
 
@@ -43,10 +46,15 @@ impl Connections {
     fn event(&self, kind: SampleKind, peer: ZenohId) {
         let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
         if kind == SampleKind::Delete {
-            peers.remove(&peer);
+            if let Some(n) = peers.get_mut(&peer) {
+                *n -= 1;
+                if *n == 0 {
+                    peers.remove(&peer);
+                }
+            }
             self.closed.fetch_add(1, Ordering::Relaxed);
         } else {
-            peers.insert(peer); // the history's and a live event's Put for one transport: once
+            *peers.entry(peer).or_insert(0) += 1;
         }
         self.open.store(peers.len(), Ordering::Relaxed);
     }
@@ -410,16 +418,16 @@ pub extern "C" fn zn_put(
     if payload.is_null() && len > 0 {
         return ERR;
     }
-    // no connection to anyone: the put would return Ok and go nowhere
-    if p.1.open.load(Ordering::Relaxed) == 0 {
-        return UNROUTED;
-    }
+    // no connection to anyone: the put returns Ok and goes nowhere. Put all the same (should the
+    // count be wrong, nothing is lost for it), but said.
+    let unrouted = p.1.open.load(Ordering::Relaxed) == 0;
     let data = if len == 0 { &[][..] } else { unsafe { slice::from_raw_parts(payload, len) } };
     let mut put = p.0.put(reused_bytes(PAYLOAD, data));
     if !attachment.is_null() && attachment_len > 0 {
         put = put.attachment(reused_bytes(ATTACHMENT, unsafe { slice::from_raw_parts(attachment, attachment_len) }));
     }
     match put.wait() {
+        Ok(()) if unrouted => UNROUTED,
         Ok(()) => 0,
         Err(_) => ERR,
     }
