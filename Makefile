@@ -11,9 +11,12 @@ PYTEST         := $(PYTHON) -m pytest
 # Rust and zenohd builds outlive `make clean` and fresh clones: they take minutes.
 CACHE          ?= $(HOME)/.cache/canbench
 ZENOHD_VERSION := 1.10.2
-# the bench's zenohd: the builder image's (the patched zenoh crates, firmware/ports/linux/zenoh_rust/
-# patched/README.md; their hash names the build), or ZENOHD=/path/to/zenohd for another
-ZENOHD_PATCHES := $(shell cat firmware/ports/linux/zenoh_rust/patched/*/src/*.rs 2>/dev/null | sha256sum | cut -c1-8)
+# the bench's zenohd: the builder image's (its workspace, with the patched zenoh crates of
+# firmware/ports/linux/zenoh_rust/patched/README.md: the hash of what it is built from names the
+# build), or ZENOHD=/path/to/zenohd for another
+ZENOHD_SOURCES := images/builder/rust firmware/ports/linux/zenoh_rust/Cargo.toml firmware/ports/linux/zenoh_rust/patched
+ZENOHD_PATCHES := $(shell { git ls-files -s $(ZENOHD_SOURCES); git diff HEAD -- $(ZENOHD_SOURCES); \
+                   git ls-files -o --exclude-standard $(ZENOHD_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-8)
 ZENOHD         ?= $(CACHE)/zenohd-$(ZENOHD_VERSION)-$(ZENOHD_PATCHES)/bin/zenohd
 CARGO_TARGET   ?= $(CACHE)/cargo-target
 FUZZ_SECONDS   ?= 30

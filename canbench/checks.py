@@ -137,7 +137,7 @@ def _numbered_by_the_bridge(result: RunResult, b) -> str:
     # nowhere (a bridge older than the counter, or a device of your own, may not say)
     closed = (result.bridge_stats or {}).get("connections_closed")
     if stats and closed is not None:
-        drops += (f", and {closed} Zenoh connections of it closed (samples put while it had none are lost "
+        drops += (f", and {closed} Zenoh connections of it closed (samples put before one reopened are lost "
                   f"though their put succeeded)" if closed else ", and no Zenoh connection of it closed")
     return (f"; the bridge numbered {len(numbered)} of them ({_listed(numbered, str)}): it read them, so they were "
             f"dropped from its queue or lost after its put (its Zenoh session, the router, the capture's){drops}")

@@ -32,9 +32,11 @@ def port_open(port: int) -> bool:
 
 
 def find_zenohd() -> str | None:
-    """$ZENOHD, zenohd on PATH, or the copies make zenohd and the images install."""
-    candidates = [os.environ.get("ZENOHD"), shutil.which("zenohd"),
-                  str(Path.home() / ".cache" / "canbench" / f"zenohd-{ZENOHD_VERSION}" / "bin" / "zenohd"),
+    """$ZENOHD (make exports the one it built), the newest zenohd make zenohd built (named by the hash
+    of its sources: the patched zenoh crates), a zenohd on PATH, or the images' copy."""
+    built = sorted(Path.home().glob(f".cache/canbench/zenohd-{ZENOHD_VERSION}-*/bin/zenohd"),
+                   key=lambda p: p.stat().st_mtime, reverse=True)
+    candidates = [os.environ.get("ZENOHD"), *map(str, built), shutil.which("zenohd"),
                   f"/opt/zenohd-{ZENOHD_VERSION}/bin/zenohd"]
     return next((c for c in candidates if c and os.access(c, os.X_OK)), None)
 

@@ -214,6 +214,10 @@ def test_starts_before_its_router_and_recovers_after_restart(bus, bridge, router
         router.stop()
         router.start()
         wait_for(lambda: (s := bridge.try_stats(session2)) and s["reconnects"] >= 1, "reconnect counted", timeout=30)
+        # its closed connection too (before it, the bridge was waiting: none had opened to close)
+        wait_for(lambda: "1 Zenoh connection closed (1 since start)" in bridge.log.read_text(), "the closure logged")
+        stats = bridge.stats(session2)
+        assert stats["connections_closed"] == 1, stats
         bus.run(["cansend", "vcan0", "222#22"])
         wait_for(lambda: [f.can_id for f, _, _ in rx.frames()][-1:] == [0x222], "frames after the restart")
     finally:

@@ -192,7 +192,7 @@ def test_a_lost_frame_the_bridge_numbered_is_said_to_be_lost_after_its_read(tmp_
         in problems[0], problems
     # and whether its connection to the router closed meanwhile (a put in the gap returns Ok and is lost)
     for closed, said in ((0, ", and no Zenoh connection of it closed"),
-                         (2, ", and 2 Zenoh connections of it closed (samples put while it had none are lost")):
+                         (2, ", and 2 Zenoh connections of it closed (samples put before one reopened are lost")):
         problems = checks.integrity(run.analyse(sc, "seeded", tmp_path, "vehicle/can", {},
                                                 {**stats, "connections_closed": closed}, 2.0))
         assert "0 frames put while it had no Zenoh connection" + said in problems[0], problems

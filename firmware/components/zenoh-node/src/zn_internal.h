@@ -50,7 +50,7 @@ struct tx_cmd {
 struct bus_counters {
 	uint64_t can_rx_frames, filtered, invalid_frames, rx_queue_drops;
 	uint64_t published_samples, published_frames, publish_errors;
-	uint64_t unrouted_frames; /* not put: the session had no connection (ZN_PORT_UNROUTED) */
+	uint64_t unrouted_frames; /* put with no connection open: went nowhere (ZN_PORT_UNROUTED) */
 	uint64_t tx_samples, tx_frames, can_tx_errors, tx_queue_full, tx_abandoned;
 	uint64_t tx_rejected[ZN_WIRE_REASONS];
 	uint64_t can_reopens;

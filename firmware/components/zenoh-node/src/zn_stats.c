@@ -132,7 +132,7 @@ void zn_stats_monitor_thread(void *arg)
 		/* a connection replaced within a poll leaves the routers unchanged: only this count sees it */
 		uint64_t closed = zn_connections_closed(zn_node.session);
 		if (closed > zn_node.connections_seen_closed)
-			zn_log("W", "%" PRIu64 " Zenoh connection%s closed (%" PRIu64 " since start): samples put while none was up are lost",
+			zn_log("W", "%" PRIu64 " Zenoh connection%s closed (%" PRIu64 " since start): samples put to its peer before it reopened are lost",
 			       closed - zn_node.connections_seen_closed, closed - zn_node.connections_seen_closed > 1 ? "s" : "", closed);
 		zn_node.connections_seen_closed = closed;
 		if (routers > 0)

@@ -5,7 +5,7 @@
 //! the FFI boundary (panic = "abort" in the release profile as a backstop).
 
 use std::cell::RefCell;
-use std::collections::HashMap;
+use std::collections::HashSet;
 use std::ffi::{c_char, c_int, c_void, CStr};
 use std::ptr;
 use std::slice;
@@ -32,13 +32,15 @@ const UNROUTED: c_int = 1;
 /// A session's connections (Zenoh transports) to routers and peers, from its transport events:
 /// Zenoh's put returns Ok whether or not one is open, and a connection closed and replaced
 /// within milliseconds is seen by no poll of the routers.
-/// Counted per peer, not kept as a set: a new transport's Put before the old one's Delete still
-/// leaves one open. A transport in the history and in a live Put (opened as the listener was
-/// declared) counts twice and so stays open: an error only ever towards "connected".
+/// A set of peers: a transport in the history and in a live Put (opened as the listener was
+/// declared) is one. A replaced transport's Delete comes before its successor's Put (zenoh 1.10.2:
+/// the old one's closed() is called before it leaves the manager's table, and until then no new
+/// transport to that peer is made). A transport the runtime refuses after its Put (a client's
+/// second router) gets no Delete: an error towards "connected" only.
 #[derive(Default)]
 struct Connections {
-    peers: Mutex<HashMap<ZenohId, usize>>,
-    open: AtomicUsize, // peers with a transport, read by every put without the lock
+    peers: Mutex<HashSet<ZenohId>>,
+    open: AtomicUsize, // peers' size, read by every put without the lock
     closed: AtomicU64, // since the session opened
 }
 
@@ -46,17 +48,16 @@ impl Connections {
     fn event(&self, kind: SampleKind, peer: ZenohId) {
         let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
         if kind == SampleKind::Delete {
-            if let Some(n) = peers.get_mut(&peer) {
-                *n -= 1;
-                if *n == 0 {
-                    peers.remove(&peer);
-                }
-            }
+            peers.remove(&peer);
             self.closed.fetch_add(1, Ordering::Relaxed);
         } else {
-            *peers.entry(peer).or_insert(0) += 1;
+            peers.insert(peer);
         }
         self.open.store(peers.len(), Ordering::Relaxed);
+    }
+
+    fn none_open(&self) -> bool {
+        self.open.load(Ordering::Relaxed) == 0
     }
 }
 
@@ -419,15 +420,16 @@ pub extern "C" fn zn_put(
         return ERR;
     }
     // no connection to anyone: the put returns Ok and goes nowhere. Put all the same (should the
-    // count be wrong, nothing is lost for it), but said.
-    let unrouted = p.1.open.load(Ordering::Relaxed) == 0;
+    // count be wrong, nothing is lost for it), but said; only when none was open before and after
+    // it, so a put that a connection opening meanwhile carried is never said to be lost.
+    let none_before = p.1.none_open();
     let data = if len == 0 { &[][..] } else { unsafe { slice::from_raw_parts(payload, len) } };
     let mut put = p.0.put(reused_bytes(PAYLOAD, data));
     if !attachment.is_null() && attachment_len > 0 {
         put = put.attachment(reused_bytes(ATTACHMENT, unsafe { slice::from_raw_parts(attachment, attachment_len) }));
     }
     match put.wait() {
-        Ok(()) if unrouted => UNROUTED,
+        Ok(()) if none_before && p.1.none_open() => UNROUTED,
         Ok(()) => 0,
         Err(_) => ERR,
     }
