@@ -12,7 +12,7 @@ PYTEST         := $(PYTHON) -m pytest
 CACHE          ?= $(HOME)/.cache/canbench
 ZENOHD_VERSION := 1.10.2
 # the bench's zenohd: the builder image's (its workspace, with the patched zenoh crates of
-# firmware/ports/linux/zenoh_rust/patched/README.md: the hash of what it is built from names the
+# docs/upstream/README.md: the hash of what it is built from names the
 # build), or ZENOHD=/path/to/zenohd for another
 ZENOHD_SOURCES := images/builder/rust firmware/ports/linux/zenoh_rust/Cargo.toml firmware/ports/linux/zenoh_rust/patched
 ZENOHD_PATCHES := $(shell { git ls-files -s $(ZENOHD_SOURCES); git diff HEAD -- $(ZENOHD_SOURCES); \

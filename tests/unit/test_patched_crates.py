@@ -1,4 +1,4 @@
-"""The patched zenoh crates (firmware/ports/linux/zenoh_rust/patched/README.md) are what every
+"""The patched zenoh crates (docs/upstream/README.md) are what every
 Rust build of the bench uses: each is zenoh's pinned version with its patch from docs/upstream/
 applied, taken by [patch.crates-io] in every workspace that builds zenoh, and locked as a path
 package (a lockfile that still names the registry's crate would build the unpatched one, or fail
