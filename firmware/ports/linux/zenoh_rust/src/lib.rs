@@ -32,7 +32,7 @@ const UNROUTED: c_int = 1;
 /// A session's connections (Zenoh transports) to routers and peers, from its transport events:
 /// Zenoh's put returns Ok whether or not one is open, and a connection closed and replaced
 /// within milliseconds is seen by no poll of the routers.
-/// A set of peers: a transport in the history and in a live Put (opened as the listener was
+/// A set of peers: a transport seen at the start and in a live Put (opened as the listener was
 /// declared) is one. A replaced transport's Delete comes before its successor's Put (zenoh 1.10.2:
 /// the old one's closed() is called before it leaves the manager's table, and until then no new
 /// transport to that peer is made). A transport the runtime refuses after its Put (a client's
@@ -54,6 +54,15 @@ impl Connections {
             peers.insert(peer);
         }
         self.open.store(peers.len(), Ordering::Relaxed);
+    }
+
+    /// The peers already connected when the listener was declared. Not the listener's history:
+    /// it lists them through each transport's links, which the low-latency transport reads with
+    /// Tokio's current runtime (none on a C thread: zenoh-transport panics).
+    fn seed(&self, peers: impl Iterator<Item = ZenohId>) {
+        let mut set = self.peers.lock().unwrap_or_else(|e| e.into_inner());
+        set.extend(peers);
+        self.open.store(set.len(), Ordering::Relaxed);
     }
 
     fn none_open(&self) -> bool {
@@ -297,11 +306,10 @@ pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession)
                 let connections = Arc::new(Connections::default());
                 let seen = connections.clone();
                 // Transports, not links: one closed by its peer, or the low-latency transport's
-                // on a failure, tells no link event. history: the ones already open, as Puts.
+                // on a failure, tells no link event.
                 let listening = session
                     .info()
                     .transport_events_listener()
-                    .history(true)
                     .callback(move |event| seen.event(event.kind(), *event.transport().zid()))
                     .background()
                     .wait();
@@ -309,6 +317,8 @@ pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession)
                     eprintln!("zenoh-node: cannot listen to the session's transport events: {e}");
                     return ERR;
                 }
+                let info = session.info();
+                connections.seed(info.routers_zid().wait().chain(info.peers_zid().wait()));
                 unsafe { *out = Box::into_raw(Box::new(ZnSession(session, connections))) };
                 return 0;
             }
