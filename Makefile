@@ -14,7 +14,7 @@ ZENOHD_VERSION := 1.10.2
 # the bench's zenohd: the builder image's (its workspace, with the patched zenoh crates of
 # docs/upstream/README.md: the hash of what it is built from names the
 # build), or ZENOHD=/path/to/zenohd for another
-ZENOHD_SOURCES := images/builder/rust firmware/ports/linux/zenoh_rust/Cargo.toml firmware/ports/linux/zenoh_rust/patched
+ZENOHD_SOURCES := images/builder/rust firmware/ports/linux/zenoh_rust/Cargo.toml firmware/ports/linux/zenoh_rust/patched scripts/zenohd-source
 ZENOHD_PATCHES := $(shell { git ls-files -s $(ZENOHD_SOURCES); git diff HEAD -- $(ZENOHD_SOURCES); \
                    git ls-files -o --exclude-standard $(ZENOHD_SOURCES) | xargs -r sha1sum; } | sha1sum | cut -c1-8)
 ZENOHD         ?= $(CACHE)/zenohd-$(ZENOHD_VERSION)-$(ZENOHD_PATCHES)/bin/zenohd
@@ -35,7 +35,7 @@ BENCH_BASE     := canbench/base:bookworm
 COMPOSE        ?= $(shell docker compose version >/dev/null 2>&1 && echo "docker compose" || echo docker-compose)
 BENCH_CAN_MODE ?= $(shell scripts/detect-can)
 BENCH_BUS_CAP  := $(if $(filter kernel,$(BENCH_CAN_MODE)),NET_ADMIN,CHOWN)
-IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/data pyproject.toml .dockerignore
+IMAGE_SOURCES  := images ucan firmware bench/tools canbench tests/data pyproject.toml .dockerignore scripts/zenohd-source
 # content hash of everything the images are built from: unchanged sources, no rebuild.
 # Computed once per make run (:=), so the images built and the images tested are the same
 # even if a file changes meanwhile.
