@@ -18,6 +18,7 @@ MSG_ACK, MSG_HEADER_MODE = 1, 2
 COOKIE_MAX = 64
 CTL = struct.Struct("=Ii")          # ucan_ctl
 SOCKOPTS = struct.Struct("=IIIIBBBBBBBBI")  # ucan_sockopts without its filters
+RXHDR_SIZE = 24                     # ucan_rxhdr: what a headed frame (40 / 96 bytes) starts with
 
 
 def sockopts(ifindex: int = IFINDEX_VCAN0, rcvbuf: int = 0, recv_own: bool = False, loopback: bool = True,

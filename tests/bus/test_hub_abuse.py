@@ -9,7 +9,20 @@ import time
 
 import pytest
 from conftest import require_userspace
-from hubclient import MSG_RESET_STATS, Client, OwnHub, Stopped, barrier, cpu_seconds, frame, query, rss_kib, sockopts
+from hubclient import (
+    MSG_RESET_STATS,
+    MSG_SETOPT,
+    RXHDR_SIZE,
+    Client,
+    OwnHub,
+    Stopped,
+    barrier,
+    cpu_seconds,
+    frame,
+    query,
+    rss_kib,
+    sockopts,
+)
 
 pytestmark = pytest.mark.bus
 
@@ -142,3 +155,17 @@ def test_socket_is_for_the_hubs_owner_and_group_only(hub):
     """Defect 5: the socket was world-writable (umask 0): any local user could send frames."""
     assert stat.S_IMODE((hub.workdir / "hub.sock").stat().st_mode) == 0o660
     assert stat.S_IMODE((hub.workdir / "hub.lock").stat().st_mode) & 0o007 == 0
+
+
+def test_switch_to_headers_sends_no_control_message_on_the_data_socket(hub):
+    """After BIND's ACK a data socket carries frames only. A control message queued there
+    (the hub's notice of its switch to headers, once) was the one message a MSG_PEEK had to
+    consume by a second read: a thread reading the socket meanwhile took the notice, and the
+    peeking thread's consume took a frame instead (lost)."""
+    reader, sender = Client(hub.workdir), Client(hub.workdir)
+    reader.bind()
+    reader.send(sockopts(kind=MSG_SETOPT, timestamps=3))  # SO_TIMESTAMPNS: frames carry headers
+    sender.send(frame(0x123, b"\x01"))
+    first = reader.recv()
+    assert len(first) == RXHDR_SIZE + 16, f"expected the frame behind its header, got {len(first)} bytes"
+    assert first[RXHDR_SIZE:] == frame(0x123, b"\x01")[8:]

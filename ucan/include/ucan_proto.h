@@ -45,7 +45,7 @@
 
 enum ucan_msg_type {
 	UCAN_MSG_ACK = 1,	  /* hub -> client: result of BIND / query */
-	UCAN_MSG_HEADER_MODE = 2, /* hub -> client: frames carry ucan_rxhdr from now on */
+	UCAN_MSG_HEADER_MODE = 2, /* reserved: no longer sent (frames are told by length) */
 	UCAN_MSG_BIND = 10,	  /* client -> hub: ucan_sockopts, answered by ACK */
 	UCAN_MSG_SETOPT = 11,	  /* client -> hub: ucan_sockopts, made visible by BARRIER */
 	UCAN_MSG_FRAME = 12,	  /* client -> hub: ucan_txhdr + frame */

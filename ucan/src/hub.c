@@ -861,10 +861,11 @@ static unsigned handle_message(uint32_t idx, const uint8_t *msg, size_t len)
 		apply_sockopts(idx, msg, len);
 		if (hub.clients[idx].fd < 0)
 			return 1;
-		if (c->bound && !c->header_mode && needs_header(c)) {
+		/* no notice of the switch on the data socket: the library tells a headed frame
+		 * from a bare one by its length, and a control message there would be the one
+		 * message a MSG_PEEK must consume, racing a second reader of the socket for it */
+		if (c->bound && !c->header_mode && needs_header(c))
 			c->header_mode = 1;
-			client_send_ctl(idx, UCAN_MSG_HEADER_MODE, 0);
-		}
 		break;
 	case UCAN_MSG_FRAME: {
 		struct ucan_txhdr hdr;

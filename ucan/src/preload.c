@@ -1044,9 +1044,9 @@ static int recv_nothing(int fd, int flags)
 
 /* Hub messages are told apart by length alone (ucan_proto.h): 16 / 72 bytes a bare frame,
  * 40 / 96 a frame behind its ucan_rxhdr, 8 a control reply. The hub switches a socket to
- * headers (HEADER_MODE) when it needs them, but the library does not follow the switch: a
- * socket inherited across exec may still hold bare frames queued before it, and a thread may
- * read on while another takes it. Each message is decoded by its length. */
+ * headers when it needs them, without a notice on the socket: a socket inherited across exec
+ * may still hold bare frames queued before the switch, and several threads may read it. Each
+ * message is decoded by its length. */
 static int bare_frame_len(size_t len)
 {
 	return len == CAN_MTU || len == CANFD_MTU;
@@ -1119,7 +1119,9 @@ static ssize_t can_recvmsg(struct csock *cs, int fd, struct msghdr *user, int fl
 			errno = ENETDOWN;
 			return -1;
 		}
-		if (n == (ssize_t)sizeof(struct ucan_ctl)) { /* an ACK, or HEADER_MODE: frames are told by length */
+		if (n == (ssize_t)sizeof(struct ucan_ctl)) {
+			/* a control reply: after BIND's ACK (read by bind) the hub sends none on a data
+			 * socket, so a second reader cannot take it between this peek and its consume */
 			if (flags & MSG_PEEK) { /* consume it so the peeked frame is the next one */
 				struct ucan_ctl ctl;
 				get_recv()(fd, &ctl, sizeof(ctl), MSG_DONTWAIT);
@@ -1229,7 +1231,7 @@ PUBLIC ssize_t readv(int fd, const struct iovec *iov, int iovcnt)
 static int mmsg_deliver(struct csock *cs, struct mmsghdr *out, const uint8_t *data, size_t len, int native_flags)
 {
 	if (len == sizeof(struct ucan_ctl))
-		return 0; /* an ACK, or HEADER_MODE: frames are told by length */
+		return 0; /* a control reply: frames are told by length */
 	struct ucan_rxhdr hdr;
 	int headed = !bare_frame_len(len);
 	if (headed) {
