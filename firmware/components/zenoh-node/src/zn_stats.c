@@ -131,9 +131,10 @@ void zn_stats_monitor_thread(void *arg)
 		}
 		/* a connection replaced within a poll leaves the routers unchanged: only this count sees it */
 		uint64_t closed = zn_connections_closed(zn_node.session);
-		if (closed > zn_node.connections_seen_closed)
+		uint64_t newly = closed > zn_node.connections_seen_closed ? closed - zn_node.connections_seen_closed : 0;
+		if (newly)
 			zn_log("W", "%" PRIu64 " Zenoh connection%s closed (%" PRIu64 " since start): samples put to its peer before it reopened are lost",
-			       closed - zn_node.connections_seen_closed, closed - zn_node.connections_seen_closed > 1 ? "s" : "", closed);
+			       newly, newly > 1 ? "s" : "", closed);
 		zn_node.connections_seen_closed = closed;
 		if (routers > 0)
 			snprintf(zn_node.router_ids, sizeof(zn_node.router_ids), "%s", ids);
