@@ -1,5 +1,6 @@
 """python-can's BLF reader, with the bus events it skips without a word: an error frame stored
-as a CAN_ERROR object (some loggers' way; python-can reads only CAN_ERROR_EXT ones) and an
+as a CAN_ERROR or CAN_FD_ERROR_64 object (some loggers' way, and CANoe's on a CAN FD channel;
+python-can reads only CAN_ERROR_EXT ones) and an
 overload frame (CAN_OVERLOAD) are read as python-can reads a CAN_ERROR_EXT, an error-flagged
 can.Message, so that a BLF's error frames are refused and counted as every other format's are
 (canbench.trace)."""
@@ -17,18 +18,21 @@ from can.io import blf
 # Vector's object types python-can's reader passes over. An overload frame is read as an error
 # frame too: like one, it is a bus event with no id or data a replay could send, and the kernel
 # reports it as one (CAN_ERR_PROT_OVERLOAD), so candump -e's recording of the bus counts it as one.
-CAN_ERROR, CAN_OVERLOAD = 2, 3
-BUS_EVENTS = (CAN_ERROR, CAN_OVERLOAD)
-CHANNEL = struct.Struct("<H")  # VBLCANErrorFrame / VBLCANOverloadFrame begin with their channel (from 1)
-# an object header of either type: none in the data, no object of them starts in it (a quick test)
-BUS_EVENT_HEADER = re.compile(rb"LOBJ.{8}[\x02\x03]\x00\x00\x00", re.DOTALL)
+# CAN_FD_ERROR_64: the error frame CANoe and CANalyzer store on a channel in CAN FD mode (which
+# carries classic frames too).
+CAN_ERROR, CAN_OVERLOAD, CAN_FD_ERROR_64 = 2, 3, 104
+# each begins with its channel (from 1): VBLCANErrorFrame and VBLCANOverloadFrame a WORD, VBLCANFDErrorFrame64 a BYTE
+CHANNEL = {CAN_ERROR: struct.Struct("<H"), CAN_OVERLOAD: struct.Struct("<H"), CAN_FD_ERROR_64: struct.Struct("<B")}
+BUS_EVENTS = tuple(CHANNEL)
+# an object header of these types: none in the data, no object of them starts in it (a quick test)
+BUS_EVENT_HEADER = re.compile(rb"LOBJ.{8}[\x02\x03\x68]\x00\x00\x00", re.DOTALL)
 HEADER_SIZES = {1: blf.OBJ_HEADER_BASE_STRUCT.size + blf.OBJ_HEADER_V1_STRUCT.size,
                 2: blf.OBJ_HEADER_BASE_STRUCT.size + blf.OBJ_HEADER_V2_STRUCT.size}
 
 
 class BLFReader(blf.BLFReader):
-    """python-can's reader, that also yields Message(is_error_frame=True) for CAN_ERROR and
-    CAN_OVERLOAD objects, in their place among the frames.
+    """python-can's reader, that also yields Message(is_error_frame=True) for CAN_ERROR,
+    CAN_FD_ERROR_64 and CAN_OVERLOAD objects, in their place among the frames.
 
     Two internals of python-can 4.6.1's reader make that possible, pinned by
     test_python_can_blf_internals_it_relies_on (an upgrade that changes them fails it):
@@ -54,7 +58,7 @@ class BLFReader(blf.BLFReader):
         yield from (event for pos, event in events if pos < self._pos)
 
     def _bus_events(self, data: bytes) -> Iterator[tuple[int, can.Message]]:
-        """(where its object starts, the error frame) of each whole CAN_ERROR or CAN_OVERLOAD object
+        """(where its object starts, the error frame) of each whole bus event object (BUS_EVENTS)
         in data, walking the objects as python-can's _parse_data does; the rest of what it reads or
         refuses (a stray byte, an unknown header version) is python-can's to say."""
         pos, end = 0, len(data)
@@ -66,10 +70,10 @@ class BLFReader(blf.BLFReader):
             if size < blf.OBJ_HEADER_BASE_STRUCT.size or pos + size > end:
                 return  # python-can's own error, or an object that goes on in the next container
             body = pos + HEADER_SIZES.get(version, 0)
-            if kind in BUS_EVENTS and version in HEADER_SIZES and body + CHANNEL.size <= pos + size:
+            if kind in BUS_EVENTS and version in HEADER_SIZES and body + CHANNEL[kind].size <= pos + size:
                 header = blf.OBJ_HEADER_V1_STRUCT if version == 1 else blf.OBJ_HEADER_V2_STRUCT
                 flags, _, _, stamp = header.unpack_from(data, pos + blf.OBJ_HEADER_BASE_STRUCT.size)
                 factor = blf.TIME_TEN_MICS_FACTOR if flags == blf.TIME_TEN_MICS else blf.TIME_ONE_NANS_FACTOR
                 yield pos, can.Message(timestamp=float(Decimal(stamp) * factor) + self.start_timestamp,
-                                       is_error_frame=True, channel=CHANNEL.unpack_from(data, body)[0] - 1)
+                                       is_error_frame=True, channel=CHANNEL[kind].unpack_from(data, body)[0] - 1)
             pos += size

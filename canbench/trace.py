@@ -7,6 +7,8 @@ passes the same checks (iter_trace): CAN 2.0 data and remote frames only (a CAN 
 frame is refused, never truncated or replayed as data), ids in range, time never going back."""
 from __future__ import annotations
 
+import base64
+import binascii
 import logging
 import re
 import string
@@ -196,6 +198,10 @@ class _LineCounter:
 
     def __init__(self, f):
         self.f, self.line, self.text = f, 0, ""
+        # (line, problem, kind) of lines python-can would misread or pass over without a word,
+        # found here on the way to it; refused: the last such line (a frame read from it is dropped)
+        self.problems: list[tuple[int, str, str | None]] = []
+        self.refused = 0
 
     def __iter__(self):
         return self
@@ -207,6 +213,12 @@ class _LineCounter:
 
     def close(self) -> None:
         self.f.close()
+
+    def said(self, fail: Callable[..., None]) -> None:
+        """Each problem found since, to fail."""
+        for line, problem, kind in self.problems:
+            fail(line, problem, kind)
+        self.problems.clear()
 
 
 class _AscLines(_LineCounter):
@@ -228,6 +240,9 @@ class _AscLines(_LineCounter):
             return self.text
         text = super().__next__()
         if not self.header:
+            if (problem := _asc_line_problem(text)) is not None:
+                self.problems.append((self.line, problem, None))
+                self.refused = self.line
             return text
         while not text.strip():  # python-can's header reader stops at a blank line: a base line after it went unread
             text = super().__next__()
@@ -241,6 +256,69 @@ class _AscLines(_LineCounter):
             self.header, self.pending, self.line = False, text, self.line - 1
             return "no internal events logged\n"
         return text
+
+
+class _TrcLines(_LineCounter):
+    """A TRC file as python-can's TRCReader takes it, but for TRC 1.0's error frames ('2) 1842
+    0008 4 ERROR 00 19 08 08', PEAK's format description): its reader stops at the whole file on
+    one (it reads 'ERROR' as a data byte), so each is passed over here and said as an error frame."""
+
+    def __init__(self, f, version: str | None):
+        super().__init__(f)
+        self.v1_0 = version in (None, "1.0")
+
+    def __next__(self) -> str:
+        text = super().__next__()
+        while self.v1_0 and TRC_1_0_ERROR.match(text):
+            self.problems.append((self.line, ERROR_FRAME, ERROR_KIND))
+            text = super().__next__()
+        return text
+
+
+TRC_1_0_ERROR = re.compile(r"^\s*\d+\)\s+\S+\s+[0-9A-Fa-f]+\s+\d+\s+ERROR\b")
+# TRC 1.x's data bytes end the line, two hex digits each (2.x's columns python-can checks itself)
+TRC_1_X_BYTES = re.compile(r"(?:\s+[0-9A-Fa-f]{2})+\s*$")
+# an ASC classic frame line, Vector's grammar: <time> <ch> <id>[x] <Rx|Tx> <d|r> <dlc> <data bytes> ...
+ASC_CLASSIC_LIKE = re.compile(r"^\s*(?P<time>\d+[.,]\d+)\s+\d+\s+[0-9A-Fa-f]{1,8}x?\s+(?P<f1>\S+)(?:\s+(?P<f2>\S+))?")
+ASC_DIRECTIONS = ("rx", "tx", "txrq")
+
+
+def _asc_line_problem(text: str) -> str | None:
+    """Why an ASC line shaped like a classic frame is none python-can reads right: its reader passes
+    over a frame line without a direction, with another word there or a decimal comma in the stamp,
+    and reads any type but 'r' as data. None: not such a line, or a good one."""
+    m = ASC_CLASSIC_LIKE.match(text)
+    if not m:
+        return None
+    f1, f2 = m["f1"].lower(), (m["f2"] or "").lower()
+    if f1 in ("d", "r"):
+        return f"a frame line without its direction (Rx or Tx) before '{m['f1']}': {text.strip()[:60]!r}"
+    if f1 not in ASC_DIRECTIONS and f2 in ("d", "r"):
+        return f"direction '{m['f1']}' is not Rx or Tx: {text.strip()[:60]!r}"
+    if f1 not in ASC_DIRECTIONS:
+        return None  # not a frame line (an event's)
+    if "," in m["time"]:
+        return f"a decimal comma in the stamp {m['time']!r}: ASC stamps are seconds with a point"
+    if f2 not in ("d", "r"):
+        return f"frame type '{m['f2'] or ''}' is not d (data) or r (remote): {text.strip()[:60]!r}"
+    return None
+
+
+def _extra_bytes(suffix: str, text: str, msg: can.Message, base: str) -> str | None:
+    """Why a data frame's line holds more bytes than its DLC (ASC's classic lines, TRC 1.x), which
+    python-can reads without a word to the DLC's count: which of the two is wrong no one can tell."""
+    if msg.is_remote_frame or msg.is_fd or msg.dlc > 8:
+        return None
+    if suffix == ".asc":
+        tokens = text.split()
+        if len(tokens) < 6 or not tokens[1].isdigit() or tokens[4].lower() != "d":  # not a classic data line
+            return None
+        byte = r"\d{1,3}" if base == "dec" else r"[0-9A-Fa-f]{1,2}"
+        count = next((n for n, field in enumerate(tokens[6:]) if not re.fullmatch(byte, field)), len(tokens[6:]))
+    else:
+        m = TRC_1_X_BYTES.search(text)
+        count = len(m[0].split()) if m else 0
+    return f"dlc {msg.dlc} with {count} data bytes" if count > msg.dlc else None
 
 
 ASC_HEADER = re.compile(r"^(date\s|base\s|//)", re.IGNORECASE)  # what ASCReader's header reader reads on past
@@ -295,26 +373,33 @@ def _unended_line(path: Path) -> tuple[int, str] | None:
 
 
 ASC_FD_FRAME = 0x1000  # the flags' EDL bit: the frame was CAN FD (Vector's ASC; python-can's ASCWriter sets it)
+ASC_REMOTE = 0x10  # the flags' RTR bit (can-utils' asc2log: ASC_F_RTR)
 
 
-def _classic_in_fd_line(text: str, msg: can.Message) -> can.Message:
+def _classic_in_fd_line(text: str, msg: can.Message, base: str) -> can.Message:
     """A frame of an ASC `CANFD` line whose flags say it was a classic CAN frame (EDL clear, no BRS
     or ESI, at most 8 bytes), as CANoe logs on a CAN FD channel and can-utils' log2asc -f writes:
-    the classic frame (python-can reads every CANFD line as CAN FD). Else the message unchanged.
-    Grammar: <time> CANFD <ch> <dir> <id> [<name>] <brs> <esi> <dlc> <length> <data bytes>
-    <duration> <bits> <flags> <crc> ..., e.g. '0.010000 CANFD 1 Rx 123 0 0 8 8 01 .. 08 130000 130 0 0'."""
+    the classic frame (python-can reads every CANFD line as CAN FD), remote by the flags' RTR bit
+    (python-can takes every line without data for a remote frame), with the line's DLC code, so
+    that a code that is not the data's length is refused as on a classic line. Else the message
+    unchanged. Grammar: <time> CANFD <ch> <dir> <id> [<name>] <brs> <esi> <dlc> <length> <data
+    bytes> <duration> <bits> <flags> <crc> ..., e.g. '0.010000 CANFD 1 Rx 123 0 0 8 8 01 .. 08 130000 130 0 0'."""
     tokens = text.split()
     at = 5 if len(tokens) > 5 and tokens[5].isdigit() else 6  # an optional symbolic name
     try:
         brs, esi, length = tokens[at], tokens[at + 1], int(tokens[at + 3])
+        code = int(tokens[at + 2], 10 if base == "dec" else 16)
         flags = int(tokens[at + 4 + length + 2], 16)
     except (IndexError, ValueError):
         return msg  # not the grammar above: left as python-can read it (refused as CAN FD)
     if flags & ASC_FD_FRAME or brs != "0" or esi != "0" or length > 8:
         return msg
+    if flags & ASC_REMOTE:
+        return can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id,
+                           is_extended_id=msg.is_extended_id, is_remote_frame=True, dlc=code,
+                           channel=msg.channel, is_rx=msg.is_rx)
     return can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id, is_extended_id=msg.is_extended_id,
-                       is_remote_frame=msg.is_remote_frame, dlc=msg.dlc if msg.is_remote_frame else len(msg.data),
-                       data=None if msg.is_remote_frame else msg.data, channel=msg.channel, is_rx=msg.is_rx)
+                       dlc=code, data=msg.data[:length], channel=msg.channel, is_rx=msg.is_rx)
 
 
 def _asc_dlc_code(text: str, msg: can.Message, base: str) -> can.Message:
@@ -335,10 +420,16 @@ def _asc_dlc_code(text: str, msg: can.Message, base: str) -> can.Message:
 
 
 def _csv_problem(text: str) -> str | None:
-    """Why a python-can CSV row's flags are not its 0/1 (it reads 'true' as 0: a 29-bit frame as 11-bit)."""
+    """Why a python-can CSV row's flags are not its 0/1 (it reads 'true' as 0: a 29-bit frame as 11-bit),
+    or its data is no base64 (its reader drops the characters that are none and reads the rest)."""
     fields = text.strip().split(",")
     if len(fields) >= 5 and any(flag not in ("0", "1") for flag in fields[2:5]):
         return f"extended, remote and error are 0 or 1 in python-can's CSV, not {','.join(fields[2:5])!r}"
+    if len(fields) >= 7:
+        try:
+            base64.b64decode(fields[6], validate=True)
+        except binascii.Error:
+            return f"data {fields[6][:40]!r} is not base64 (python-can's CSV writes the bytes so)"
     return None
 
 
@@ -393,8 +484,10 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
             if first != CSV_HEADER:
                 raise TraceError(str(path), 1, f"python-can's CSV begins with the line {CSV_HEADER} "
                                  f"(its reader skips the first line whatever it is): {first[:60]!r}")
+        version = _trc_version(path) if suffix == ".trc" else None
         f = open(path, encoding="utf-8-sig", errors="replace")
-        counter: _LineCounter = _AscLines(f, path) if suffix == ".asc" else _LineCounter(f)
+        counter: _LineCounter = (_AscLines(f, path) if suffix == ".asc" else
+                                 _TrcLines(f, version) if suffix == ".trc" else _LineCounter(f))
         log = _ReaderLog(counter)
         try:
             with _listening("can.io.trc", log, logging.INFO):
@@ -402,6 +495,9 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
                 for msg in reader:
                     line = counter.line
                     _reader_problems(log, fail)
+                    counter.said(fail)
+                    if line == counter.refused:
+                        continue
                     if unended and line == unended[0]:
                         hex_bytes = str(getattr(reader, "base", "hex")).lower() != "dec"  # ASC: as its header said
                         cut = _cut(unended[1], msg, suffix, hex_bytes)
@@ -412,15 +508,18 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
                     if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
                         continue  # a transmit request is no frame on the bus
                     if suffix == ".asc" and msg.is_fd and not msg.is_error_frame:
-                        msg = _classic_in_fd_line(counter.text, msg)
+                        msg = _classic_in_fd_line(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
                     elif suffix == ".asc" and msg.dlc > 8 and not msg.is_remote_frame:
                         msg = _asc_dlc_code(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
                     problem = _csv_problem(counter.text) if suffix == ".csv" else None
+                    if suffix == ".asc" or (suffix == ".trc" and (version or "1.0").startswith("1.")):
+                        problem = _extra_bytes(suffix, counter.text, msg, str(getattr(reader, "base", "hex")).lower())
                     if problem:
                         fail(line, problem)
                         continue
                     yield line, msg
                 _reader_problems(log, fail)
+                counter.said(fail)
                 if unended and _cut(unended[1], None, suffix):  # python-can read nothing from it
                     fail(unended[0], cut_said)
         except TraceError:
@@ -466,7 +565,8 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
     except TraceError:
         raise
     except Exception as e:  # noqa: BLE001 - python-can raises many kinds for bad files
-        raise TraceError(str(path), None, f"python-can cannot read it: {e}") from None
+        reason = str(e) or f"{type(e).__name__}, bytes it reads as no object: a damaged file?"
+        raise TraceError(str(path), None, f"python-can cannot read it: {reason}") from None
 
 
 class _Skipped(logging.Handler):

@@ -1,8 +1,10 @@
 """Recordings as other tools leave them, where python-can's readers alone would read them wrong
 without a word: ASC files with relative stamps, transmit requests or no 'internal events
-logged' line, a text trace cut inside its last line (whatever its line ends, candump -L too), python-can CSV
-without its header or with 'true' flags, a compressed trace, a BLF its logger never closed or
-with error frames stored as CAN_ERROR objects (and the python-can internals read for them), a
+logged' line, ASC CANFD lines of classic frames (remote by their flags, their DLC code), ASC frame
+lines python-can skips or misreads, ASC and TRC 1.x lines of more bytes than their dlc, TRC 1.0
+error frames, a text trace cut inside its last line (whatever its line ends, candump -L too), python-can CSV
+without its header, with 'true' flags or data that is no base64, a compressed trace, a BLF its logger never closed or
+with error frames stored as CAN_ERROR or CAN_FD_ERROR_64 objects (and the python-can internals read for them), a
 candump -d recording with DROPCOUNT lines; and `canbench scaffold` beside another scenario's files or
 with a DBC whose limits the trace is outside. Each case read a frame wrong, twice or not at all
 before the code it guards."""
@@ -220,6 +222,90 @@ def test_an_asc_canfd_line_of_a_classic_frame_is_a_can_20_frame(tmp_path):
                               "trace it writes)"]
 
 
+def test_an_asc_canfd_line_of_a_classic_frame_is_remote_by_its_flags_and_keeps_its_dlc_code(tmp_path):
+    # python-can takes a CANFD line without data for a remote frame whatever its flags say (RTR 0x10),
+    # and reads its data length whatever its DLC code says
+    line = "   {t} CANFD   1 Rx          123        0 0 {dlc}  {n} {data}  102203  133  {flags} 0 0 0 0 0\n"
+    path = asc(tmp_path, line.format(t="0.010000", dlc=0, n=0, data="", flags="200000")
+               + line.format(t="0.020000", dlc=8, n=0, data="", flags="200010")
+               + line.format(t="0.030000", dlc=8, n=4, data="DE AD BE EF", flags="200000")
+               + line.format(t="0.040000", dlc="d", n=8, data="01 02 03 04 05 06 07 08", flags="200000"))
+    read = [(line, frame.candump()) for line, _, _, frame in iter_trace(path, on_problem=lambda e: None)]
+    assert read == [(5, "vcan0 123#"), (6, "vcan0 123#R8")]
+    said = problems(path)
+    assert said[0] == f"{path}:7: dlc 8 with 4 data bytes"
+    assert said[1].startswith(f"{path}:8: DLC D (13) with 8 data bytes") and len(said) == 2
+
+
+@pytest.mark.parametrize("line,said", [
+    ("   0.010000 1  123  Rx   q 4 DE AD BE EF", "frame type 'q' is not d (data) or r (remote)"),
+    ("   0.010000 1  123  d 4 DE AD BE EF", "a frame line without its direction (Rx or Tx) before 'd'"),
+    ("   0.010000 1  123  Xx   d 4 DE AD BE EF", "direction 'Xx' is not Rx or Tx"),
+    ("   0,010000 1  123  Rx   d 4 DE AD BE EF", "a decimal comma in the stamp '0,010000': ASC stamps are seconds "
+                                                 "with a point"),
+    ("   0.010000 1  123  Rx   d 2 DE AD BE EF", "dlc 2 with 4 data bytes"),
+])
+def test_an_asc_frame_line_python_can_would_skip_or_misread_is_said_at_its_line(tmp_path, line, said):
+    # python-can's ASC reader passes over a frame line without Rx/Tx or with a decimal comma, reads a
+    # type other than 'r' as data, and reads only the DLC's count of bytes
+    path = asc(tmp_path, line + "\n   0.020000 1  124  Rx   d 1 01   Length = 0 BitCount = 0 ID = 292\n")
+    found = problems(path)
+    assert len(found) == 1 and found[0].startswith(f"{path}:5: {said}"), found
+    assert [(line, frame.candump()) for line, _, _, frame in iter_trace(path, on_problem=lambda e: None)] == [
+        (6, "vcan0 124#01")]
+
+
+def test_asc_events_and_well_formed_lines_are_no_problem(tmp_path):
+    path = asc(tmp_path, "   0.005000 Start of measurement\n"
+                         "   0.006000 1  Statistic: D 0 R 0 XD 0 XR 0 E 0 O 0 B 0.00%\n"
+                         "   0.007000 1  ErrorFrame\n   0.008000 CAN 1 Status:chip status error active\n"
+                         "   0.010000 1  1CFEF100x  Rx   d 8 01 02 03 04 05 06 07 08  Length = 0 BitCount = 0 ID = 1\n"
+                         "   0.020000 1  7E0  Tx   r 8\n   0.030000 1  123  RX   D 0\n")
+    found: list[TraceError] = []
+    read = [frame.candump() for _, _, _, frame in iter_trace(path, on_problem=found.append, left_out={})]
+    assert read == ["vcan0 1CFEF100#0102030405060708", "vcan0 7E0#R8", "vcan0 123#"] and not found
+
+
+@pytest.mark.parametrize("version,line", [
+    ("1.1", "     1)     17535.4  Tx         0100  2  00 01 02 03"),
+    ("1.3", "     1)     17535.4 1  Tx        0100 -  2  00 01 02 03"),
+])
+def test_a_trc_1x_line_of_more_bytes_than_its_dlc_is_refused(tmp_path, version, line):
+    path = tmp_path / "t.trc"
+    path.write_text(f";$FILEVERSION={version}\n;$STARTTIME=44548.6028595139\n{line}\n")
+    assert problems(path) == [f"{path}:3: dlc 2 with 4 data bytes"]
+
+
+def test_a_trc_10_error_frame_is_left_out_and_counted_not_the_end_of_the_read(tmp_path):
+    # PCAN's TRC 1.0 (no FILEVERSION line): python-can reads 'ERROR' as a data byte and stops there
+    path = tmp_path / "t.trc"
+    path.write_text(";   Start time: 11.09.2002 16:00:20.682\n"
+                    "     1)      1841  0001  8  00 00 00 00 00 00 00 00\n"
+                    "     2)      1842  0008  4  ERROR 00 19 08 08\n"
+                    "     3)      1844  0100  3  RTR\n")
+    left_out: dict[str, list[int]] = {}
+    read = [(line, frame.candump()) for line, _, _, frame in iter_trace(path, left_out=left_out)]
+    assert read == [(2, "vcan0 001#0000000000000000"), (4, "vcan0 100#R3")] and left_out == {ERROR_KIND: [3]}
+    assert problems(path) == [f"{path}:3: {ERROR_FRAME}"]
+
+
+def test_python_can_csv_data_that_is_not_base64_is_refused(tmp_path):
+    # its reader decodes without validate: '3q2*+7w==' read as DEADBEEF
+    path = tmp_path / "t.csv"
+    path.write_text("timestamp,arbitration_id,extended,remote,error,dlc,data\n1700000000.1,0x123,0,0,0,4,3q2*+7w==\n"
+                    "1700000000.2,0x123,0,0,0,4,3q2+7w==\n")
+    assert problems(path) == [f"{path}:2: data '3q2*+7w==' is not base64 (python-can's CSV writes the bytes so)"]
+
+
+def test_a_blf_python_can_refuses_without_a_reason_is_said_with_one(tmp_path):
+    path = tmp_path / "t.blf"
+    with can.BLFWriter(str(path)) as writer:
+        writer.on_message_received(can.Message(timestamp=T0, arbitration_id=0x123, data=b"\x01", channel=0))
+    path.write_bytes(path.read_bytes() + b"\x00" * 24)  # stray bytes after the last object
+    with pytest.raises(TraceError, match=r"python-can cannot read it: \w+, bytes it reads as no object"):
+        frames(path)
+
+
 def test_candump_of_several_interfaces_is_in_order_per_interface_only(tmp_path):
     # candump can0 can1 reads one socket per wakeup: can1's .0002 may be written after can0's .0003
     path = tmp_path / "two.log"
@@ -296,7 +382,7 @@ def test_a_blf_its_logger_never_closed_is_refused_where_it_is_cut(tmp_path):
 
 
 T0 = 1_700_000_000.0
-CAN_ERROR, CAN_OVERLOAD = 2, 3  # Vector's object types python-can's reader passes over
+CAN_ERROR, CAN_OVERLOAD, CAN_FD_ERROR_64 = 2, 3, 104  # Vector's object types python-can's reader passes over
 
 
 def blf_with(path: Path, records: list, container: int = 128 * 1024) -> list[tuple[int, int]]:
@@ -312,7 +398,10 @@ def blf_with(path: Path, records: list, container: int = 128 * 1024) -> list[tup
             offset += blf.OBJ_HEADER_BASE_STRUCT.size + blf.OBJ_HEADER_V1_STRUCT.size + blf.CAN_MSG_STRUCT.size
             continue
         kind, stamp, channel, version = record
-        body = struct.pack("<HHL", channel, 0, 0)  # VBLCANErrorFrame: channel, length, reserved
+        if kind == CAN_FD_ERROR_64:  # VBLCANFDErrorFrame64: channel (a byte), dlc, ..., crc, position, data[64]
+            body = struct.pack("<BBBBHHHBBLLLLLLLHH64s", channel, *[0] * 17, b"")
+        else:  # VBLCANErrorFrame: channel, length, reserved
+            body = struct.pack("<HHL", channel, 0, 0)
         if version == 1:
             writer._add_object(kind, body, stamp)
             size = blf.OBJ_HEADER_BASE_STRUCT.size + blf.OBJ_HEADER_V1_STRUCT.size + len(body)
@@ -369,6 +458,22 @@ def test_blf_error_frames_stored_as_can_error_objects_are_refused_and_counted_no
     mine = list(BLFReader(str(path)))
     assert [(round(m.timestamp - T0, 6), m.channel) for m in mine if m.is_error_frame] == [(0.025, 0), (0.065, 1)]
     assert as_read(m for m in mine if not m.is_error_frame) == as_read(can.BLFReader(str(path)))
+
+
+@pytest.mark.parametrize("container", [128 * 1024, 80])
+def test_blf_error_frames_of_a_can_fd_channel_are_refused_and_counted_not_skipped(tmp_path, container):
+    # CANoe and CANalyzer store an error frame on a channel in CAN FD mode (which carries classic
+    # frames too) as CAN_FD_ERROR_64, which python-can's reader passes over without a word
+    path = tmp_path / "drive.blf"
+    records = ten_frames()
+    records[3] = (CAN_FD_ERROR_64, T0 + 0.025, 1, 1)
+    records[8] = (CAN_FD_ERROR_64, T0 + 0.065, 2, 2)
+    blf_with(path, records, container)
+    left_out: dict[str, list[int]] = {}
+    assert [line for line, _, _, _ in iter_trace(path, left_out=left_out)] == [1, 2, 3, 5, 6, 7, 8, 10, 11, 12]
+    assert left_out == {ERROR_KIND: [4, 9]}
+    mine = list(BLFReader(str(path)))
+    assert [(round(m.timestamp - T0, 6), m.channel) for m in mine if m.is_error_frame] == [(0.025, 0), (0.065, 1)]
 
 
 def test_summarise_and_scaffold_count_a_blfs_can_error_objects(tmp_path, capsys):
