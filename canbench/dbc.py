@@ -3,9 +3,9 @@ checks share one database), a frame's signals as numbers (the recording's /signa
 the viewer, the signal expectations), a message's database cycle time and send type, and why a
 scenario's value cannot be a signal's.
 
-A DBC is read as written (cantools' strict=False) and then held to cantools' strict rules
-where it is used: a scenario refuses one whose signals overlap or pass their message's end
-unless it says `dbc_strict: false`, a command line unless given --dbc-lenient. Such a message
+A DBC is read as written (cantools' strict=False) and then held to cantools' strict rules, and
+the bench's (_bench_problem), where it is used: a scenario refuses one whose signals overlap or
+pass their message's end unless it says `dbc_strict: false`, a command line unless given --dbc-lenient. Such a message
 cantools cannot decode whole (its codec needs the bits in one piece), so it is decoded signal by
 signal, each from its own bits as the DBC places them (_one_signal_messages), and it is not encoded:
 what the bench sends must carry every signal's value, and overlapping signals cannot.
@@ -14,6 +14,7 @@ A 29-bit frame of no message's id is a J1939 message's when the DBC marks one me
 parameter group J1939 (message_of): a truck's network sends a group from any source address."""
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import re
@@ -29,11 +30,13 @@ from cantools.database.can import Message
 from . import j1939
 from .files import file_problem
 
-# per message that cantools' strict mode refuses: why (its words), and the one-signal messages it
+# per message that strict reading refuses: why (cantools' words, or _bench_problem's), and the one-signal messages it
 # is decoded by; filled when the DBC is loaded, so a database in use is never changed
 _AS_WRITTEN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _J1939: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # per database, its J1939 messages by group
+# a multiplexed message's one-signal messages, made at its first frame of a page the DBC does not list
+_MUX_PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 # GenMsgSendType defined as a number (some tools do; Vector's DBCs make it an ENUM): cantools refuses
@@ -88,13 +91,37 @@ def saved_text(data: bytes) -> str:
 
 
 def _hold_to_strict(db) -> None:
-    """Note each message cantools' strict mode refuses, with why, and the parts it is decoded by."""
+    """Note each message cantools' strict mode, or the bench (_bench_problem), refuses, with why,
+    and the parts it is decoded by."""
     for message in db.messages:
         try:
             message.refresh(strict=True)  # raises only once its state is rebuilt as it was
+            why = _bench_problem(message)
         except cantools.database.Error as e:
-            _AS_WRITTEN[message] = str(e).rstrip(".")
+            why = str(e).rstrip(".")
+        if why is not None:
+            _AS_WRITTEN[message] = why
             _PARTS[message] = _one_signal_messages(message)
+
+
+def _bench_problem(message) -> str | None:
+    """Why a message cantools' strict mode passes cannot be read whole as the DBC writes it: signals
+    multiplexed by a signal the DBC does not mark a multiplexer (M; cantools never decodes them, nor
+    encodes their values), a float signal of neither 32 nor 64 bits (cantools cannot unpack 8, and
+    reads 16 as IEEE half precision, which no DBC type is), a scale of 0 (every frame carries the
+    offset: no value can be sent or judged)."""
+    by_name = {s.name: s for s in message.signals}
+    for signal in message.signals:
+        mux = signal.multiplexer_signal
+        if mux is not None and not getattr(by_name.get(mux), "is_multiplexer", False):
+            return (f"{signal.name} is multiplexed by {mux}, which the DBC does not mark a multiplexer "
+                    f"({'M' if mux in by_name else 'no such signal'})")
+        if signal.is_float and signal.length not in (32, 64):
+            return (f"{signal.name} is a float of {signal.length} bits (a DBC's float is 32 bits, SIG_VALTYPE_ 1, "
+                    "or 64, SIG_VALTYPE_ 2)")
+        if signal.conversion.scale == 0:
+            return f"{signal.name}'s scale is 0 (every frame carries its offset, {signal.conversion.offset:g})"
+    return None
 
 
 def _one_signal_messages(message) -> tuple:
@@ -108,6 +135,9 @@ def _one_signal_messages(message) -> tuple:
         while at.multiplexer_signal in by_name and by_name[at.multiplexer_signal] not in chain:  # a loop ends
             at = by_name[at.multiplexer_signal]
             chain.insert(0, at)
+        if signal.is_multiplexer:  # read as a plain signal: its value is one whatever pages the DBC lists
+            chain[-1] = copy.copy(signal)
+            chain[-1].is_multiplexer = False
         length = max(message.length, *(_end_byte(s) for s in chain))
         out.append(Message(message.frame_id, message.name, length, chain, strict=False,
                            is_extended_frame=message.is_extended_frame))
@@ -136,29 +166,53 @@ def past_can_20(signal) -> str | None:
     return None if end <= 8 else f"{signal.name}'s bits end in byte {end}: no CAN 2.0 frame (8 bytes) carries it"
 
 
+def judged_problem(message, signal) -> str | None:
+    """Why no frame the bench carries gives a signal's value (None if one can): a message of more
+    than 8 bytes (CAN FD: a frame of 8 does not decode as it), bits past the 8th byte, a scale of 0."""
+    if too_long_for_can_20(message):
+        return (f"{message.name} has {message.length} data bytes (CAN FD): the bench carries CAN 2.0 frames of "
+                "at most 8, and no shorter frame decodes as it")
+    if why := past_can_20(signal):
+        return why
+    if signal.conversion.scale == 0:
+        return f"{signal.name}'s scale is 0 in the DBC: every frame carries its offset, whatever its bits"
+    return None
+
+
 def as_written_problem(message) -> str | None:
-    """Why cantools' strict mode refuses a message (None if it does not): signals that overlap or
-    pass its end."""
+    """Why strict reading refuses a message (None if it does not): signals that overlap or pass its
+    end (cantools' strict mode), or what _bench_problem says."""
     return _AS_WRITTEN.get(message)
 
 
 def strict_problem(db) -> str | None:
-    """Why cantools' strict mode refuses a DBC (None if it does not): how many messages, the first five named."""
+    """Why strict reading refuses a DBC (None if it does not): how many messages, the first five named."""
     said = [f"{m.name} ({_AS_WRITTEN[m]})" for m in db.messages if m in _AS_WRITTEN]
     if not said:
         return None
-    return (f"{len(said)} message{'s' if len(said) > 1 else ''} with signals that overlap or pass the message's "
-            f"end: {'; '.join(said[:5])}{'; ...' if len(said) > 5 else ''}")
+    return (f"{len(said)} message{'s' if len(said) > 1 else ''} it cannot read whole as written (signals that "
+            f"overlap or pass the message's end, or below): {'; '.join(said[:5])}{'; ...' if len(said) > 5 else ''}")
 
 
 def decode(message, data: bytes, scaling: bool = True) -> dict:
     """A frame's signals (numbers, not value-table names), as cantools decodes the message: a
-    frame shorter than the message is an error, as for cantools. A message strict mode refuses
-    is decoded signal by signal (_one_signal_messages); a signal past the DBC's length is left out
-    of a frame too short for it."""
+    frame shorter than the message is an error, as for cantools. A multiplexer value the DBC lists
+    no page for gives the frame's other signals and the multiplexer (cantools: an error, which
+    would lose a page-less signal's value and count its frame as one the DBC does not describe). A
+    message strict reading refuses is decoded signal by signal (_one_signal_messages); a signal past
+    the DBC's length is left out of a frame too short for it."""
     parts = _PARTS.get(message)
     if parts is None:
-        return message.decode(data, decode_choices=False, scaling=scaling)
+        try:
+            return message.decode(data, decode_choices=False, scaling=scaling)
+        except cantools.database.DecodeError:
+            if not message.is_multiplexed() or len(data) < message.length:
+                raise
+            # a page the DBC does not list (an ECU's reserved one): the signals outside pages and the
+            # multiplexers are still the frame's, read signal by signal as below
+            parts = _MUX_PARTS.get(message)
+            if parts is None:
+                parts = _MUX_PARTS[message] = _one_signal_messages(message)
     if len(data) < message.length:
         raise cantools.database.DecodeError(f"wrong data size: {len(data)} instead of {message.length} bytes")
     out: dict = {}
@@ -183,10 +237,16 @@ class DbcError(ValueError):
 
 def _refuse_duplicates(db) -> None:
     """Two messages of one id (and format) or one name: cantools keeps the last for lookups, so
-    every frame of that id would decode as the last one. Refused, naming both."""
+    every frame of that id would decode as the last one; two signals of one name in a message:
+    a decoded frame holds one value of the name. Refused, naming both."""
     ids: dict[tuple[int, bool], str] = {}
     names: dict[str, int] = {}
     for m in db.messages:
+        seen: set[str] = set()
+        for signal in m.signals:
+            if signal.name in seen:
+                raise DbcError(f"message {m.name} has two signals named {signal.name}: give each signal its own name")
+            seen.add(signal.name)
         key = (m.frame_id, m.is_extended_frame)
         if key in ids:
             raise DbcError(f"messages {ids[key]} and {m.name} have the same id "
@@ -205,7 +265,7 @@ def load_dbc(path: Path | None):
 
 def read_dbc(path: Path, lenient: bool = False):
     """load_dbc for a file a user named on the command line: an InputError naming it when it is
-    missing or cannot be used, or when cantools' strict mode refuses it and lenient is not set
+    missing or cannot be used, or when strict reading refuses it and lenient is not set
     (--dbc-lenient)."""
     from .errors import InputError
     if (problem := file_problem(Path(path), "DBC file", named=False)) is not None:
@@ -215,7 +275,7 @@ def read_dbc(path: Path, lenient: bool = False):
     except Exception as e:  # noqa: BLE001 - cantools' parse errors name what it could not read
         raise InputError(str(path), None, load_error_text(e, path=Path(path))) from None
     if not lenient and (why := strict_problem(db)):
-        raise InputError(str(path), None, f"cantools' strict mode refuses it: {why}; to read it as written, "
+        raise InputError(str(path), None, f"strict reading refuses it: {why}; to read it as written, "
                                           "give --dbc-lenient")
     return db
 
@@ -348,17 +408,22 @@ def raws_of(signal, value) -> tuple[int | float, ...]:
 
 def grid_problem(signal, value: float) -> str | None:
     """Why a number is between two values an integer signal can carry (None if it is one of them):
-    an equality gate on it could never be met. Float signals carry any number (at their width)."""
-    if signal.is_float or isinstance(value, bool):
+    an equality gate on it could never be met. Float signals carry any number (at their width). A
+    scale of 0 carries its offset only (and has no raw value for any number: said, not divided by)."""
+    if isinstance(value, bool):
+        return None
+    if signal.conversion.scale == 0:
+        return f"{signal.name}'s scale is 0 in the DBC: it carries {signal.conversion.offset:g} only"
+    if signal.is_float:
         return None
     raw = as_raw(signal, value)
     carried = signal.conversion.raw_to_scaled(raw, decode_choices=False)
-    scale = abs(signal.conversion.scale) or 1
+    scale = abs(signal.conversion.scale)
     if carried == value or math.isclose(carried, value, rel_tol=1e-9, abs_tol=scale * 1e-6):
         return None
-    lo, hi = sorted((carried, signal.conversion.raw_to_scaled(raw + (1 if value > carried else -1),
-                                                               decode_choices=False)))
-    return (f"{value:g} is not a value {signal.name} carries (steps of {signal.conversion.scale:g} from "
+    toward = 1 if (value > carried) == (signal.conversion.scale > 0) else -1  # a negative scale steps down
+    lo, hi = sorted((carried, signal.conversion.raw_to_scaled(raw + toward, decode_choices=False)))
+    return (f"{value:.10g} is not a value {signal.name} carries (steps of {signal.conversion.scale:g} from "
             f"{signal.conversion.offset:g}): {lo:.10g} or {hi:.10g}")
 
 

@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .dbc import decode, grid_problem, message_of, name_problem, past_can_20, range_problem, raws_of, value_range
+from .dbc import decode, grid_problem, judged_problem, message_of, name_problem, range_problem, raws_of, value_range
 from .stats import latency_stats
 
 if TYPE_CHECKING:
@@ -69,9 +69,9 @@ def value_problem(signal, value) -> str | None:
     return None  # the schema's
 
 
-def condition_problems(signal, spec: dict, where: list, fail) -> bool:
+def condition_problems(message, signal, spec: dict, where: list, fail) -> bool:
     """Each value of a `when`/`then` condition the signal cannot have, at its line; True if any."""
-    if why := past_can_20(signal):
+    if why := judged_problem(message, signal):
         fail([*where, "signal"], why)
         return True
     values: list[tuple[list, Any]] = [(["equals"], spec["equals"])] if "equals" in spec else []
@@ -185,7 +185,7 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
         except KeyError as e:
             fail([*where, "then", "signal"], f"{then['signal']}: not in the DBC ({e})")
             continue
-        bad = condition_problems(signal, then, [*where, "then"], fail)  # the stimulus is checked too
+        bad = condition_problems(message, signal, then, [*where, "then"], fail)  # the stimulus is checked too
         then_cond = None if bad else condition(signal, then)
         rule = dict(name=spec.get("name", f"response{i}"), bus=bus, within_ms=float(spec["within_ms"]), db=db,
                     response_message=message, response_signal=signal.name, then=then_cond,
@@ -223,7 +223,7 @@ def rules(doc: dict, bus_dbcs: dict, load, fail) -> tuple[Rule, ...]:
             except KeyError as e:
                 fail([*where, "when", "signal"], f"{when['signal']}: not in the DBC ({e})")
                 continue
-            if not condition_problems(ssignal, when, [*where, "when"], fail) and not bad:
+            if not condition_problems(smessage, ssignal, when, [*where, "when"], fail) and not bad:
                 out.append(Rule(**rule, stimulus_message=smessage, stimulus_signal=ssignal.name,
                                 when=condition(ssignal, when)))
     return tuple(out)

@@ -572,7 +572,7 @@ def _signal_parts(path: Path, doc: Any, dbc: Path | None, fail) -> tuple[dict[st
             fail(where, load_error_text(e, file.name, file))
             continue
         if strict and (why := strict_problem(db)):
-            fail(where, f"cantools' strict mode refuses {file.name}: {why}; if the DBC is meant as written, "
+            fail(where, f"strict reading refuses {file.name}: {why}; if the DBC is meant as written, "
                         "set dbc_strict: false (each such message is then read signal by signal, and not sent)")
     cycle = (doc.get("expect") or {}).get("cycle_time") if isinstance(doc.get("expect"), dict) else None
     if isinstance(cycle, dict) and cycle.get("from_dbc") and not bus_dbcs:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from . import wire
-from .dbc import decode, grid_problem, load_dbc, message_of, past_can_20, range_problem, raws_of, value_range
+from .dbc import decode, grid_problem, judged_problem, load_dbc, message_of, range_problem, raws_of, value_range
 from .scenario import text_number
 
 if TYPE_CHECKING:
@@ -165,7 +165,7 @@ def gates(doc: Any, bus_dbcs: dict[str, Path], fail: Callable[[list, str], None]
             signal = found[group[0]]
             said = (lambda at, text, g=group: fail(at, f"{text} (the DBC of {', '.join(g)})")) \
                 if len(alike) > 1 else fail
-            if why := past_can_20(signal):
+            if why := judged_problem(_message(dbs[group[0]], message_name), signal):
                 said(where, why)
                 continue
             gate = _gate(key, message_name, signal, tuple(group), spec, where, said)

@@ -29,7 +29,8 @@ def add_arguments(p) -> None:
                    help="decode this bus's frames with its own DBC instead of --dbc (repeatable; the bus "
                         "as its keys name it: <prefix>/<bus>/rx, or a one-bus bridge's token)")
     p.add_argument("--dbc-lenient", action="store_true",
-                   help="read DBCs cantools' strict mode refuses (signals that overlap or pass their message's end) "
+                   help="read DBCs strict reading refuses (signals that overlap or pass their message's end, "
+                        "or that cantools reads wrong: docs/bench.md) "
                         "as written, each such message signal by signal")
     p.add_argument("--save", type=Path, help="write an .rrd file instead of spawning the Rerun viewer")
     p.add_argument("--duration", type=float, default=0, help="stop after this many seconds (0: until Ctrl-C)")

@@ -55,7 +55,8 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bitrate", type=bitrate, default=500_000, help="for the bus load (default 500000)")
     p.add_argument("--dbc", type=Path, help="propose signal ranges and DBC cycle times from this DBC (review them)")
     p.add_argument("--dbc-lenient", action="store_true",
-                   help="read a DBC cantools' strict mode refuses (signals that overlap or pass their message's end) "
+                   help="read a DBC strict reading refuses (signals that overlap or pass their message's end, "
+                        "or that cantools reads wrong: docs/bench.md) "
                         "as written; the scenario then says dbc_strict: false")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_scaffold)

@@ -39,6 +39,7 @@ def add_subparser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bitrate", type=bitrate, default=500_000, help="for the bus load (default 500000)")
     p.add_argument("--dbc", type=Path, help="also per-message signal statistics, decoded with this DBC (cantools)")
     p.add_argument("--dbc-lenient", action="store_true",
-                   help="read a DBC cantools' strict mode refuses (signals that overlap or pass their message's end) "
+                   help="read a DBC strict reading refuses (signals that overlap or pass their message's end, "
+                        "or that cantools reads wrong: docs/bench.md) "
                         "as written, each such message signal by signal")
     p.set_defaults(func=cmd_summarise)

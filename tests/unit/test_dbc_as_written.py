@@ -113,7 +113,8 @@ def test_a_signal_past_the_dbc_length_is_read_where_the_frame_carries_it(files):
 def test_the_reason_names_every_message_strict_mode_refuses(files):
     db = dbc.load_dbc(files / "car.dbc")
     why = dbc.strict_problem(db)
-    assert why is not None and why.startswith("3 messages with signals that overlap or pass the message's end")
+    assert why is not None and why.startswith("3 messages it cannot read whole as written (signals that overlap or "
+                                              "pass the message's end, or below)")
     for said in ("OVERLAP (The signals LOW_BIT and WIDE are overlapping in message OVERLAP)",
                  "SHORT (The signal PAST does not fit in message SHORT)", "MUXED (The signals P1B and P1"):
         assert said in why
@@ -131,12 +132,12 @@ def test_a_scenario_refuses_it_at_its_dbc_line_and_says_what_to_set(files, capsy
     with pytest.raises(ScenarioError) as e:
         scenario.load(path)
     said = str(e.value)
-    assert f"{path}:3" in said and "cantools' strict mode refuses car.dbc: 3 messages" in said
+    assert f"{path}:3" in said and "strict reading refuses car.dbc: 3 messages" in said
     assert "set dbc_strict: false" in said
     path.write_text(scenario_text("dbc_strict: false\n", "  signals:\n    OVERLAP.LOW_BIT: {equals: 1}\n"))
     assert [g.key for g in scenario.load(path).signal_gates] == ["OVERLAP.LOW_BIT"]
     assert cli.main(["validate", str(path)]) == 0
-    assert ("note: car.dbc is read as written (dbc_strict: false): 3 messages with signals that overlap"
+    assert ("note: car.dbc is read as written (dbc_strict: false): 3 messages it cannot read whole as written"
             in capsys.readouterr().out)
     path.write_text(scenario_text("dbc_strict: 'false'\n"))
     with pytest.raises(ScenarioError, match="dbc_strict"):
@@ -177,7 +178,7 @@ def test_the_bench_never_sends_a_message_it_cannot_encode(files):
 
 
 def test_command_lines_refuse_it_unless_told_and_scaffold_writes_the_setting(files, capsys):
-    with pytest.raises(InputError, match="strict mode refuses it: 3 messages.*give --dbc-lenient"):
+    with pytest.raises(InputError, match="strict reading refuses it: 3 messages.*give --dbc-lenient"):
         dbc.read_dbc(files / "car.dbc")
     assert dbc.read_dbc(files / "car.dbc", lenient=True) is dbc.load_dbc(files / "car.dbc")
     trace = files / "drive.log"

@@ -312,3 +312,82 @@ def test_a_responder_request_of_another_page_is_unanswerable_not_a_crash():
     assert rule.answer(bytes([0, 5]) + bytes(6), 0)[1] == bytes([5]) + bytes(7)
     with pytest.raises(restbus.Unanswerable, match="Req.A is not in this request's page"):
         rule.answer(bytes([1, 5]) + bytes(6), 0)
+
+
+def gate_problems(tmp_path: Path, dbc_text: str, gate: str, more: str = "") -> list[str]:
+    """The problems of a scenario that gates one signal (a candump trace to replay, no ECU sends the DBC)."""
+    (tmp_path / "v.dbc").write_text(HEAD + textwrap.dedent(dbc_text))
+    (tmp_path / "t.log").write_text("(1700000000.000000) vcan0 123#00\n")
+    path = tmp_path / "s.yaml"
+    path.write_text(f"name: v\nduration_s: 5\ndbc: v.dbc\n{more}buses: [{{name: vcan0}}]\n"
+                    "ecus:\n  - {name: e, bus: vcan0, trace: t.log}\nexpect: {signals: {" + gate + "}}\n")
+    return [str(p).split(": ", 1)[1] for p in validate.problems(path)]
+
+
+@pytest.mark.parametrize("signals,said", [
+    # opendbc's vw_pq.dbc Motor_2: a bare 'm' where the multiplexer's 'M' belongs, pages by SG_MUL_VAL_
+    (' SG_ Code m : 6|2@1+ (1,0) [0|3] "" TESTER\n SG_ Motor m1 : 0|6@1+ (1,0) [0|63] "" TESTER\n'
+     'SG_MUL_VAL_ 648 Motor Code 1-1;\n',
+     "Motor is multiplexed by Code, which the DBC does not mark a multiplexer (M)"),
+    (' SG_ Half : 0|16@1- (1,0) [0|0] "" TESTER\nSIG_VALTYPE_ 648 Half : 1;\n',
+     "Half is a float of 16 bits (a DBC's float is 32 bits, SIG_VALTYPE_ 1, or 64, SIG_VALTYPE_ 2)"),
+    (' SG_ Z : 0|8@1+ (0,5) [0|0] "" TESTER\n', "Z's scale is 0 (every frame carries its offset, 5)"),
+])
+def test_a_signal_cantools_reads_but_never_decodes_or_encodes_right_is_refused_strictly(tmp_path, signals, said):
+    # each loaded without a word: the page's signals were never decoded (nor their values sent), an
+    # 8-bit float failed every frame of its message, a scale of 0 crashed validation (division by zero)
+    text = "BO_ 648 Motor_2: 8 GW\n" + signals.split("\nSG_MUL_VAL_")[0].split("\nSIG_VALTYPE_")[0] + "\n" + \
+        "".join(line + "\n" for line in signals.splitlines() if not line.startswith(" SG_ "))
+    path = scenario_file(tmp_path, text, "ecus:\n  - {name: gw, bus: vcan0, role: restbus, dbc_node: GW, run_s: 1}\n")
+    problems = [str(p).split(": ", 1)[1] for p in validate.problems(path)]
+    assert problems[0] == (f"dbc: strict reading refuses v.dbc: 1 message it cannot read whole as written (signals "
+                           f"that overlap or pass the message's end, or below): Motor_2 ({said}); if the DBC is meant "
+                           "as written, set dbc_strict: false (each such message is then read signal by signal, and "
+                           "not sent)")
+
+
+def test_two_signals_of_one_name_are_refused(tmp_path):
+    # a decoded frame held one value of the name; a gate took its limits from one, its scale from the other
+    path = scenario_file(tmp_path, 'BO_ 256 M: 8 GW\n SG_ Speed : 0|8@1+ (1,0) [0|0] "" TESTER\n'
+                                   ' SG_ Speed : 8|16@1+ (0.01,0) [0|0] "" TESTER\n',
+                         "ecus:\n  - {name: gw, bus: vcan0, role: restbus, dbc_node: GW, run_s: 1}\n")
+    assert [str(p) for p in validate.problems(path)] == [
+        f"{path}:3: dbc: cannot use v.dbc as a DBC: message M has two signals named Speed: give each signal its "
+        "own name"]
+
+
+def test_a_gate_on_a_can_fd_message_is_refused_though_its_signal_lies_in_8_bytes(tmp_path):
+    # every frame of 8 bytes failed to decode as the 16-byte message: a violation per frame at run time
+    text = 'BO_ 500 FdStatus: 16 GW\n SG_ Speed : 0|16@1+ (1,0) [0|0] "" TESTER\n'
+    assert gate_problems(tmp_path, text, "FdStatus.Speed: {range: [0, 10]}") == [
+        "expect.signals.FdStatus.Speed: FdStatus has 16 data bytes (CAN FD): the bench carries CAN 2.0 frames of "
+        "at most 8, and no shorter frame decodes as it"]
+
+
+def test_a_gate_on_a_signal_of_scale_zero_read_as_written_is_a_problem_not_a_crash(tmp_path):
+    text = 'BO_ 291 M: 8 GW\n SG_ Z : 0|8@1+ (0,5) [0|0] "" TESTER\n'
+    assert gate_problems(tmp_path, text, "M.Z: {equals: 5}", "dbc_strict: false\n") == [
+        "expect.signals.M.Z: Z's scale is 0 in the DBC: every frame carries its offset, whatever its bits"]
+    db = dbc.load_dbc(tmp_path / "v.dbc")
+    assert dbc.grid_problem(db.get_message_by_name("M").get_signal_by_name("Z"), 5) == \
+        "Z's scale is 0 in the DBC: it carries 5 only"
+
+
+def test_a_value_between_steps_of_a_negative_scale_names_its_true_neighbours():
+    db = load('BO_ 291 M: 8 GW\n SG_ Temperature : 0|16@1+ (-0.01,4100) [0|0] "" TESTER\n')
+    signal = db.get_message_by_name("M").get_signal_by_name("Temperature")
+    assert dbc.grid_problem(signal, 4078.997) == (
+        "4078.997 is not a value Temperature carries (steps of -0.01 from 4100): 4078.99 or 4079")
+
+
+def test_a_multiplexer_value_the_dbc_lists_no_page_for_still_gives_the_other_signals():
+    # an ECU's reserved page (real in opendbc's tesla_model3_party VCFRONT_LVPowerState, vw_mqb VIN_01):
+    # cantools refuses the frame whole, and a gate on a page-less signal counted it a violation
+    db = load('BO_ 512 Paged: 8 GW\n SG_ Page M : 0|8@1+ (1,0) [0|0] "" TESTER\n'
+              ' SG_ A m0 : 8|8@1+ (1,0) [0|0] "" TESTER\n SG_ B m1 : 8|8@1+ (1,0) [0|0] "" TESTER\n'
+              ' SG_ Counter : 56|4@1+ (1,0) [0|15] "" TESTER\n')
+    message = db.get_message_by_name("Paged")
+    assert dbc.decode(message, bytes.fromhex("0507000000000009")) == {"Page": 5, "Counter": 9}
+    assert dbc.decode(message, bytes.fromhex("0107000000000009")) == {"Page": 1, "B": 7, "Counter": 9}
+    with pytest.raises(cantools.database.DecodeError):
+        dbc.decode(message, bytes.fromhex("05070000"))  # a frame shorter than the message is still an error
