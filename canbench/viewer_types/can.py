@@ -13,6 +13,8 @@ from .. import wire
 from ..dbc import decode_signals
 from .registry import Context, Pending, logger, send_entity
 
+CAN_ERR_FLAG = 0x20000000  # linux/can.h: the id's flag of an error frame, as candump -e writes it
+
 
 class CanColumns:
     """Frames grouped by entity, sent with their receive times when due (registry.Pending): one
@@ -65,7 +67,14 @@ def frame_of(msg) -> wire.Frame:
 
 @logger("can_msgs/msg/Frame")
 def log_frame(ctx: Context, path: str, msg) -> None:
-    """Into the viewer's columns (ctx.can) when it keeps them, else sent at once."""
+    """Into the viewer's columns (ctx.can) when it keeps them, else sent at once. An error frame
+    (is_error: ros2_socketcan's SocketCAN error frames, the id the error's class) is no message of
+    any DBC: said at <base>/error as candump -e names it, never decoded as the id's message."""
+    if msg.is_error:
+        data = bytes(msg.data)[:8].hex().upper()
+        ctx.log(f"{path}/error", rr.TextLog(f"{msg.id | CAN_ERR_FLAG:08X}#{data} (error class {msg.id:X})",
+                                           level=rr.TextLogLevel.ERROR))
+        return
     columns = ctx.can or CanColumns(ctx.dbc, ctx.bus_dbcs)
     columns.add(path, ctx.t_ns, [frame_of(msg)])
     if ctx.can is None:

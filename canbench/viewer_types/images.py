@@ -20,7 +20,9 @@ ENCODINGS: dict[str, tuple[str, int, str | rr.PixelFormat | None, float]] = {
     "bayer_rggb16": ("u2", 1, "L", 0), "bayer_bggr16": ("u2", 1, "L", 0),
     "bayer_gbrg16": ("u2", 1, "L", 0), "bayer_grbg16": ("u2", 1, "L", 0),
     # 4:2:2, two bytes a pixel: yuv422 is UYVY (U Y0 V Y1), reordered to the YUY2 Rerun decodes
+    # (uyvy and yuyv: their names since ROS 2 Iron, the same bytes)
     "yuv422": ("u1", 2, rr.PixelFormat.YUY2, 0), "yuv422_yuy2": ("u1", 2, rr.PixelFormat.YUY2, 0),
+    "uyvy": ("u1", 2, rr.PixelFormat.YUY2, 0), "yuyv": ("u1", 2, rr.PixelFormat.YUY2, 0),
     "16UC1": ("u2", 1, None, 1000.0), "32FC1": ("f4", 1, None, 1.0),  # REP 118: depth in mm or m
 }
 UYVY_AS_YUY2 = [1, 0, 3, 2]  # byte order of each two pixels
@@ -39,7 +41,7 @@ def image_array(msg) -> tuple[np.ndarray, str | rr.PixelFormat | None, float]:
     require(len(msg.data) >= msg.step * msg.height,
             f"{len(msg.data)} data bytes < step {msg.step} * height {msg.height}")
     rows = np.frombuffer(bytes(msg.data), dtype=np.uint8)[:msg.step * msg.height].reshape(msg.height, msg.step)
-    if msg.encoding == "yuv422":
+    if msg.encoding in ("yuv422", "uyvy"):
         return rows[:, :row].reshape(msg.height, msg.width // 2, 4)[:, :, UYVY_AS_YUY2].copy(), shown, meter
     pixels = rows[:, :row].copy().view(dtype).astype(dtype.newbyteorder("="))
     return pixels.reshape(msg.height, msg.width, channels) if channels > 1 else pixels, shown, meter
@@ -114,4 +116,4 @@ def log_occupancy_grid(ctx: Context, path: str, msg) -> None:
                                        triangle_indices=[[0, 1, 2], [0, 2, 3]],
                                        vertex_texcoords=[[0, 0], [1, 0], [1, 1], [0, 1]],
                                        albedo_texture=np.dstack([grey] * 3)),
-            frame=path if msg.header.frame_id else "")
+            frame=path if msg.header.frame_id else "", named=True)  # the frame the pose above named

@@ -37,6 +37,8 @@ def shape(m):
     if m.type == CYLINDER:  # scale.x, scale.y diameters, scale.z height; Rerun's cylinders are round
         return rr.Cylinders3D(lengths=[m.scale.z], radii=[m.scale.x / 2], colors=colors[:1], fill_mode="solid")
     if m.type == LINE_STRIP:
+        if len(colors) > 1:  # a colour per point, as RViz blends them: a strip per segment in its first point's
+            return rr.LineStrips3D(np.stack([pts[:-1], pts[1:]], axis=1), radii=m.scale.x / 2, colors=colors[:-1])
         return rr.LineStrips3D([pts], radii=m.scale.x / 2, colors=colors[:1])
     if m.type == LINE_LIST:
         return rr.LineStrips3D(pts[: len(pts) // 2 * 2].reshape(-1, 2, 3), radii=m.scale.x / 2,
@@ -49,10 +51,12 @@ def shape(m):
         return rr.Points3D(pts, radii=m.scale.x / 2, colors=colors)
     if m.type == TEXT_VIEW_FACING:  # scale.z the text height
         return rr.Points3D([[0, 0, 0]], labels=[m.text], radii=m.scale.z / 10, colors=colors[:1], show_labels=True)
-    if m.type == TRIANGLE_LIST:
-        n = len(pts) // 3 * 3
-        return rr.Mesh3D(vertex_positions=pts[:n], triangle_indices=np.arange(n).reshape(-1, 3),
-                         vertex_colors=colors * (n if len(colors) == 1 else 1) if n else None)
+    if m.type == TRIANGLE_LIST:  # scaled, as RViz's TriangleListMarker does; a partial triangle RViz refuses
+        if len(pts) % 3:
+            raise ValueError(f"marker {m.ns}/{m.id}: TRIANGLE_LIST of {len(pts)} points, not a multiple of 3")
+        scaled = pts * [m.scale.x, m.scale.y, m.scale.z]
+        return rr.Mesh3D(vertex_positions=scaled, triangle_indices=np.arange(len(pts)).reshape(-1, 3),
+                         vertex_colors=colors * (len(pts) if len(colors) == 1 else 1) if len(pts) else None)
     if m.type == ARROW_STRIP:
         return rr.Arrows3D(origins=pts[:-1], vectors=np.diff(pts, axis=0), radii=m.scale.x / 2, colors=colors[:1])
     if m.type == MESH_RESOURCE:

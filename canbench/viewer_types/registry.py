@@ -57,9 +57,10 @@ class Context:
         prefix = f"{self.domain}/" if self.domain else ""
         return "tf/" + prefix + "/".join(f.removeprefix(prefix) for f in reversed(chain))
 
-    def log(self, path: str, *archetypes, frame: str = "") -> None:
-        """rr.log, plus the entity's coordinate frame (header.frame_id) whenever it changes."""
-        frame = self.frame(frame)
+    def log(self, path: str, *archetypes, frame: str = "", named: bool = False) -> None:
+        """rr.log, plus the entity's coordinate frame (header.frame_id) whenever it changes; named:
+        frame is a name pose() gave (an entity's own frame), not a header's frame_id to name."""
+        frame = frame if named else self.frame(frame)
         if frame and self.frames_of.get(path) != frame:
             self.frames_of[path] = frame
             archetypes = (*archetypes, rr.CoordinateFrame(frame))
