@@ -21,8 +21,9 @@ PATCHED = PORT / "patched"
 PATCHES = {
     "zenoh-link-tls": ("docs/upstream/zenoh-link-tls-split-stream.patch", 2),
     "zenoh-sync": ("docs/upstream/zenoh-sync-lifo-queue-notify-waiters.patch", 3),
+    "zenoh-transport": ("docs/upstream/zenoh-transport-lowlatency-buffered-read.patch", 3),
 }
-# workspace root -> the patched crates it uses (zn-flood speaks TCP only)
+# workspace root -> the patched crates it uses (zn-flood speaks TCP only and receives nothing)
 WORKSPACES = {
     PORT: set(PATCHES),
     REPO / "images" / "builder" / "rust": set(PATCHES),
