@@ -14,6 +14,7 @@ import tempfile
 from array import array
 from collections import defaultdict
 from dataclasses import dataclass, field
+from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +58,7 @@ class IdSummary:
     interface: str | None = None  # the trace's interface (channel) it was recorded on
     near_pct: float | None = None  # share of the gaps within NEAR_PCT of the cycle
     max_gap_ms: float | None = None  # the longest gap
+    min_dlc: int | None = None  # the smallest dlc, when not every frame had `dlc` (the largest)
 
 
 @dataclass
@@ -93,7 +95,8 @@ class TraceSummary:
             jitter = f"{s.jitter_ms:9.3f}" if s.jitter_ms is not None else f"{'-':>9}"
             steady = f"{s.steady_pct:8.0f}" if s.steady_pct is not None else f"{'-':>8}"
             iface = f"{s.interface or '-':<9}  " if several else ""
-            lines.append(f"  {iface}{s.ident:>8}  {s.count:>7}  {s.dlc:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
+            dlcs = f"{s.min_dlc}-{s.dlc}" if s.min_dlc is not None else str(s.dlc)  # several: what a DBC decodes
+            lines.append(f"  {iface}{s.ident:>8}  {s.count:>7}  {dlcs:>3}  {cycle}  {jitter}  {steady}  {s.remote}")
         return "\n".join(lines)
 
 
@@ -115,6 +118,7 @@ class _IdState:
     """One id's running state in one pass: its gaps (ms, 8 bytes each: a 1M-frame trace 8 MiB)."""
     count: int = 0
     dlc: int = 0
+    min_dlc: int = 8
     remote: int = 0
     last_ns: int | None = None
     gaps: array = field(default_factory=lambda: array("d"))
@@ -139,6 +143,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
         state.last_ns = t_ns
         state.count += 1
         state.dlc = max(state.dlc, frame.dlc)
+        state.min_dlc = min(state.min_dlc, frame.dlc)
         state.remote += frame.remote
         frame_bits = frame_bits_worst(frame.dlc, frame.extended, frame.remote)
         bits[iface] += frame_bits
@@ -167,7 +172,7 @@ def summarise(path: Path, bitrate: int = 500_000) -> TraceSummary:
                 if gaps and cycle else None)
         ids.append(IdSummary(id_hex(can_id, extended), extended, state.count, state.dlc,
                              None if cycle is None else round(cycle, 6), jitter, state.remote, steady, iface,
-                             near, max(gaps) if gaps else None))
+                             near, max(gaps) if gaps else None, state.min_dlc if state.min_dlc < state.dlc else None))
     # each interface's load over its own span: one recorded from later on (or stopped earlier) is
     # not diluted by the time the other interfaces were recorded alone
     # (a frame is stamped as it ends: the span holds the first frame's time on the wire too, so three
@@ -250,9 +255,18 @@ class SignalSummary:
                     lines.append(f"    {sig.name:<28}  {sig.count:>7}  {dash}  {dash}  {dash}  {sig.unit}{odd}")
                     continue
                 names = f" {sorted(sig.names)}" if sig.names else ""
-                lines.append(f"    {sig.name:<28}  {sig.count:>7}  {sig.min:>12.6g}  {sig.max:>12.6g}  "
-                             f"{sig.total / (sig.count - sig.nonfinite):>12.6g}  {sig.unit}{names}{odd}")
+                digits = _digits_apart(sig.min, sig.max)
+                lines.append(f"    {sig.name:<28}  {sig.count:>7}  {sig.min:>12.{digits}g}  {sig.max:>12.{digits}g}  "
+                             f"{sig.total / (sig.count - sig.nonfinite):>12.{digits}g}  {sig.unit}{names}{odd}")
         return "\n".join(lines)
+
+
+def _digits_apart(a: float, b: float) -> int:
+    """Significant digits that show two numbers apart when they differ (6 at least, 17 at most)."""
+    digits = 6
+    while digits < 17 and a != b and f"{a:.{digits}g}" == f"{b:.{digits}g}":
+        digits += 1
+    return digits
 
 
 def summarise_signals(path: Path, dbc_path: Path, lenient: bool = False) -> SignalSummary:
@@ -310,12 +324,18 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list |
         message = db.get_message_by_name(m.name)
         for sig in (m.signals or {}).values():
             key = f"{m.name}.{sig.name}"
+            if m.undecodable:  # a gate counts each such frame a violation: the trace would fail itself
+                out.append((key, {"present": 1}, f"not gated: {m.undecodable} of {m.name}'s {m.frames} frames do not "
+                            f"decode with the DBC (a length other than its {message.length} bytes?)", False))
+                continue
             if sig.min is None or sig.max is None:
                 if sig.nonfinite:
                     out.append((key, {"present": 1}, f"not gated: its {sig.nonfinite} values were all NaN or "
                                 "infinite", False))
                 continue
-            seen = f"seen {sig.min:.6g}..{sig.max:.6g}{' ' + sig.unit if sig.unit else ''} in {sig.count} values"
+            digits = _digits_apart(sig.min, sig.max)
+            seen = (f"seen {sig.min:.{digits}g}..{sig.max:.{digits}g}{' ' + sig.unit if sig.unit else ''} in "
+                    f"{sig.count} values")
             if sig.names and not sig.unnamed and len(sig.names) < CHOICES_SEEN_MAX:
                 out.append((key, {"one_of": sorted(sig.names)}, f"value-table names seen in {sig.count} values", True))
                 continue
@@ -332,8 +352,9 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list |
                 ("above", dbc_signal.maximum, dbc_signal.maximum is not None and sig.max > dbc_signal.maximum))
                 if out_of]
             lo, hi, _ = value_range(dbc_signal)
-            outside = _round(high) < lo or _round(low) > hi
-            out.append((key, {"range": [_round(low), _round(high)]},
+            low, high = _round(low, "down"), _round(high, "up")
+            outside = high < lo or low > hi
+            out.append((key, {"range": [low, high]},
                         seen + (f" ({' and '.join(beyond)}: is the DBC right?)" if beyond else "")
                         + (f"; not gated: wholly outside the [{lo:g}, {hi:g}] the DBC allows" if outside
                            else f"; not gated: {sig.nonfinite} NaN or infinite, which no range passes"
@@ -342,8 +363,16 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list |
     return out
 
 
-def _round(v: float) -> float | int:
-    r = float(f"{v:.6g}")
+def _round(v: float, toward: str = "nearest") -> float | int:
+    """v at 6 significant digits: the nearest, or (a range's ends) the one at or below ("down") or
+    at or above ("up") it, so that a range rounded outward still holds every value it was made from
+    (an odometer seen at 123456.7..123456.8 km: [123457, 123457] held neither)."""
+    if toward == "nearest" or not math.isfinite(v) or v == 0:
+        r = float(f"{v:.6g}")
+    else:
+        d = Decimal(repr(v))
+        r = float(d.quantize(Decimal(1).scaleb(d.adjusted() - 5),
+                             rounding=ROUND_FLOOR if toward == "down" else ROUND_CEILING))
     return int(r) if r.is_integer() and abs(r) < 1e15 else r
 
 
@@ -465,6 +494,23 @@ def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, tuple[Any, float]],
     return out
 
 
+def _no_one_cycle(s: TraceSummary, dbc_cycles: dict[str, tuple[Any, float]]) -> list[str]:
+    """The ids of a cyclic message of the DBC (dbc_cycles) that the trace does not send at one
+    cycle on every interface where it has 5 frames or more: a median gap of 0 on one (sent twice a
+    cycle under one logger stamp), or cycles beyond STEADY_PCT of each other on two. from_dbc would
+    judge each against the DBC's one cycle on every bus, and fail the trace itself."""
+    on: dict[str, list[IdSummary]] = defaultdict(list)
+    for i in s.ids:
+        if i.ident in dbc_cycles and i.count >= 5:
+            on[i.ident].append(i)
+    out = []
+    for ident, seen in on.items():
+        cycles = [i.cycle_ms or 0.0 for i in seen]
+        if min(cycles) <= 0 or max(cycles) - min(cycles) > min(cycles) * STEADY_PCT / 100:
+            out.append(ident)
+    return sorted(out)
+
+
 def periodic(i: IdSummary) -> bool:
     """Whether an id's gaps show one cycle: PERIODIC_STEADY_PCT of them within +-STEADY_PCT of
     it, or (a logger's jitter) within +-NEAR_PCT with half of them within +-STEADY_PCT."""
@@ -573,6 +619,14 @@ def scaffold(trace: Path, name: str, scenario_path: Path, bitrate: int = 500_000
             header += (f"# REVIEW: dbc_strict: false, as --dbc-lenient asked: the DBC has {as_written}. Each such "
                        "message is read signal by signal; the bench does not send it.\n")
         dbc_cycles = dbc_cycles_of(s, dbc)
+        unsure = _no_one_cycle(s, dbc_cycles)
+        if unsure:  # from_dbc would judge these against the DBC's cycle on every bus: the trace's own cycles
+            header += (f"# Not cycle_time.from_dbc: the trace sends {', '.join(unsure[:10])}"
+                       f"{', ...' if len(unsure) > 10 else ''} at no one cycle on every interface (interfaces that "
+                       "disagree, or several frames under one logger stamp), which from_dbc would judge against the "
+                       "DBC's cycle on every bus; cycle_time.ids holds the trace's periodic ids (REVIEW: the DBC's "
+                       "cycles are in `canbench summarise --dbc`).\n")
+            dbc_cycles = {}
         from_dbc = set(dbc_cycles)
         if from_dbc:  # the database's cycles; ids: keeps only the periodic ids it has no cycle for
             expect: dict = doc["expect"]  # type: ignore[assignment]
