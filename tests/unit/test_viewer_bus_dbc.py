@@ -51,7 +51,8 @@ def test_each_bus_is_decoded_with_its_own_dbc(tmp_path):
         live._log_loop()
         # a recording's can_msgs/msg/Frame topic /can/<bus>: the same choice by bus
         for bus in ("vcan0", "vcan1"):
-            msg = SimpleNamespace(id=0x2F0, dlc=6, data=list(GEARBOX.data) + [0, 0], is_rtr=False, is_extended=False)
+            msg = SimpleNamespace(id=0x2F0, dlc=6, data=list(GEARBOX.data) + [0, 0], is_rtr=False, is_extended=False,
+                                  is_error=False)
             LOGGERS["can_msgs/msg/Frame"](live.ctx, f"mcap/can/{bus}", msg)
         live.can.flush()  # the viewer's columns: sent when due, here at once
     rec.flush()
