@@ -20,6 +20,7 @@ from another source than the DBC's id (dbc.message_of) is <msg>_<id>, one channe
 and loggers (view_mcap): the same entities as a live run."""
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -75,13 +76,43 @@ class Ros2McapWriter:
         self.write(topic, FRAME, o.t_ns, can_frame_msg(bus, o.t_ns, o.frame))
 
 
-def _signals(w: Ros2McapWriter, prefix: str, db, o: Observed) -> None:
+class TopicNames:
+    """ROS 2 topic names for a database's message and signal names: a KCD, SYM or ARXML file may
+    name them with spaces, dashes or dots, or a digit first, which no ROS 2 topic has (ros2 bag play
+    cannot publish on one). Each part not of [A-Za-z0-9_] or led by a digit is made one ('Engine
+    Data' -> Engine_Data, '2nd.Gear' -> _2nd_Gear); two names that would be one topic stay apart
+    (a suffix)."""
+
+    def __init__(self) -> None:
+        self.of: dict[tuple[str, ...], str] = {}
+        self.taken: set[str] = set()
+
+    def topic(self, prefix: str, *parts: str) -> str:
+        key = (prefix, *parts)
+        name = self.of.get(key)
+        if name is None:
+            name = prefix + "".join("/" + _topic_part(p) for p in parts)
+            base, n = name, 1
+            while name in self.taken:
+                n += 1
+                name = f"{base}_{n}"
+            self.of[key] = name
+            self.taken.add(name)
+        return name
+
+
+def _topic_part(name: str) -> str:
+    part = re.sub(r"[^A-Za-z0-9_]", "_", name) or "_"
+    return "_" + part if part[0].isdigit() else part
+
+
+def _signals(w: Ros2McapWriter, names: TopicNames, prefix: str, db, o: Observed) -> None:
     if db is not None and not o.frame.remote and (signals := decode_signals(db, o.frame)):
         message = signals[0]
         if o.frame.can_id != db.get_message_by_name(message).frame_id:  # a J1939 group's other sender
             message = f"{message}_{wire.id_hex(o.frame.can_id, o.frame.extended)}"
         for name, value in signals[1].items():
-            w.write(f"{prefix}/{message}/{name}", FLOAT64, o.t_ns, ros2_msgs.Float64(value))
+            w.write(names.topic(prefix, message, name), FLOAT64, o.t_ns, ros2_msgs.Float64(value))
 
 
 def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
@@ -89,15 +120,16 @@ def write_mcap(result: RunResult, path: Path, dbc=None) -> None:
     bus_dbcs = getattr(result.scenario, "bus_dbcs", {})
     with open(path, "wb") as out:
         w = Ros2McapWriter(out)
+        names = TopicNames()
         for b in result.buses:
             db = load_dbc(bus_dbcs[b.bus]) if b.bus in bus_dbcs else dbc
             for o in b.bus_frames:
                 w.frame(f"/can/{b.bus}", b.bus, o)
-                _signals(w, f"/signals/{b.bus}", db, o)
+                _signals(w, names, f"/signals/{b.bus}", db, o)
             latency_of = {r.index: (r.t_ns - s.t_ns) / 1e6 for s, r in b.comparison.matched}
             for o in b.zenoh_frames:
                 w.frame(f"/zenoh/{b.bus}", b.bus, o)
-                _signals(w, f"/signals_zenoh/{b.bus}", db, o)
+                _signals(w, names, f"/signals_zenoh/{b.bus}", db, o)
                 if o.index in latency_of:
                     w.write(f"/latency/{b.bus}", FLOAT64, o.t_ns, ros2_msgs.Float64(latency_of[o.index]))
             for o in b.commands:

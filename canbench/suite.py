@@ -141,9 +141,13 @@ def merged_junit(runs: list[Run], reports: Path, suite: str) -> ET.Element:
         name = Path(r.scenario).stem
         junit = reports / r.run_id / "junit.xml" if r.run_id else None
         suites = []
+        unreadable = None  # a run's junit.xml cut short (its pytest killed while writing, a full disk)
         if junit is not None and junit.exists():
-            parsed = ET.parse(junit).getroot()
-            suites = [parsed] if parsed.tag == "testsuite" else list(parsed.iter("testsuite"))
+            try:
+                parsed = ET.parse(junit).getroot()
+                suites = [parsed] if parsed.tag == "testsuite" else list(parsed.iter("testsuite"))
+            except ET.ParseError as e:
+                unreadable = f"{junit}: not JUnit XML ({e}): its checks are unknown"
         if not suites:
             suites = [ET.Element("testsuite", tests="0", failures="0", errors="0", skipped="0", time="0")]
         for ts in suites:
@@ -155,9 +159,13 @@ def merged_junit(runs: list[Run], reports: Path, suite: str) -> ET.Element:
             run_case = ET.SubElement(ts, "testcase", classname=name, name="bench_run", time=str(r.seconds))
             if r.left_out:
                 ET.SubElement(run_case, "skipped", message=f"{r.scenario}: {r.verdict}")
-            elif r.exit_code != 0:
-                ET.SubElement(run_case, "failure", message=f"{r.scenario}: {r.verdict} (exit {r.exit_code})")
+            elif r.exit_code != 0 or unreadable:
+                ET.SubElement(run_case, "failure", message=f"{r.scenario}: {r.verdict} (exit {r.exit_code})"
+                              + (f"; {unreadable}" if unreadable else ""))
+                r.checks["bench_run"] = "failed"
             cases = list(ts.iter("testcase"))
+            # the run's time: Jenkins takes a suite's duration from it, GitLab adds up the cases
+            ts.set("time", f"{max(float(ts.get('time') or 0), r.seconds):g}")
             ts.set("tests", str(len(cases)))
             ts.set("failures", str(sum(c.find("failure") is not None for c in cases)))
             ts.set("errors", str(sum(c.find("error") is not None for c in cases)))
@@ -165,6 +173,7 @@ def merged_junit(runs: list[Run], reports: Path, suite: str) -> ET.Element:
             root.append(ts)
     for key in ("tests", "failures", "errors", "skipped"):
         root.set(key, str(sum(int(ts.get(key, "0")) for ts in root)))
+    root.set("time", f"{sum(float(ts.get('time') or 0) for ts in root):g}")
     return root
 
 

@@ -104,3 +104,14 @@ def test_canbench_view_shows_the_recording(run_dir):
     assert logged["/can/vcan0/0C0/EngineSpeed"] == logged["/signals/vcan0/EngineData/EngineSpeed"]  # both decodings
     assert len(logged["/signals/vcan0/EngineData/EngineSpeed"]) == 200  # the recording's signals
     assert logged["/commands/vcan0/7A0/raw"] == ["7A0#0102"]
+
+
+def test_signal_topics_are_ros2_names_whatever_the_database_calls_them():
+    # a KCD may name a message 'Engine Data' and a signal '2nd.Gear': no ROS 2 topic (ros2 bag play
+    # cannot publish on one); two names that would be one topic stay apart
+    names = recording.TopicNames()
+    assert names.topic("/signals/vcan0", "Engine Data", "2nd.Gear") == "/signals/vcan0/Engine_Data/_2nd_Gear"
+    assert names.topic("/signals/vcan0", "Engine Data", "Engine-Speed") == "/signals/vcan0/Engine_Data/Engine_Speed"
+    assert names.topic("/signals/vcan0", "Engine_Data", "Engine_Speed") == "/signals/vcan0/Engine_Data/Engine_Speed_2"
+    assert names.topic("/signals/vcan0", "Engine Data", "Engine-Speed") == "/signals/vcan0/Engine_Data/Engine_Speed"
+    assert names.topic("/signals/vcan0", "EngineData", "Speed") == "/signals/vcan0/EngineData/Speed"  # a DBC's, as is

@@ -181,3 +181,26 @@ def test_suite_same_serial_against_shards(tmp_path, capsys):
     # a scenario in two suites of one side is an error, not a silent pick
     with pytest.raises(InputError, match="more than one"):
         suite.same_verdicts([serial, shard1], [shard2])
+
+
+def test_a_runs_junit_cut_short_fails_that_run_not_the_summary(tmp_path):
+    # pytest killed while writing it (or a full disk): the summary raised and the suite had no junit.xml at all
+    suite_dir = make_suite(tmp_path, [("scenarios/smoke.yaml", "r1-smoke", 0), ("scenarios/burst.yaml", "r2-burst", 0)])
+    junit = suite_dir.parent / "r2-burst" / "junit.xml"
+    junit.write_text(junit.read_text()[:150])
+    assert cli.main(["suite", "summary", str(suite_dir)]) == 1
+    root = ET.parse(suite_dir / "junit.xml").getroot()
+    burst = next(ts for ts in root if ts.get("name") == "burst")
+    failure = burst.find("testcase[@name='bench_run']/failure")
+    assert failure is not None and "r2-burst/junit.xml: not JUnit XML" in failure.get("message", "")
+    assert json.loads((suite_dir / "summary.json").read_text())["runs"][1]["checks"]["bench_run"] == "failed"
+
+
+def test_a_merged_suites_time_holds_its_run(tmp_path):
+    # Jenkins takes a suite's duration from its time: pytest's 1.0 s, the run's 33 s
+    suite_dir = make_suite(tmp_path, [("scenarios/smoke.yaml", "r1-smoke", 0)])
+    cli.main(["suite", "summary", str(suite_dir)])
+    root = ET.parse(suite_dir / "junit.xml").getroot()
+    smoke = next(ts for ts in root if ts.get("name") == "smoke")
+    assert float(smoke.get("time", "0")) == 33  # the run's wall time, its checks' within it
+    assert float(root.get("time", "0")) == sum(float(ts.get("time", "0")) for ts in root)
