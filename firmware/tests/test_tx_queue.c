@@ -108,6 +108,8 @@ static void test_callback_never_waits_and_full_queue_refuses(void)
 		CHECK(m.identifier == ((i < 30 ? 0x100 : 0x200) + k) % 0x800 && m.data[0] == (uint8_t)k);
 	}
 	CHECK(stats_soon_has("\"tx_samples\": 3"));
+	/* all three unstamped: the two written, not the one refused (it counted once, as tx_queue_full) */
+	CHECK(stats_soon_has("\"tx_unstamped\": 2"));
 	zn_node_stop();
 }
 

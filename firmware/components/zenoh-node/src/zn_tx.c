@@ -236,8 +236,6 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 		return;
 	}
 	int64_t source_ns = source_time(attachment, att_len, zenoh_ns), age_ms = 0;
-	if (!source_ns)
-		COUNT(b->n.tx_unstamped);
 	if (stale(source_ns, &age_ms)) {
 		refuse_stale(b, age_ms, (uint32_t)count, "on arrival");
 		return;
@@ -261,6 +259,8 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 			       b->name, queued, b->tx_cap, count);
 		return;
 	}
+	if (!source_ns) /* written: a refused one is counted under its reason only */
+		COUNT(b->n.tx_unstamped);
 	struct tx_cmd c = { .order = b->tx_order++, .first = b->tx_free, .count = (uint32_t)count,
 			    .source_ns = source_ns };
 	uint32_t slot = b->tx_free;
