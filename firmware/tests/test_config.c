@@ -100,6 +100,13 @@ static void test_errors(void)
 	expect_error((const char *[]){ "--router", "bogus/127.0.0.1:7447", NULL }, "'bogus/127.0.0.1:7447'");
 	expect_error((const char *[]){ "--mode", "peer", "--listen", "tcp/0.0.0.0:x", NULL }, "listen endpoint");
 	expect_error((const char *[]){ "--tx-queue-frames", "10", NULL }, "tx queue 10 frames");
+	/* what the stats' JSON would carry unescaped, or Zenoh refuse at its declaration (exit 1, not 2) */
+	expect_error((const char *[]){ "--name", "front\"ecu", NULL }, "node name 'front\"ecu' must be one key chunk");
+	expect_error((const char *[]){ "--name", "front\\ecu", NULL }, "node name 'front\\ecu'");
+	expect_error((const char *[]){ "--key-prefix", "vehicle//can", NULL }, "key prefix 'vehicle//can'");
+	expect_error((const char *[]){ "--key-prefix", "vehicle/c?n", NULL }, "key prefix 'vehicle/c?n'");
+	expect_error((const char *[]){ "--key-prefix", "vehicle/$can", NULL }, "key prefix 'vehicle/$can'");
+	expect_error((const char *[]){ "--key-prefix", "vehicle/can/", NULL }, "key prefix 'vehicle/can/'");
 	/* the low-latency transport has no QoS and no compression: refused, never silently ignored */
 	expect_error((const char *[]){ "--low-latency", "fast", NULL }, "--low-latency='fast' is not 0 or 1");
 	expect_error((const char *[]){ "--ros2-humble", "humble", NULL }, "--ros2-humble='humble' is not 0 or 1");

@@ -166,3 +166,17 @@ def test_a_wildcard_stats_query_gets_each_bridge_on_its_own_key(bus, bridge, rou
     finally:
         rc, log = other.stop(signal.SIGTERM)
     assert rc == 0, log[-3000:]
+
+
+def test_a_deletion_on_the_tx_key_is_no_command(bus, bridge, session):
+    """session.delete on the tx key reached the bridge as a command of 0 bytes: counted in tx_samples and
+    refused as tx_rejected.length, a reason that says nothing of what happened. A deletion carries no command."""
+    bridge.start("--can", "vcan0")
+    bridge.wait_ready(session)
+    for _ in range(3):
+        session.delete("vehicle/can/tx")
+    marker = wire.Frame(0x321, 1, b"\x01")  # a command after them: once it is counted, the deletions were seen
+    session.put("vehicle/can/tx", wire.encode(marker))
+    stats = wait_for(lambda: (s := bridge.stats(session)["buses"][0]) and s["tx_frames"] >= 1 and s,
+                     "the command after the deletions written")
+    assert stats["tx_samples"] == 1 and not any(stats["tx_rejected"].values()), stats

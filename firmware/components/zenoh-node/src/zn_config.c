@@ -60,14 +60,34 @@ void zn_node_default_config(zn_node_config_t *cfg)
 #endif
 }
 
-static int valid_key_chunk(const char *s)
+/* One chunk of a key expression, of n bytes: none of Zenoh's special characters, no space, nor
+ * what the stats' JSON would have to escape (a quote, a backslash, a control character). */
+static int valid_key_chunk_n(const char *s, size_t n)
 {
-	if (!*s)
+	if (!n)
 		return 0;
-	for (; *s; s++)
-		if (*s == '*' || *s == '$' || *s == '?' || *s == '#' || *s == '/' || *s == ' ')
+	for (size_t i = 0; i < n; i++)
+		if (s[i] == '*' || s[i] == '$' || s[i] == '?' || s[i] == '#' || s[i] == '/' || s[i] == ' ' ||
+		    s[i] == '"' || s[i] == '\\' || (unsigned char)s[i] < 0x20)
 			return 0;
 	return 1;
+}
+
+static int valid_key_chunk(const char *s)
+{
+	return valid_key_chunk_n(s, strlen(s));
+}
+
+/* A key prefix: chunks separated by single '/' (no empty chunk: none first, last or between). */
+static int valid_key_prefix(const char *s)
+{
+	for (const char *end;; s = end + 1) {
+		end = strchr(s, '/');
+		if (!valid_key_chunk_n(s, end ? (size_t)(end - s) : strlen(s)))
+			return 0;
+		if (!end)
+			return 1;
+	}
 }
 
 /* One Zenoh endpoint: <protocol>/<address>[?metadata][#config], e.g. tcp/127.0.0.1:7447,
@@ -155,10 +175,11 @@ esp_err_t zn_node_check_config(const zn_node_config_t *cfg, char *err, size_t er
 	if (cfg->bus_count < 1 || cfg->bus_count > ZN_MAX_BUSES)
 		BAD("%zu CAN buses: 1..%d supported", cfg->bus_count, ZN_MAX_BUSES);
 	if (!valid_key_chunk(cfg->node_name))
-		BAD("node name '%s' must be one key chunk (no '/', '*', '$', '?', '#', spaces)", cfg->node_name);
-	if (!cfg->key_prefix[0] || cfg->key_prefix[0] == '/' || strchr(cfg->key_prefix, '*') ||
-	    cfg->key_prefix[strlen(cfg->key_prefix) - 1] == '/')
-		BAD("key prefix '%s' must be a plain key expression (no wildcards, no leading/trailing '/')",
+		BAD("node name '%s' must be one key chunk (no '/', '*', '$', '?', '#', spaces, quotes, backslashes)",
+		    cfg->node_name);
+	if (!valid_key_prefix(cfg->key_prefix))
+		BAD("key prefix '%s' must be a plain key expression (chunks without '*', '$', '?', '#', spaces, quotes, "
+		    "backslashes; no leading, trailing or double '/')",
 		    cfg->key_prefix);
 	for (size_t i = 0; i < cfg->bus_count; i++) {
 		if (!valid_key_chunk(cfg->buses[i]))

@@ -462,6 +462,9 @@ pub extern "C" fn zn_declare_subscriber(
         .declare_subscriber(key.to_owned())
         .callback(move |sample| {
             let ctx = ctx;
+            if sample.kind() == SampleKind::Delete {
+                return; // a key's deletion carries no command (it was counted as one of length 0)
+            }
             let payload = sample.payload().to_bytes();
             let source_time_ns = sample.timestamp().map_or(0, |t| t.get_time().as_nanos());
             match sample.attachment() {
@@ -503,24 +506,29 @@ pub extern "C" fn zn_declare_token(s: *mut ZnSession, key: *const c_char, out: *
 }
 
 /// The callback's reply, in a buffer grown to the length it asks for (zn_query_cb's contract:
-/// a length of cap or more did not fit), at most STATS_REPLY_MAX; empty when it never fits.
-fn reply_text(cb: QueryCb, ctx: *mut c_void) -> Vec<u8> {
+/// a length of cap or more did not fit; 0 no answer, as a node stopping gives), at most
+/// STATS_REPLY_MAX; None when there is none or it never fits: no reply (an empty one read as
+/// an answer that is not JSON).
+fn reply_text(cb: QueryCb, ctx: *mut c_void) -> Option<Vec<u8>> {
     let mut cap = STATS_REPLY_FIRST;
     for _ in 0..3 {
         // counters may grow a digit between two calls: a little room over what it asked for
         let mut buf = vec![0u8; cap];
         let n = cb(buf.as_mut_ptr() as *mut c_char, buf.len(), ctx);
+        if n == 0 {
+            return None;
+        }
         if n < cap {
             buf.truncate(n);
-            return buf;
+            return Some(buf);
         }
         if cap == STATS_REPLY_MAX {
             break;
         }
         cap = n.saturating_add(256).min(STATS_REPLY_MAX);
     }
-    eprintln!("zenoh-node: a query's reply does not fit in {STATS_REPLY_MAX} bytes: replied empty");
-    Vec::new()
+    eprintln!("zenoh-node: a query's reply does not fit in {STATS_REPLY_MAX} bytes: not replied");
+    None
 }
 
 #[no_mangle]
@@ -551,7 +559,9 @@ pub extern "C" fn zn_declare_queryable(
         .declare_queryable(reply_key.clone())
         .callback(move |query| {
             let ctx = ctx;
-            let _ = query.reply(reply_key.clone(), reply_text(cb, ctx.0)).wait();
+            if let Some(text) = reply_text(cb, ctx.0) {
+                let _ = query.reply(reply_key.clone(), text).wait();
+            }
         })
         .wait();
     match result {
@@ -664,5 +674,23 @@ mod tests {
         let large = vec![7u8; REUSED_MAX + 1];
         assert_eq!(reused_bytes(PAYLOAD, &large).len(), large.len());
         PUT_BUFFERS.with(|b| assert!(b.borrow()[PAYLOAD].is_none())); // a large buffer is not kept
+    }
+
+    extern "C" fn no_answer(_: *mut c_char, _: usize, _: *mut c_void) -> usize {
+        0
+    }
+
+    extern "C" fn two_bytes(buf: *mut c_char, cap: usize, _: *mut c_void) -> usize {
+        if cap >= 2 {
+            unsafe { ptr::copy_nonoverlapping(b"{}".as_ptr() as *const c_char, buf, 2) };
+        }
+        2
+    }
+
+    #[test]
+    fn a_query_callback_without_an_answer_gives_no_reply_not_an_empty_one() {
+        // a node stopping answers 0: an empty reply was read as an answer that is not JSON
+        assert_eq!(reply_text(no_answer, ptr::null_mut()), None);
+        assert_eq!(reply_text(two_bytes, ptr::null_mut()).as_deref(), Some(&b"{}"[..]));
     }
 }
