@@ -156,8 +156,9 @@ def test_max_rate_follows_each_sender_of_a_group(tmp_path):
 def test_the_recording_keeps_each_sender_of_a_group_on_its_own_channel(db):
     topics: list[str] = []
     writer = SimpleNamespace(write=lambda topic, *_: topics.append(topic))
+    names = recording.TopicNames()
     for f in (eec1(800, source=0x00), eec1(1500, source=0x17)):
-        recording._signals(writer, "/signals/vcan0", db, oracle.Observed(f, T0, 0))
+        recording._signals(writer, names, "/signals/vcan0", db, oracle.Observed(f, T0, 0))
     assert topics == ["/signals/vcan0/EEC1/EngineSpeed", "/signals/vcan0/EEC1_0CF00417/EngineSpeed"]
 
 
