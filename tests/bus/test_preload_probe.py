@@ -65,7 +65,7 @@ def test_descriptor_closed_behind_the_librarys_back_is_not_can_any_more(bus):
 
 
 def test_socket_inherited_across_exec_after_the_switch_to_stamps_loses_no_frame(bus):
-    """Frames queued before SO_TIMESTAMPNS reach the socket bare, the hub's HEADER_MODE
+    """Frames queued before SO_TIMESTAMPNS reach the socket bare, the hub's frames with headers
     behind them; a program exec'd with the socket took the hub's mode of now (headers) and
     recvmmsg dropped the bare frames unseen (2 of 4), read() returned them as garbage (id 0)."""
     probe = start_probe(bus, "exec", "vcan0")
@@ -76,8 +76,9 @@ def test_socket_inherited_across_exec_after_the_switch_to_stamps_loses_no_frame(
 
 def test_a_reader_that_did_not_see_the_switch_to_stamps_reads_whole_frames(bus):
     """A socket shared by two readers (threads, or here a child forked before): the one that
-    reads the hub's HEADER_MODE switches, the other read the frames behind it in the bare
-    layout: a 40-byte message cut to the program's 16 (a header's bytes as the frame)."""
+    asked for stamps switched (reading the hub's notice of it, when the hub still sent one), the
+    other read the frames behind it in the bare layout: a 40-byte message cut to the program's 16
+    (a header's bytes as the frame)."""
     probe = start_probe(bus, "switch", "vcan0")
     lines = finish(probe, [])
     assert sum(line.startswith("ok: recvmmsg frame") for line in lines) == 3, lines
