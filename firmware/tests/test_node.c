@@ -306,6 +306,26 @@ static void test_commands(void)
 	zn_node_stop();
 }
 
+/* A command that arrives while the node starts (its subscriber declared, the other buses, the
+ * transmitters and the token not yet) is not taken: it was written before the bridge was ready,
+ * and by a start that could still fail. Once init has returned, commands are. */
+static void test_command_during_start_is_not_taken(void)
+{
+	mock_reset();
+	uint8_t wire[16];
+	can_message_t a = frame(0x321, 0, 0, 3, 0x42);
+	zn_wire_encode(&a, wire, 16);
+	mock_zenoh_deliver_on_declare("vehicle/can/tx", wire, 16);
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	CHECK(mock_can_tx_count("vcan0") == 0);
+	CHECK(stats_has("\"tx_samples\": 0"));
+	deliver(wire, 16, NULL, 0);
+	CHECK(mock_can_wait_tx("vcan0", 1, WAIT_MS) == 1);
+	CHECK(stats_soon_has("\"tx_samples\": 1"));
+	zn_node_stop();
+}
+
 static void test_multi_bus_keys(void)
 {
 	mock_reset();
@@ -474,6 +494,7 @@ int main(void)
 	test_burst_batching();
 	test_burst_port_capacity();
 	test_commands();
+	test_command_during_start_is_not_taken();
 	test_multi_bus_keys();
 	test_can_reopen();
 	test_config_checks();

@@ -1,6 +1,7 @@
 /* zenoh_mock.c - recording Zenoh port: puts are stored, samples can be
  * delivered to subscribers, tokens and queryables are looked up by key. */
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -47,6 +48,13 @@ static zn_session_config_t last_open;
 
 void mock_can_reset(void);
 
+/* mock_zenoh_deliver_on_declare's command, for the next subscriber of its key (empty key: none) */
+static struct {
+	char key[128];
+	uint8_t payload[64];
+	size_t len;
+} on_declare;
+
 void mock_reset(void)
 {
 	pthread_mutex_lock(&lock);
@@ -58,6 +66,7 @@ void mock_reset(void)
 	memset(tokens, 0, sizeof(tokens));
 	memset(queryables, 0, sizeof(queryables));
 	open_result = 0;
+	on_declare.key[0] = 0;
 	__atomic_store_n(&connections_closed, 0, __ATOMIC_RELAXED);
 	unrouted = 0;
 	pthread_mutex_unlock(&lock);
@@ -135,6 +144,15 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 	return rc;
 }
 
+void mock_zenoh_deliver_on_declare(const char *key, const uint8_t *payload, size_t len)
+{
+	pthread_mutex_lock(&lock);
+	snprintf(on_declare.key, sizeof(on_declare.key), "%s", key);
+	on_declare.len = len < sizeof(on_declare.payload) ? len : sizeof(on_declare.payload);
+	memcpy(on_declare.payload, payload, on_declare.len);
+	pthread_mutex_unlock(&lock);
+}
+
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out)
 {
 	(void)s;
@@ -142,9 +160,20 @@ int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, voi
 	strncpy(sub->key, key, sizeof(sub->key) - 1);
 	sub->cb = cb;
 	sub->ctx = ctx;
+	uint8_t payload[sizeof(on_declare.payload)];
+	size_t len = 0;
+	int now = 0;
 	pthread_mutex_lock(&lock);
 	add((void **)subs, sub);
+	if (on_declare.key[0] && strcmp(on_declare.key, key) == 0) {
+		now = 1;
+		len = on_declare.len;
+		memcpy(payload, on_declare.payload, len);
+		on_declare.key[0] = 0;
+	}
 	pthread_mutex_unlock(&lock);
+	if (now)
+		cb(payload, len, NULL, 0, 0, ctx);
 	*out = sub;
 	return 0;
 }

@@ -100,6 +100,9 @@ void mock_zenoh_open_result(int rc);
 void mock_zenoh_close_connection(void);
 /* 1: the session has no connection; puts are recorded and answered ZN_PORT_UNROUTED. */
 void mock_zenoh_unrouted(int on);
+/* Once: the next subscriber declared on key gets this command at once, from within its
+ * declaration (a command that arrives while the node starts). */
+void mock_zenoh_deliver_on_declare(const char *key, const uint8_t *payload, size_t len);
 /* The session configuration of the last zn_open. */
 zn_session_config_t mock_zenoh_last_open(void);
 /* Queries a declared queryable: the reply's length, NUL-terminated in buf; 0 and "" when

@@ -28,6 +28,11 @@ void zn_gate_shut(struct zn_gate *g)
 	__atomic_store_n(&g->shut, 1, __ATOMIC_SEQ_CST);
 }
 
+void zn_gate_open(struct zn_gate *g)
+{
+	__atomic_store_n(&g->shut, 0, __ATOMIC_SEQ_CST);
+}
+
 void zn_gate_wait(struct zn_gate *g, zn_mutex_t *lock, zn_cond_t *cond, int recheck_ms)
 {
 	if (!lock || !cond)

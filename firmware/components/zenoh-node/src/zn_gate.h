@@ -1,10 +1,12 @@
 /* zn_gate.h - the gate a Zenoh callback passes so its owner can be freed under it.
  *
- * Undeclaring a subscriber or queryable does not wait for a callback already running (Zenoh
- * 1.10), and one may even start after it. The callback enters the gate before it touches
+ * Undeclaring a subscriber or queryable need not wait for a callback already running (Zenoh
+ * 1.10's default: the Linux port's subscribers wait, its queryable does not, since a reply can
+ * block), and one may even start after it. The callback enters the gate before it touches
  * anything and leaves it when done; the owner shuts the gate, undeclares, then waits until none
  * is inside before freeing what callbacks read. A callback that finds the gate shut touches
- * nothing else. The gate itself lives in static storage, so it outlives every callback. */
+ * nothing else. The gate itself lives in static storage, so it outlives every callback, and
+ * outside the node's state, whose resets would open it. */
 #ifndef ZN_GATE_H
 #define ZN_GATE_H
 
@@ -25,6 +27,9 @@ bool zn_gate_enter(struct zn_gate *g);
 void zn_gate_leave(struct zn_gate *g, zn_mutex_t *lock, zn_cond_t *cond);
 
 void zn_gate_shut(struct zn_gate *g);
+
+/* Lets callbacks in (again): once what they read exists. */
+void zn_gate_open(struct zn_gate *g);
 
 /* Until no callback is inside (the gate shut first); one turned away at the gate does not
  * signal, so the count is re-read every recheck_ms. Without a lock or cond there is nothing

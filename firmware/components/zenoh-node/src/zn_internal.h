@@ -120,7 +120,6 @@ struct bus {
 	struct tx_cmd tx_rest;
 	int tx_failed; /* the transmitter's last command failed and no frame went since: at stop, give up */
 	zn_thread_t *transmitter;
-	struct zn_gate cb_gate; /* the command callback's (zn_tx_close shuts it) */
 	struct bus_counters n;
 };
 
@@ -128,7 +127,6 @@ struct node {
 	zn_node_config_t cfg;
 	zn_session_t *session;
 	zn_queryable_t *stats_q;
-	struct zn_gate stats_gate; /* the stats callback's (release shuts it) */
 	char stats_key[ZN_KEY_MAX];
 	struct bus buses[ZN_MAX_BUSES];
 	zn_thread_t *monitor;
@@ -146,6 +144,17 @@ struct node {
 };
 
 extern struct node zn_node;
+
+/* The callbacks' gates (zn_gate.h): the command callback's per bus (zn_tx_close shuts it), the
+ * stats callback's. Outside zn_node, whose resets (init, release) would open them for an instant
+ * to a callback Zenoh runs that late; shut from init until start has succeeded (a command is
+ * not taken before the bridge is ready, its token) and from stop on. */
+extern struct zn_gate zn_cb_gates[ZN_MAX_BUSES], zn_stats_gate;
+
+static inline struct zn_gate *zn_cb_gate(const struct bus *b)
+{
+	return &zn_cb_gates[b - zn_node.buses];
+}
 extern const char *const zn_mode_names[3];
 
 /* Waits up to timeout_ms for zn_node_stop; returns whether it was called. */

@@ -11,6 +11,7 @@
 #define STATS_RECHECK_MS 1 /* release() re-reads the stats gate's count at least this often */
 
 struct node zn_node;
+struct zn_gate zn_cb_gates[ZN_MAX_BUSES], zn_stats_gate;
 const char *const zn_mode_names[3] = { "client", "peer", "router" };
 
 int zn_stop_wait(int timeout_ms)
@@ -92,10 +93,10 @@ static void release(int final_stats)
 		if (b->ros_pub)
 			zn_undeclare_publisher(b->ros_pub);
 	}
-	zn_gate_shut(&zn_node.stats_gate);
+	zn_gate_shut(&zn_stats_gate);
 	zn_undeclare_queryable(zn_node.stats_q);
 	/* one Zenoh started before the gate shut may still read the buses' locks */
-	zn_gate_wait(&zn_node.stats_gate, zn_node.stop_lock, zn_node.stop_cond, STATS_RECHECK_MS);
+	zn_gate_wait(&zn_stats_gate, zn_node.stop_lock, zn_node.stop_cond, STATS_RECHECK_MS);
 	char *stats = final_stats ? zn_stats_json_alloc() : NULL;
 	if (stats)
 		zn_log("I", "final stats: %s", stats);
@@ -121,10 +122,14 @@ static void release(int final_stats)
 	}
 	zn_cond_free(zn_node.stop_cond);
 	zn_mutex_free(zn_node.stop_lock);
-	memset(&zn_node, 0, sizeof(zn_node));
-	for (size_t i = 0; i < ZN_MAX_BUSES; i++) /* a callback Zenoh starts this late finds the gate shut */
-		zn_gate_shut(&zn_node.buses[i].cb_gate);
-	zn_gate_shut(&zn_node.stats_gate);
+	memset(&zn_node, 0, sizeof(zn_node)); /* the gates stay shut: a callback Zenoh runs this late touches nothing */
+}
+
+static void shut_gates(void)
+{
+	for (size_t i = 0; i < ZN_MAX_BUSES; i++)
+		zn_gate_shut(&zn_cb_gates[i]);
+	zn_gate_shut(&zn_stats_gate);
 }
 
 /* Everything init does once the configuration is valid; on failure, what it took is released by the caller. */
@@ -163,6 +168,7 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		zn_log("E", "cannot declare the stats queryable %s", zn_node.stats_key);
 		return ESP_FAIL;
 	}
+	zn_gate_open(&zn_stats_gate); /* what it reads exists */
 	/* ROS 2's tokens and the gid its samples carry: before the threads that publish start, and
 	 * before the bridge's token (other clients may still see tokens in another order) */
 	char zid[64] = "";
@@ -177,6 +183,9 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		ZN_TRY(zn_thread_start(&b->transmitter, "zn-tx", zn_tx_transmitter_thread, b));
 	}
 	ZN_TRY(zn_thread_start(&zn_node.monitor, "zn-mon", zn_stats_monitor_thread, NULL));
+	/* commands are taken from now on: a start that failed before wrote none */
+	for (size_t i = 0; i < cfg->bus_count; i++)
+		zn_gate_open(&zn_cb_gates[i]);
 	/* last: the token tells others the bridge forwards both ways from now on */
 	for (size_t i = 0; i < cfg->bus_count; i++) {
 		struct bus *b = &zn_node.buses[i];
@@ -200,6 +209,7 @@ esp_err_t zn_node_init(const zn_node_config_t *cfg)
 		zn_log("E", "invalid configuration: %s", err);
 		return ESP_ERR_INVALID_ARG;
 	}
+	shut_gates(); /* until start has succeeded; a callback of an earlier session finds them shut */
 	memset(&zn_node, 0, sizeof(zn_node));
 	zn_node.cfg = *cfg;
 	esp_err_t rc = start(cfg);

@@ -94,10 +94,10 @@ size_t zn_stats_on_query(char *buf, size_t cap, void *ctx)
 	(void)ctx;
 	/* the gate: undeclaring the queryable does not wait for a callback already running (Zenoh
 	 * 1.10), and the buses' locks the stats read are freed once release() sees none inside */
-	if (!zn_gate_enter(&zn_node.stats_gate))
+	if (!zn_gate_enter(&zn_stats_gate))
 		return 0;
 	size_t n = zn_node_stats_json(buf, cap);
-	zn_gate_leave(&zn_node.stats_gate, NULL, NULL); /* release() re-reads the count: stop_lock is its */
+	zn_gate_leave(&zn_stats_gate, NULL, NULL); /* release() re-reads the count: stop_lock is its */
 	return n;
 }
 

@@ -303,20 +303,20 @@ void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachm
 	struct bus *b = ctx;
 	(void)source_time_ns; /* freshness is judged from it (docs/bridge.md) */
 	/* the gate: b lives in static storage, the queue and its lock only until zn_tx_close returns */
-	if (!zn_gate_enter(&b->cb_gate))
+	if (!zn_gate_enter(zn_cb_gate(b)))
 		return;
 	accept(b, payload, len, attachment, attachment_len, source_time_ns);
-	zn_gate_leave(&b->cb_gate, b->tx_lock, b->tx_idle);
+	zn_gate_leave(zn_cb_gate(b), b->tx_lock, b->tx_idle);
 }
 
 void zn_tx_close(struct bus *b)
 {
-	zn_gate_shut(&b->cb_gate);
+	zn_gate_shut(zn_cb_gate(b));
 	if (b->sub) {
 		zn_undeclare_subscriber(b->sub);
 		b->sub = NULL;
 	}
-	zn_gate_wait(&b->cb_gate, b->tx_lock, b->tx_idle, CLOSE_RECHECK_MS);
+	zn_gate_wait(zn_cb_gate(b), b->tx_lock, b->tx_idle, CLOSE_RECHECK_MS);
 }
 
 /* What is left of a command's deadline (ms, at least 1), or -1 when it has none. */

@@ -625,7 +625,9 @@ pub extern "C" fn zn_undeclare_publisher(p: *mut ZnPublisher) {
 pub extern "C" fn zn_undeclare_subscriber(sub: *mut ZnSubscriber) {
     if !sub.is_null() {
         let sub = unsafe { Box::from_raw(sub) };
-        let _ = sub.0.undeclare().wait();
+        // returns once no callback of it runs or will (one dispatched before the undeclare but not
+        // yet run included): the component's command callback never blocks, so this is short
+        let _ = sub.0.undeclare().wait_callbacks().wait();
     }
 }
 
