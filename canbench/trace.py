@@ -472,9 +472,8 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
     """(line, message) of a trace python-can reads: text formats with the file's line, binary ones
     with the frame's number; what its readers skip with only a log line is a problem here."""
     suffix = path.suffix.lower()
-    hint = ""
-    if suffix == ".trc" and _trc_version(path) is None:
-        hint = " (the file has no ;$FILEVERSION line: read as TRC 1.0)"
+    version = _trc_version(path) if suffix == ".trc" else None
+    hint = " (the file has no ;$FILEVERSION line: read as TRC 1.0)" if suffix == ".trc" and version is None else ""
     if suffix in TEXT_READERS:
         unended = _unended_line(path)
         cut_said = f"the file ends inside this line: a recording cut there ({unended[1][:60]!r})" if unended else ""
@@ -484,7 +483,6 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
             if first != CSV_HEADER:
                 raise TraceError(str(path), 1, f"python-can's CSV begins with the line {CSV_HEADER} "
                                  f"(its reader skips the first line whatever it is): {first[:60]!r}")
-        version = _trc_version(path) if suffix == ".trc" else None
         f = open(path, encoding="utf-8-sig", errors="replace")
         counter: _LineCounter = (_AscLines(f, path) if suffix == ".asc" else
                                  _TrcLines(f, version) if suffix == ".trc" else _LineCounter(f))
@@ -494,13 +492,13 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
                 reader = TEXT_READERS[suffix](counter)
                 for msg in reader:
                     line = counter.line
+                    base = str(getattr(reader, "base", "hex")).lower()  # ASC: as its header said (read by now)
                     _reader_problems(log, fail)
                     counter.said(fail)
                     if line == counter.refused:
                         continue
                     if unended and line == unended[0]:
-                        hex_bytes = str(getattr(reader, "base", "hex")).lower() != "dec"  # ASC: as its header said
-                        cut = _cut(unended[1], msg, suffix, hex_bytes)
+                        cut = _cut(unended[1], msg, suffix, base != "dec")
                         unended = None  # judged once
                         if cut:
                             fail(line, cut_said)
@@ -508,12 +506,12 @@ def _python_can_messages(path: Path, fail: Callable[..., None]) -> Iterator[tupl
                     if suffix == ".asc" and ASC_TX_REQUEST.match(counter.text):
                         continue  # a transmit request is no frame on the bus
                     if suffix == ".asc" and msg.is_fd and not msg.is_error_frame:
-                        msg = _classic_in_fd_line(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
+                        msg = _classic_in_fd_line(counter.text, msg, base)
                     elif suffix == ".asc" and msg.dlc > 8 and not msg.is_remote_frame:
-                        msg = _asc_dlc_code(counter.text, msg, str(getattr(reader, "base", "hex")).lower())
+                        msg = _asc_dlc_code(counter.text, msg, base)
                     problem = _csv_problem(counter.text) if suffix == ".csv" else None
                     if suffix == ".asc" or (suffix == ".trc" and (version or "1.0").startswith("1.")):
-                        problem = _extra_bytes(suffix, counter.text, msg, str(getattr(reader, "base", "hex")).lower())
+                        problem = _extra_bytes(suffix, counter.text, msg, base)
                     if problem:
                         fail(line, problem)
                         continue
