@@ -352,7 +352,7 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list |
                 ("above", dbc_signal.maximum, dbc_signal.maximum is not None and sig.max > dbc_signal.maximum))
                 if out_of]
             lo, hi, _ = value_range(dbc_signal)
-            low, high = _round(low, "down"), _round(high, "up")
+            low, high = _round(low, up=False), _round(high, up=True)
             outside = high < lo or low > hi
             out.append((key, {"range": [low, high]},
                         seen + (f" ({' and '.join(beyond)}: is the DBC right?)" if beyond else "")
@@ -363,16 +363,14 @@ def proposed_signals(summary: SignalSummary) -> list[tuple[str, dict[str, list |
     return out
 
 
-def _round(v: float, toward: str = "nearest") -> float | int:
-    """v at 6 significant digits: the nearest, or (a range's ends) the one at or below ("down") or
-    at or above ("up") it, so that a range rounded outward still holds every value it was made from
-    (an odometer seen at 123456.7..123456.8 km: [123457, 123457] held neither)."""
-    if toward == "nearest" or not math.isfinite(v) or v == 0:
-        r = float(f"{v:.6g}")
-    else:
+def _round(v: float, up: bool) -> float | int:
+    """A range's end at 6 significant digits, rounded outward: the one at or below v (the low end)
+    or at or above it (up), so that the range still holds every value it was made from (an
+    odometer seen at 123456.7..123456.8 km, rounded to the nearest: [123457, 123457] held neither)."""
+    r = float(v)
+    if math.isfinite(v) and v != 0:
         d = Decimal(repr(v))
-        r = float(d.quantize(Decimal(1).scaleb(d.adjusted() - 5),
-                             rounding=ROUND_FLOOR if toward == "down" else ROUND_CEILING))
+        r = float(d.quantize(Decimal(1).scaleb(d.adjusted() - 5), rounding=ROUND_CEILING if up else ROUND_FLOOR))
     return int(r) if r.is_integer() and abs(r) < 1e15 else r
 
 
@@ -497,18 +495,11 @@ def _dbc_cycles_off(s: TraceSummary, dbc_cycles: dict[str, tuple[Any, float]],
 def _no_one_cycle(s: TraceSummary, dbc_cycles: dict[str, tuple[Any, float]]) -> list[str]:
     """The ids of a cyclic message of the DBC (dbc_cycles) that the trace does not send at one
     cycle on every interface where it has 5 frames or more: a median gap of 0 on one (sent twice a
-    cycle under one logger stamp), or cycles beyond STEADY_PCT of each other on two. from_dbc would
-    judge each against the DBC's one cycle on every bus, and fail the trace itself."""
-    on: dict[str, list[IdSummary]] = defaultdict(list)
-    for i in s.ids:
-        if i.ident in dbc_cycles and i.count >= 5:
-            on[i.ident].append(i)
-    out = []
-    for ident, seen in on.items():
-        cycles = [i.cycle_ms or 0.0 for i in seen]
-        if min(cycles) <= 0 or max(cycles) - min(cycles) > min(cycles) * STEADY_PCT / 100:
-            out.append(ident)
-    return sorted(out)
+    cycle under one logger stamp), or cycles beyond STEADY_PCT of the first's (as gated_cycles
+    judges them) on another. from_dbc would judge each against the DBC's one cycle on every bus,
+    and fail the trace itself."""
+    return sorted(ident for ident, on in _judged_by_id(s).items()
+                  if ident in dbc_cycles and (any(not i.cycle_ms for i in on) or not _one_cycle(on)))
 
 
 def periodic(i: IdSummary) -> bool:
@@ -520,22 +511,32 @@ def periodic(i: IdSummary) -> bool:
         i.near_pct is not None and i.near_pct >= PERIODIC_STEADY_PCT and i.steady_pct >= 50)
 
 
-def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
-    """cycle_time.ids from the trace: each id periodic (>= 5 frames, PERIODIC_STEADY_PCT of its
-    gaps steady) on every interface where it has 5 frames or more, with one cycle (within
-    STEADY_PCT) on all of them; and the periodic ids left out because their interfaces disagree."""
+def _judged_by_id(s: TraceSummary) -> dict[str, list[IdSummary]]:
+    """Each id's summaries on the interfaces where it has 5 frames or more (the ones judged)."""
     judged: dict[str, list[IdSummary]] = defaultdict(list)
     for i in s.ids:
         if i.count >= 5:
             judged[i.ident].append(i)
+    return judged
+
+
+def _one_cycle(on: list[IdSummary]) -> bool:
+    """Whether the interfaces' cycles of an id are one: each within STEADY_PCT of the first's."""
+    first = on[0].cycle_ms or 0.0
+    return all(abs((i.cycle_ms or 0.0) - first) <= first * STEADY_PCT / 100 for i in on)
+
+
+def gated_cycles(s: TraceSummary) -> tuple[dict[str, float], list[str]]:
+    """cycle_time.ids from the trace: each id periodic (>= 5 frames, PERIODIC_STEADY_PCT of its
+    gaps steady) on every interface where it has 5 frames or more, with one cycle (within
+    STEADY_PCT) on all of them; and the periodic ids left out because their interfaces disagree."""
     cycles: dict[str, float] = {}
     disagree: list[str] = []
-    for ident, on in judged.items():
+    for ident, on in _judged_by_id(s).items():
         steady = [i for i in on if i.cycle_ms and periodic(i)]
         if not steady:
             continue
-        first = steady[0].cycle_ms or 0.0
-        if len(steady) < len(on) or any(abs((i.cycle_ms or 0.0) - first) > first * STEADY_PCT / 100 for i in steady):
+        if len(steady) < len(on) or not _one_cycle(steady):
             disagree.append(ident)
             continue
         cycles[ident] = round(statistics.median(i.cycle_ms or 0.0 for i in steady), 3)
