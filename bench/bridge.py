@@ -99,7 +99,8 @@ JUDGED_RUNS = 3
 SETTLE_S = 10.0
 # zenoh-node's per-bus counters that say where a frame went (docs/bridge.md, Keys, token, stats)
 CAN_TO_ZENOH_COUNTERS = ("can_rx_frames", "rx_queue_drops", "published_frames", "publish_errors", "unrouted_frames")
-ZENOH_TO_CAN_COUNTERS = ("tx_samples", "tx_frames", "tx_queue_full", "can_tx_errors", "tx_abandoned")
+ZENOH_TO_CAN_COUNTERS = ("tx_samples", "tx_frames", "tx_queue_full", "can_tx_errors", "tx_abandoned",
+                         "tx_refused_closed")
 
 
 def reference_of(system: str, direction: str) -> str:
@@ -286,7 +287,7 @@ def first_loss(results: list[dict], system: str) -> str:
 
 
 LOSS_COUNTERS = ("hub_rx_drops", "rx_queue_drops", "publish_errors", "unrouted_frames", "tx_rejected", "tx_queue_full",
-                 "can_tx_errors", "tx_abandoned")
+                 "can_tx_errors", "tx_abandoned", "tx_refused_closed")
 
 
 def lossless_cell(r: dict) -> str:

@@ -5,8 +5,9 @@
  * block), and one may even start after it. The callback enters the gate before it touches
  * anything and leaves it when done; the owner shuts the gate, undeclares, then waits until none
  * is inside before freeing what callbacks read. A callback that finds the gate shut touches
- * nothing else. The gate itself lives in static storage, so it outlives every callback, and
- * outside the node's state, whose resets would open it. */
+ * nothing else but static storage (its count of refusals, beside the gate). The gate itself lives
+ * in static storage, so it outlives every callback, and outside the node's state, whose resets
+ * would open it. */
 #ifndef ZN_GATE_H
 #define ZN_GATE_H
 

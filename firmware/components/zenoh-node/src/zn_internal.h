@@ -151,6 +151,10 @@ extern struct node zn_node;
  * not taken before the bridge is ready, its token) and from stop on. */
 extern struct zn_gate zn_cb_gates[ZN_MAX_BUSES], zn_stats_gate;
 
+/* Commands each bus's callback found its gate shut to (tx_refused_closed): counted beside the gates,
+ * not in the bus's counters, which init and release reset under such a callback. Zeroed by init. */
+extern uint64_t zn_tx_refused_closed[ZN_MAX_BUSES];
+
 static inline struct zn_gate *zn_cb_gate(const struct bus *b)
 {
 	return &zn_cb_gates[b - zn_node.buses];

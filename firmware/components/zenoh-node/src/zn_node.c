@@ -12,6 +12,7 @@
 
 struct node zn_node;
 struct zn_gate zn_cb_gates[ZN_MAX_BUSES], zn_stats_gate;
+uint64_t zn_tx_refused_closed[ZN_MAX_BUSES];
 const char *const zn_mode_names[3] = { "client", "peer", "router" };
 
 int zn_stop_wait(int timeout_ms)
@@ -210,6 +211,8 @@ esp_err_t zn_node_init(const zn_node_config_t *cfg)
 		return ESP_ERR_INVALID_ARG;
 	}
 	shut_gates(); /* until start has succeeded; a callback of an earlier session finds them shut */
+	for (size_t i = 0; i < ZN_MAX_BUSES; i++) /* one turned away from now on is this session's to report */
+		__atomic_store_n(&zn_tx_refused_closed[i], 0, __ATOMIC_RELAXED);
 	memset(&zn_node, 0, sizeof(zn_node));
 	zn_node.cfg = *cfg;
 	esp_err_t rc = start(cfg);

@@ -42,14 +42,16 @@ size_t zn_node_stats_json(char *buf, size_t cap)
 			     ", \"published_samples\": %" PRIu64 ", \"published_frames\": %" PRIu64
 			     ", \"publish_errors\": %" PRIu64 ", \"unrouted_frames\": %" PRIu64 ", \"tx_samples\": %" PRIu64 ", \"tx_frames\": %" PRIu64
 			     ", \"can_tx_errors\": %" PRIu64 ", \"tx_queue_full\": %" PRIu64 ", \"tx_abandoned\": %" PRIu64
-			     ", \"can_reopens\": %" PRIu64 ", \"direct_frames\": %" PRIu64 ", \"direct_stalls\": %" PRIu64
+			     ", \"tx_refused_closed\": %" PRIu64 ", \"can_reopens\": %" PRIu64
+			     ", \"direct_frames\": %" PRIu64 ", \"direct_stalls\": %" PRIu64
 			     ", \"tx_direct_frames\": %" PRIu64 ", \"tx_unstamped\": %" PRIu64
 			     ", \"rx_queued\": %" PRIu32 ", \"put_running_ms\": %" PRId64 ", \"tx_rejected\": {",
 			     i ? ", " : "", b->name, b->rx_key, b->tx_key, READ(b->n.can_rx_frames), READ(b->n.filtered),
 			     READ(b->n.invalid_frames), READ(b->n.rx_queue_drops), READ(b->n.published_samples), READ(b->n.published_frames),
 			     READ(b->n.publish_errors), READ(b->n.unrouted_frames), READ(b->n.tx_samples), READ(b->n.tx_frames),
 			     READ(b->n.can_tx_errors), READ(b->n.tx_queue_full), READ(b->n.tx_abandoned),
-			     READ(b->n.can_reopens), READ(b->n.direct_frames), READ(b->n.direct_stalls),
+			     READ(zn_tx_refused_closed[i]), READ(b->n.can_reopens), READ(b->n.direct_frames),
+			     READ(b->n.direct_stalls),
 			     READ(b->n.tx_direct_frames), READ(b->n.tx_unstamped), queued, put_ms);
 		for (int r = 1; r < ZN_WIRE_REASONS; r++)
 			off = append(buf, cap, off, "%s\"%s\": %" PRIu64, r > 1 ? ", " : "",

@@ -36,7 +36,8 @@
  *
  * Shutdown: zn_tx_close shuts a gate the callback passes on entry, then
  * undeclares the subscriber and waits until no callback is inside; a callback
- * Zenoh still starts later sees the gate shut and touches nothing else. The
+ * Zenoh still starts later sees the gate shut and touches nothing else but its
+ * count beside the gate (tx_refused_closed, as one before start has succeeded). The
  * transmitter then writes what is queued while the bus takes it and abandons
  * the rest at the first failure. */
 #include <assert.h>
@@ -297,14 +298,28 @@ static void accept(struct bus *b, const uint8_t *payload, size_t len, const uint
 	zn_mutex_unlock(b->tx_lock);
 }
 
+/* A command the shut gate turned away (the bridge starting or stopping): counted beside the gate, as
+ * init and release may be resetting b; the bus named by its index, since its name is b's too. */
+static void refuse_closed(const struct bus *b)
+{
+	size_t bus = (size_t)(b - zn_node.buses);
+	if (COUNT(zn_tx_refused_closed[bus]) == 0)
+		zn_log("W",
+		       "bus %zu: refused a command: the bridge takes none while it starts or stops; further refusals "
+		       "only counted (tx_refused_closed)",
+		       bus);
+}
+
 void zn_tx_on_command(const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len,
 		      uint64_t source_time_ns, void *ctx)
 {
 	struct bus *b = ctx;
 	(void)source_time_ns; /* freshness is judged from it (docs/bridge.md) */
 	/* the gate: b lives in static storage, the queue and its lock only until zn_tx_close returns */
-	if (!zn_gate_enter(zn_cb_gate(b)))
+	if (!zn_gate_enter(zn_cb_gate(b))) {
+		refuse_closed(b);
 		return;
+	}
 	accept(b, payload, len, attachment, attachment_len, source_time_ns);
 	zn_gate_leave(zn_cb_gate(b), b->tx_lock, b->tx_idle);
 }
