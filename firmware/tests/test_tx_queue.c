@@ -2,8 +2,9 @@
  * callback never waits for CAN, a command that does not fit the bounded queue
  * is refused whole and counted, a failed frame abandons the rest of its
  * command (counted), stop during a stalled batch returns and frees nothing in
- * use (run under ASan); and a frame the wire format cannot carry is skipped
- * without costing the rest of its batch. Waiting commands leave in CAN
+ * use (run under ASan), stop after a failed write writes what the bus takes at
+ * once and abandons (counted) only what it does not; and a frame the wire
+ * format cannot carry is skipped without costing the rest of its batch. Waiting commands leave in CAN
  * priority order (lowest arbitration id first, FIFO among equals); a command
  * older than tx_max_age_ms is refused on arrival or when the transmitter takes
  * it, never written (tx_rejected.stale), one stamped further ahead of the clock than
@@ -18,6 +19,7 @@
 #include "check.h"
 #include "zn_mock.h"
 #include "zn_node.h"
+#include "zn_port_os.h"
 #include "zn_wire.h"
 
 /* zn_internal.h (the component's, not its API): the order waiting commands leave in */
@@ -75,6 +77,44 @@ static int64_t deliver_ms(const uint8_t *wire, size_t len)
 }
 
 static uint8_t big[ZN_BATCH_MAX_FRAMES * 16];
+
+/* zn_thread_start and zn_thread_join wrapped (CMakeLists.txt): stop tells the transmitter to stop,
+ * then joins it, so a test can act at that moment (at_transmitter_join) and read the stats once the
+ * transmitter has ended, before stop releases them (stats_at_stop). */
+esp_err_t __real_zn_thread_start(zn_thread_t **out, const char *name, void (*fn)(void *), void *arg);
+esp_err_t __wrap_zn_thread_start(zn_thread_t **out, const char *name, void (*fn)(void *), void *arg);
+void __real_zn_thread_join(zn_thread_t *t);
+void __wrap_zn_thread_join(zn_thread_t *t);
+
+static zn_thread_t *transmitter;
+static void (*at_transmitter_join)(void);
+static char stats_at_stop[8192];
+
+esp_err_t __wrap_zn_thread_start(zn_thread_t **out, const char *name, void (*fn)(void *), void *arg)
+{
+	esp_err_t rc = __real_zn_thread_start(out, name, fn, arg);
+	if (rc == ESP_OK && strcmp(name, "zn-tx") == 0)
+		transmitter = *out;
+	return rc;
+}
+
+void __wrap_zn_thread_join(zn_thread_t *t)
+{
+	int tx = t && t == transmitter;
+	if (tx && at_transmitter_join)
+		at_transmitter_join();
+	__real_zn_thread_join(t);
+	if (tx)
+		mock_zenoh_query("vehicle/can/bridges/zenoh-node/stats", stats_at_stop, sizeof(stats_at_stop));
+}
+
+static int stopped_with(const char *needle)
+{
+	if (strstr(stats_at_stop, needle))
+		return 1;
+	fprintf(stderr, "stats at stop lack '%s': %s\n", needle, stats_at_stop);
+	return 0;
+}
 
 /* Two largest commands fill the 2048-frame queue; the third is refused whole. */
 static void test_callback_never_waits_and_full_queue_refuses(void)
@@ -578,6 +618,67 @@ static void test_group_taken_in_none(void)
 	zn_node_stop();
 }
 
+/* A write failed (the bus stalled past its timeout) as stop began, and the bus took frames again
+ * right after: the commands queued meanwhile are still written at stop (with a timeout of 0), not
+ * abandoned for a failure the bus has recovered from. */
+static void stall_ends(void)
+{
+	CHECK(mock_can_stall_ends("vcan0") == 1); /* the transmitter's write of the first command */
+}
+
+static void test_stop_writes_what_a_recovered_bus_takes(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_stall("vcan0", MOCK_HOLD);
+	uint8_t w[16];
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x100, 0, 1), NULL, 0) == 0);
+	CHECK(mock_can_wait_tx_held("vcan0", 1, WAIT_MS) == 1);
+	size_t len = command(big, 3, 0x200);
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", big, len, NULL, 0) == 0);
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x300, 0, 2), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 3"));
+	at_transmitter_join = stall_ends;
+	zn_node_stop();
+	at_transmitter_join = NULL;
+	CHECK(mock_can_tx_count("vcan0") == 4);
+	CHECK(mock_can_tx("vcan0", 0).identifier == 0x200 && mock_can_tx("vcan0", 3).identifier == 0x300);
+	CHECK(stopped_with("\"tx_frames\": 4, \"can_tx_errors\": 1, \"tx_queue_full\": 0, \"tx_abandoned\": 0,"));
+}
+
+/* The same with a bus that stays stalled: stop ends after the one failed write, not a timeout per
+ * command queued, and abandons them, counted. */
+static void stall_stays(void)
+{
+	mock_can_stall("vcan0", 1); /* the held write fails at its timeout, and every write after it */
+}
+
+static void test_stop_on_a_stalled_bus_abandons(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	mock_can_stall("vcan0", MOCK_HOLD);
+	uint8_t w[16];
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x100, 0, 0), NULL, 0) == 0);
+	CHECK(mock_can_wait_tx_held("vcan0", 1, WAIT_MS) == 1);
+	for (uint8_t i = 1; i <= 20; i++) /* one 100 ms timeout each, were they tried */
+		CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x200u + i, 0, i), NULL, 0) == 0);
+	CHECK(stats_soon_has("\"tx_samples\": 21"));
+	at_transmitter_join = stall_stays;
+	int64_t t0 = now_ms();
+	zn_node_stop();
+	int64_t took = now_ms() - t0;
+	at_transmitter_join = NULL;
+	if (took >= 1000)
+		fprintf(stderr, "stop with 20 commands queued on a stalled bus took %lld ms\n", (long long)took);
+	CHECK(took < 1000);
+	CHECK(mock_can_tx_count("vcan0") == 0);
+	CHECK(stopped_with("\"tx_frames\": 0, \"can_tx_errors\": 1, \"tx_queue_full\": 0, \"tx_abandoned\": 20,"));
+	mock_can_stall("vcan0", 0);
+}
+
 /* Runs every test, or the one named by argv[1] (to run one against other code). */
 int main(int argc, char **argv)
 {
@@ -589,6 +690,8 @@ int main(int argc, char **argv)
 		{ "abandon", test_failed_frame_abandons_its_command },
 		{ "bursts", test_command_written_in_bursts },
 		{ "stop", test_stop_during_stalled_batch },
+		{ "stop_recovered", test_stop_writes_what_a_recovered_bus_takes },
+		{ "stop_stalled", test_stop_on_a_stalled_bus_abandons },
 		{ "bad_frame", test_bad_frame_does_not_cost_its_batch },
 		{ "priority", test_priority_order },
 		{ "arbitration_key", test_arbitration_key },

@@ -28,6 +28,8 @@ struct mock_bus {
 	size_t rx_drops, reads, tx_calls; /* frames dropped; receive and transmit calls that moved frames */
 	size_t tx_empty;		  /* transmit calls with a timeout of 0 that moved none */
 	size_t rx_waiting;		  /* receive calls waiting for a frame now */
+	size_t tx_held;			  /* burst sends waiting for the bus now */
+	unsigned stalls_ended;		  /* mock_can_stall_ends: a send waiting since before one fails */
 };
 
 struct zn_can {
@@ -181,6 +183,24 @@ void mock_can_stall(const char *bus, int stalled)
 	pthread_mutex_unlock(&lock);
 }
 
+size_t mock_can_wait_tx_held(const char *bus, size_t n, int timeout_ms)
+{
+	return wait_counter(bus, offsetof(struct mock_bus, tx_held), n, timeout_ms);
+}
+
+size_t mock_can_stall_ends(const char *bus)
+{
+	pthread_mutex_lock(&lock);
+	struct mock_bus *b = find_bus(bus, 1);
+	size_t failed = b->tx_held;
+	b->stalls_ended++;
+	b->stalled = 0;
+	b->tx_limited = 0;
+	pthread_cond_broadcast(&sent);
+	pthread_mutex_unlock(&lock);
+	return failed;
+}
+
 void mock_can_tx_room(const char *bus, long frames)
 {
 	pthread_mutex_lock(&lock);
@@ -332,37 +352,55 @@ esp_err_t zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_m
 esp_err_t zn_can_send_burst(zn_can_t *can, const can_message_t *msgs, size_t n, size_t *done, int timeout_ms)
 {
 	struct timespec ts = mock_deadline(timeout_ms);
+	esp_err_t rc = ESP_OK;
+	int held = 0; /* counted in tx_held (once a call: a broadcast each wait would wake other held sends in turn) */
 	*done = 0;
 	pthread_mutex_lock(&lock);
+	struct mock_bus *b = can->bus;
+	unsigned stalls_ended = b->stalls_ended;
 	for (;;) {
-		if (can->generation != can->bus->generation) {
-			pthread_mutex_unlock(&lock);
-			return ESP_FAIL;
+		if (can->generation != b->generation) {
+			rc = ESP_FAIL;
+			break;
 		}
-		if (!can->bus->stalled) {
+		if (b->stalls_ended != stalls_ended) { /* the stall outlasted this send's wait */
+			rc = ESP_ERR_TIMEOUT;
+			break;
+		}
+		if (!b->stalled) {
 			size_t before = *done;
-			for (; *done < n && (!can->bus->tx_limited || can->bus->tx_room > 0); (*done)++)
-				record_tx(can->bus, &msgs[*done]);
+			for (; *done < n && (!b->tx_limited || b->tx_room > 0); (*done)++)
+				record_tx(b, &msgs[*done]);
 			if (*done > before) {
-				can->bus->tx_calls += before == 0; /* a call that moved frames, counted once */
+				b->tx_calls += before == 0; /* a call that moved frames, counted once */
 				pthread_cond_broadcast(&sent);
 			}
 			if (*done == n)
 				break;
 		}
-		if ((can->bus->stalled == MOCK_HOLD || !can->bus->stalled) && timeout_ms != 0) /* held, or no room */
-			pthread_cond_wait(&sent, &lock);
-		else if (timeout_ms == 0 || pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
-			if (timeout_ms == 0 && *done == 0) {
-				can->bus->tx_empty++;
+		if (timeout_ms == 0) {
+			if (*done == 0) {
+				b->tx_empty++;
 				pthread_cond_broadcast(&sent);
 			}
-			pthread_mutex_unlock(&lock);
-			return ESP_ERR_TIMEOUT;
+			rc = ESP_ERR_TIMEOUT;
+			break;
+		}
+		if (!held) {
+			held = 1;
+			b->tx_held++;
+			pthread_cond_broadcast(&sent); /* mock_can_wait_tx_held */
+		}
+		if (b->stalled == MOCK_HOLD || !b->stalled) /* held, or no room */
+			pthread_cond_wait(&sent, &lock);
+		else if (pthread_cond_timedwait(&sent, &lock, &ts) != 0) {
+			rc = ESP_ERR_TIMEOUT;
+			break;
 		}
 	}
+	b->tx_held -= (size_t)held;
 	pthread_mutex_unlock(&lock);
-	return ESP_OK;
+	return rc;
 }
 
 void zn_can_close(zn_can_t *can)

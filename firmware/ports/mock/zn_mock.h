@@ -61,6 +61,13 @@ void mock_can_stall(const char *bus, int stalled);
  * MOCK_HOLD, a caller that may wait waits until given room again, one that may
  * not is told ESP_ERR_TIMEOUT; -1: no limit (the default). */
 void mock_can_tx_room(const char *bus, long frames);
+/* Waits until n burst sends (zn_can_send_burst with a timeout) wait for the bus, held or stalled;
+ * returns how many do. */
+size_t mock_can_wait_tx_held(const char *bus, size_t n, int timeout_ms);
+/* The stall ends just too late for the burst sends waiting now: they fail as though their timeout
+ * had passed, and the bus takes every frame from now on (neither stalled nor limited). Returns how
+ * many sends it failed. */
+size_t mock_can_stall_ends(const char *bus);
 /* Was transmitted frame i written by this thread? */
 int mock_can_tx_by(const char *bus, size_t i, pthread_t thread);
 /* The bus goes away under its open handles (hub restarted, interface down): they fail from

@@ -118,7 +118,7 @@ struct bus {
 	struct tx_cmd *tx_group; /* the transmitter's commands of one burst (zn_tx.c, Queued commands together) */
 	uint32_t tx_solo;	 /* commands to write alone after a group the bus took none of */
 	struct tx_cmd tx_rest;
-	int tx_failed; /* the transmitter's last command failed and no frame went since: at stop, give up */
+	int tx_failed; /* the transmitter's last command failed and no frame went since: at stop, what the bus takes at once */
 	zn_thread_t *transmitter;
 	struct bus_counters n;
 };

@@ -38,8 +38,11 @@
  * undeclares the subscriber and waits until no callback is inside; a callback
  * Zenoh still starts later sees the gate shut and touches nothing else but its
  * count beside the gate (tx_refused_closed, as one before start has succeeded). The
- * transmitter then writes what is queued while the bus takes it and abandons
- * the rest at the first failure. */
+ * transmitter then writes what is queued while the bus takes it. Once a write
+ * has failed (tx_failed: none went since), it writes only what the bus takes at
+ * once (a timeout of 0, in groups) and abandons all that is left at the first
+ * group the bus takes none of: a stalled bus holds stop one timeout, not one per
+ * command, and a failure the bus has recovered from since costs nothing. */
 #include <assert.h>
 #include <inttypes.h>
 #include <stdlib.h>
@@ -436,6 +439,19 @@ static size_t write_group(struct bus *b, struct tx_cmd *group, uint32_t n)
 	return sent;
 }
 
+/* Stopping on a bus that takes nothing at once: every frame still queued (the caller's command's
+ * too, its slots not released) is abandoned, counted. */
+static void abandon_queue(struct bus *b)
+{
+	zn_mutex_lock(b->tx_lock);
+	uint32_t left = b->tx_len;
+	b->tx_waiting = 0;
+	b->tx_rest.count = 0;
+	b->tx_len = 0;
+	zn_mutex_unlock(b->tx_lock);
+	COUNT_N(b->n.tx_abandoned, left);
+}
+
 void zn_tx_transmitter_thread(void *arg)
 {
 	struct bus *b = arg;
@@ -448,15 +464,13 @@ void zn_tx_transmitter_thread(void *arg)
 				b->tx_solo = 0; /* the queue emptied: the bus keeps up again */
 			zn_cond_wait(b->tx_ready, b->tx_lock, -1);
 		}
-		if ((b->tx_waiting == 0 && b->tx_rest.count == 0) || (b->tx_stop && b->tx_failed)) {
-			uint32_t left = b->tx_len; /* stopping: the bus does not take them */
-			b->tx_waiting = 0;
-			b->tx_rest.count = 0;
-			b->tx_len = 0;
+		if (b->tx_waiting == 0 && b->tx_rest.count == 0) { /* stopping, and nothing is left */
 			zn_mutex_unlock(b->tx_lock);
-			COUNT_N(b->n.tx_abandoned, left);
 			return;
 		}
+		/* stopping after a failed write: only what the bus takes at once, so a stalled bus does not
+		 * hold stop a timeout per command, and one that has recovered since loses nothing */
+		int at_once = b->tx_stop && b->tx_failed;
 		/* a command's rest is partly on the bus: its deadline is judged per burst
 		 * (transmit_command), so it is refused as a whole only before any frame went */
 		int rest = b->tx_rest.count > 0;
@@ -467,22 +481,25 @@ void zn_tx_transmitter_thread(void *arg)
 		if (too_old)
 			release(b, c.first, c.count);
 		uint32_t grouped = 1;
+		b->tx_group[0] = c;
 		if (!rest && !too_old) {
-			if (b->tx_solo > 0) {
+			if (b->tx_solo > 0 && !at_once)
 				b->tx_solo--;
-			} else {
-				b->tx_group[0] = c;
+			else
 				grouped = gather(b, b->tx_group);
-			}
 		}
 		zn_mutex_unlock(b->tx_lock);
 		if (too_old) {
 			refuse_stale(b, age_ms, c.count, "in the transmit queue");
 			continue;
 		}
-		if (grouped > 1) {
+		if (grouped > 1 || at_once) {
 			if (write_group(b, b->tx_group, grouped) > 0)
 				continue; /* what is left of it is tx_rest or back in the heap */
+			if (at_once) { /* the bus took none: it, and all that waits, abandoned */
+				abandon_queue(b);
+				return;
+			}
 			b->tx_solo = ZN_CAN_BURST_MAX; /* only the transmitter reads or writes it */
 		}
 		if (!transmit_command(b, &c, b->tx_burst)) { /* the bus's one burst buffer: one writer at a time */
