@@ -17,17 +17,18 @@ pytestmark = pytest.mark.unit
 REPO = Path(__file__).resolve().parents[2]
 PORT = REPO / "firmware" / "ports" / "linux" / "zenoh_rust"
 PATCHED = PORT / "patched"
-# crate -> (its patch, the path components above the crate in the patch's file names)
+# crate -> (its patches in the order they apply, the path components above the crate in their file names)
 PATCHES = {
-    "zenoh-link-tls": ("docs/upstream/zenoh-link-tls-split-stream.patch", 2),
-    "zenoh-sync": ("docs/upstream/zenoh-sync-lifo-queue-notify-waiters.patch", 3),
-    "zenoh-transport": ("docs/upstream/zenoh-transport-lowlatency-buffered-read.patch", 3),
+    "zenoh-link-tls": (["docs/upstream/zenoh-link-tls-split-stream.patch"], 2),
+    "zenoh-sync": (["docs/upstream/zenoh-sync-lifo-queue-notify-waiters.patch"], 3),
+    "zenoh-transport": (["docs/upstream/zenoh-transport-lowlatency-buffered-read.patch",
+                         "docs/upstream/zenoh-transport-universal-direct-write.patch"], 3),
 }
 # workspace root -> the patched crates it uses (zn-flood speaks TCP only and receives nothing)
 WORKSPACES = {
     PORT: set(PATCHES),
     REPO / "images" / "builder" / "rust": set(PATCHES),
-    REPO / "bench" / "tools" / "zn-flood": {"zenoh-sync"},
+    REPO / "bench" / "tools" / "zn-flood": {"zenoh-sync", "zenoh-transport"},
 }
 
 
@@ -46,14 +47,15 @@ def test_each_patched_crate_is_the_pinned_version():
 @pytest.mark.skipif(shutil.which("patch") is None, reason="needs patch(1)")
 @pytest.mark.parametrize("crate", sorted(PATCHES))
 def test_each_patched_crate_holds_its_patch(crate, tmp_path):
-    """Reversing the patch applies cleanly: the crate is the patch applied (and nothing else of it
-    was undone by hand since)."""
-    patch, strip = PATCHES[crate]
+    """Reversing the patches, last first, applies cleanly: the crate is the patches applied (and
+    nothing else of them was undone by hand since)."""
+    patches, strip = PATCHES[crate]
     copy = tmp_path / crate
     shutil.copytree(PATCHED / crate, copy)
-    r = subprocess.run(["patch", "-R", "--dry-run", "-p", str(strip), "-d", str(copy), "-i", str(REPO / patch)],
-                       capture_output=True, text=True)
-    assert r.returncode == 0, f"{crate} does not hold {patch}: {r.stdout}{r.stderr}"
+    for patch in reversed(patches):
+        r = subprocess.run(["patch", "-R", "-s", "-p", str(strip), "-d", str(copy), "-i", str(REPO / patch)],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, f"{crate} does not hold {patch}: {r.stdout}{r.stderr}"
 
 
 @pytest.mark.parametrize("root", sorted(WORKSPACES), ids=lambda p: str(p.relative_to(REPO)))

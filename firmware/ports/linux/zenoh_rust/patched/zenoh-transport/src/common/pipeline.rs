@@ -51,7 +51,7 @@ use crate::common::batch::BatchConfig;
 
 // Batches are moved all over the pipeline and are quite big (56B+), so they are boxed to optimize
 // the moves. They are always reused, so there is no allocation performance penalty.
-type BoxedWBatch = Box<WBatch>;
+pub(crate) type BoxedWBatch = Box<WBatch>;
 
 const RBLEN: usize = QueueSizeConf::MAX;
 
@@ -128,9 +128,66 @@ impl StageInOut {
 
     #[inline]
     fn move_batch(&mut self, batch: BoxedWBatch) {
+        self.push_batch(batch);
+        let _ = self.n_out_w.notify();
+    }
+
+    #[inline]
+    fn push_batch(&mut self, batch: BoxedWBatch) {
         let _ = self.s_out_w.push(batch);
         self.atomic_backoff.bytes.store(0, Ordering::Relaxed);
-        let _ = self.n_out_w.notify();
+    }
+}
+
+/// What tells one priority's consumer of new bytes without the `StageIn` lock: a producer
+/// waiting there for a free batch holds it until a write refills one, so a notification that
+/// needed it could wait on the very write it was to start.
+#[derive(Clone)]
+struct ConsumerNotifier {
+    n_out_w: Notifier,
+    atomic_backoff: Arc<AtomicBackoff>,
+}
+
+impl ConsumerNotifier {
+    fn notify(&self, deferred: Deferred) {
+        match deferred {
+            Deferred::Nothing => {}
+            Deferred::Batch => {
+                let _ = self.n_out_w.notify();
+            }
+            // as StageInOut::notify
+            Deferred::Bytes(bytes) => {
+                self.atomic_backoff.bytes.store(bytes, Ordering::Relaxed);
+                if !self.atomic_backoff.active.load(Ordering::Relaxed) {
+                    let _ = self.n_out_w.notify();
+                }
+            }
+        }
+    }
+}
+
+/// What a deferred push left to its caller to tell the consumer: a batch moved out, bytes added
+/// to the current batch, or nothing (the consumer was told already: a message in fragments).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Deferred {
+    Nothing,
+    Batch,
+    Bytes(BatchSize),
+}
+
+/// The consumer's notification a deferred push held back
+/// (`TransmissionPipelineProducer::push_network_message_deferred`): the caller either writes
+/// what is pending itself, taking the consumer, or hands it on with `notify_deferred`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct DeferredNotify {
+    idx: usize,
+    what: Deferred,
+}
+
+impl DeferredNotify {
+    /// The consumer must be told: the push left a batch to write.
+    pub(crate) fn is_pending(&self) -> bool {
+        self.what != Deferred::Nothing
     }
 }
 
@@ -287,6 +344,9 @@ struct StageIn {
     batching: bool,
     // used for stop fragment
     batch_config: BatchConfig,
+    // a deferred push: the message's last notification is kept in `deferred`, not sent
+    defer: bool,
+    deferred: Deferred,
 }
 
 impl StageIn {
@@ -337,13 +397,22 @@ impl StageIn {
             ($batch:expr, $msg:expr) => {{
                 if !self.batching || $msg.is_express() {
                     // Move out existing batch
-                    self.s_out.move_batch($batch);
+                    if self.defer {
+                        self.s_out.push_batch($batch);
+                        self.deferred = Deferred::Batch;
+                    } else {
+                        self.s_out.move_batch($batch);
+                    }
                     return Ok(true);
                 } else {
                     let bytes = $batch.len();
                     c_guard.batch = Some($batch);
                     drop(c_guard);
-                    self.s_out.notify(bytes);
+                    if self.defer {
+                        self.deferred = Deferred::Bytes(bytes);
+                    } else {
+                        self.s_out.notify(bytes);
+                    }
                     return Ok(true);
                 }
             }};
@@ -705,6 +774,7 @@ impl TransmissionPipeline {
 
         let mut stage_in = vec![];
         let mut stage_out = vec![];
+        let mut notifiers = vec![];
 
         let default_queue_size = [config.queue_size[Priority::DEFAULT as usize]];
         let size_iter = if priority.len() == 1 {
@@ -758,6 +828,10 @@ impl TransmissionPipeline {
                 )),
             });
 
+            notifiers.push(ConsumerNotifier {
+                n_out_w: n_out_w.clone(),
+                atomic_backoff: bytes.clone(),
+            });
             stage_in.push(Mutex::new(StageIn {
                 s_ref: StageInRefill {
                     n_ref_r,
@@ -777,6 +851,8 @@ impl TransmissionPipeline {
                 fragbuf: ZBuf::empty(),
                 batching: config.batching_enabled,
                 batch_config: config.batch,
+                defer: false,
+                deferred: Deferred::Nothing,
             }));
 
             // The stage out for this priority
@@ -793,6 +869,7 @@ impl TransmissionPipeline {
 
         let producer = TransmissionPipelineProducer {
             stage_in: stage_in.into_boxed_slice().into(),
+            notifiers: notifiers.into_boxed_slice().into(),
             status: status.clone(),
         };
         let consumer = TransmissionPipelineConsumer {
@@ -863,6 +940,8 @@ struct Waits {
 pub(crate) struct TransmissionPipelineProducer {
     // Each priority queue has its own Mutex
     stage_in: Arc<[Mutex<StageIn>]>,
+    // and its consumer's notifier, for deferred pushes
+    notifiers: Arc<[ConsumerNotifier]>,
     status: Arc<TransmissionPipelineStatus>,
 }
 
@@ -872,6 +951,38 @@ impl TransmissionPipelineProducer {
         &self,
         msg: NetworkMessageRef,
     ) -> Result<bool, TransportClosed> {
+        self.push(msg, false).map(|(sent, _)| sent)
+    }
+
+    /// As `push_network_message`, but the consumer is not told of the message's last batch: the
+    /// caller writes it (taking the consumer, which then finds it) or calls `notify_deferred`.
+    /// A message in fragments tells the consumer of each as before, so that a push waiting for
+    /// a free batch never waits on its own caller.
+    #[inline]
+    pub(crate) fn push_network_message_deferred(
+        &self,
+        msg: NetworkMessageRef,
+    ) -> Result<(bool, DeferredNotify), TransportClosed> {
+        self.push(msg, true)
+    }
+
+    /// Tells the consumer what a deferred push held back.
+    pub(crate) fn notify_deferred(&self, deferred: DeferredNotify) {
+        self.notifiers[deferred.idx].notify(deferred.what);
+    }
+
+    /// Wakes the consumer whatever a deferred push held back: a batch its writer could not
+    /// take (a `Backoff`) must be pulled by the consumer, and a consumer backing off waits anyway.
+    pub(crate) fn notify_consumer(&self, deferred: DeferredNotify) {
+        self.notifiers[deferred.idx].notify(Deferred::Batch);
+    }
+
+    #[inline]
+    fn push(
+        &self,
+        msg: NetworkMessageRef,
+        defer: bool,
+    ) -> Result<(bool, DeferredNotify), TransportClosed> {
         // Fail fast if the pipeline has already been disabled (e.g. because a previous
         // non droppable message could not be pushed and the transport is being closed).
         // This prevents threads from blocking up to `wait_before_close` on a transport
@@ -891,7 +1002,13 @@ impl TransmissionPipelineProducer {
         let (wait_time, max_wait_time) = if msg.is_droppable() {
             // Checked if we are blocked on the priority queue and we drop directly the message
             if self.status.is_congested(priority) {
-                return Ok(false);
+                return Ok((
+                    false,
+                    DeferredNotify {
+                        idx,
+                        what: Deferred::Nothing,
+                    },
+                ));
             }
             (
                 self.status.waits.wait_before_drop,
@@ -901,26 +1018,45 @@ impl TransmissionPipelineProducer {
             (self.status.waits.wait_before_close, None)
         };
         let mut deadline = Deadline::new(wait_time, max_wait_time);
+        let mut deferred = DeferredNotify {
+            idx,
+            what: Deferred::Nothing,
+        };
         // Lock the channel. We are the only one that will be writing on it.
         let mut queue = zlock!(self.stage_in[idx]);
         // Check again for congestion in case it happens when blocking on the mutex.
         if msg.is_droppable() && self.status.is_congested(priority) {
-            return Ok(false);
+            return Ok((false, deferred));
         }
-        let mut sent = queue.push_network_message(msg, priority, &mut deadline)?;
+        queue.defer = defer;
+        queue.deferred = Deferred::Nothing;
+        let pushed = Self::push_on(&mut queue, &self.status, msg, priority, &mut deadline);
+        queue.defer = false;
+        deferred.what = queue.deferred;
+        Ok((pushed?, deferred))
+    }
+
+    fn push_on(
+        queue: &mut StageIn,
+        status: &TransmissionPipelineStatus,
+        msg: NetworkMessageRef,
+        priority: Priority,
+        deadline: &mut Deadline,
+    ) -> Result<bool, TransportClosed> {
+        let mut sent = queue.push_network_message(msg, priority, deadline)?;
         // If the message cannot be sent, mark the pipeline as congested.
         if !sent {
-            self.status.set_congested(priority, true);
+            status.set_congested(priority, true);
             // During the time between deadline wakeup and setting the congested flag,
             // all batches could have been refilled (especially if there is a single one),
             // so try again with the same already expired deadline.
-            sent = queue.push_network_message(msg, priority, &mut deadline)?;
+            sent = queue.push_network_message(msg, priority, deadline)?;
             // If the message is sent in the end, reset the status.
             // Setting the status to `true` is only done with the stage_in mutex acquired,
             // so it is not possible that further messages see the congestion flag set
             // after this point.
             if sent {
-                self.status.set_congested(priority, false);
+                status.set_congested(priority, false);
             }
             // There is one edge case that is fortunately supported: if the message that
             // has been pushed again is fragmented, we might have some batches actually
@@ -1080,6 +1216,16 @@ impl PipelineConsumer for TransmissionPipelineConsumer {
 }
 
 impl TransmissionPipelineConsumer {
+    /// The pipeline was disabled: nothing more is to be pulled.
+    pub(crate) fn is_disabled(&self) -> bool {
+        self.status.is_disabled()
+    }
+
+    /// What the consumer waits on for batches (not split by priority).
+    pub(crate) fn waiter(&self) -> Waiter {
+        self.n_out_r().clone()
+    }
+
     pub(crate) fn split(self) -> Vec<SplitTransmissionPipelineConsumer> {
         assert!(self.n_out_r.is_none());
         self.stage_out

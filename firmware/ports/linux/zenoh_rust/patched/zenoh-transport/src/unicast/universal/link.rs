@@ -24,12 +24,12 @@
 ))]
 use std::fmt::Debug;
 use std::{
-    future::poll_fn,
+    future::{poll_fn, Future},
     sync::{
         atomic::{AtomicBool, Ordering},
         Arc, Mutex, OnceLock,
     },
-    task::Poll,
+    task::{Context, Poll},
     time::{Duration, Instant},
 };
 
@@ -59,8 +59,9 @@ use zenoh_protocol::{
 };
 use zenoh_result::{bail, zerror, ZResult};
 use zenoh_sync::RecyclingObjectPool;
+use zenoh_sync::Waiter;
 #[cfg(feature = "unstable")]
-use zenoh_sync::{event, Notifier, Waiter};
+use zenoh_sync::{event, Notifier};
 use zenoh_task::TaskController;
 #[cfg(all(
     feature = "uring",
@@ -83,8 +84,8 @@ use crate::{
     common::{
         batch::{BatchConfig, RBatch},
         pipeline::{
-            PipelineConsumer, TransmissionPipeline, TransmissionPipelineConf,
-            TransmissionPipelineConsumer, TransmissionPipelineProducer,
+            BoxedWBatch, DeferredNotify, PipelineConsumer, TransmissionPipeline,
+            TransmissionPipelineConf, TransmissionPipelineConsumer, TransmissionPipelineProducer,
         },
         priority::TransportPriorityTx,
     },
@@ -99,6 +100,8 @@ pub(super) struct TransportLinkUnicastUniversal {
     pub(super) pipeline: TransmissionPipelineProducer,
     // The task handling substruct
     task_controller: TaskController,
+    // The link's writer, shared by its transmit task and the producers that write directly
+    pub(super) direct: DirectTx,
     #[cfg(feature = "unstable")]
     // Notifier for a BlockFirst message to be ready to be sent
     // (after the previous one has been sent)
@@ -159,10 +162,12 @@ impl TransportLinkUnicastUniversal {
             block_first_waiters.push(waiter);
         }
 
+        let direct = DirectTx::new(!link.link.supports_priorities());
         let result = Self {
             link,
             pipeline: producer,
             task_controller: TaskController::default(),
+            direct,
             #[cfg(feature = "unstable")]
             block_first_notifiers: block_first_notifiers.try_into().ok().unwrap(),
             #[cfg(feature = "unstable")]
@@ -185,12 +190,14 @@ impl TransportLinkUnicastUniversal {
         #[cfg(feature = "stats")]
         let stats = self.stats.clone();
         let ct = self.task_controller.get_cancellation_token();
+        let direct = self.direct.clone();
         let task = async move {
             let res = tx_task(
                 consumer,
                 &mut tx,
                 keep_alive,
                 ct,
+                direct,
                 #[cfg(feature = "stats")]
                 stats,
             )
@@ -275,9 +282,28 @@ async fn tx_task(
     link: &mut TransportLinkUnicastTx,
     keep_alive: Duration,
     cancellation_token: CancellationToken,
+    direct: DirectTx,
     #[cfg(feature = "stats")] stats: zenoh_stats::LinkStats,
 ) -> ZResult<()> {
     let keep_alive_tracker = TimeoutTracker::new(keep_alive);
+    if let Some(writer) = direct.0.as_ref() {
+        let waiter = pipeline.waiter();
+        *writer.lock().await = Some(TxSide {
+            consumer: pipeline,
+            link: link.clone(),
+            keep_alive: keep_alive_tracker.0.clone(),
+            failed: None,
+            #[cfg(feature = "stats")]
+            stats,
+        });
+        let timeout = keep_alive_tracker.timeout();
+        let res = shared_write_loop(writer, waiter, keep_alive_tracker, cancellation_token).await;
+        // producers write no more on this link: they hand their batches to the pipeline
+        if let Ok(mut side) = tokio::time::timeout(timeout, writer.lock()).await {
+            *side = None;
+        }
+        return res;
+    }
     if link.inner.link.supports_priorities() {
         let (res, _, _) = select_all(pipeline.split().into_iter().map(|pipeline| {
             let mut link = link.clone();
@@ -389,6 +415,246 @@ async fn write_loop(
         }
     }
 
+    Ok(())
+}
+
+/// A link's writer: its pipeline's consumer and the link's transmit side, taken by the transmit
+/// task or by a producer that finds it free (`DirectTx::write`), one at a time so that batches
+/// keep their order.
+pub(super) struct TxSide {
+    consumer: TransmissionPipelineConsumer,
+    link: TransportLinkUnicastTx,
+    keep_alive: Arc<TimeoutTrackerInner>,
+    // a producer's write that failed: the transmit task fails with it, so the link is deleted
+    failed: Option<zenoh_result::Error>,
+    #[cfg(feature = "stats")]
+    stats: zenoh_stats::LinkStats,
+}
+
+impl TxSide {
+    async fn write(&mut self, mut batch: BoxedWBatch, priority: Priority) -> ZResult<()> {
+        let res = self.link.send_batch(&mut batch, None).await;
+        if res.is_ok() {
+            // inform the latest message tracker that a message has been sent
+            self.keep_alive.reset();
+            #[cfg(feature = "stats")]
+            {
+                self.stats.inc_bytes(zenoh_stats::Tx, batch.len() as u64);
+                self.stats
+                    .inc_transport_message(zenoh_stats::Tx, batch.stats.t_msgs as u64);
+            }
+        }
+        // Reinsert the batch into the queue
+        self.consumer.refill(batch, priority);
+        res
+    }
+}
+
+type SharedWriter = Arc<tokio::sync::Mutex<Option<TxSide>>>;
+
+/// The writer of a link not split by priority (none for one split: its transmit tasks write
+/// per priority); empty until its transmit task has started and once it has ended. A producer
+/// outside the runtime (an application's thread) that finds the writer free writes its batch
+/// itself, where the transmit task would be woken for each: a futex wake and a context switch
+/// per message, and the latency of both. It never waits for the link: a write the link does not
+/// take at once goes on in a task of the TX runtime, holding the writer, as the transmit task's
+/// would.
+#[derive(Clone)]
+pub(super) struct DirectTx(Option<SharedWriter>);
+
+/// The batches a producer writes at most before it leaves the rest to the transmit task: other
+/// threads' batches keep coming, and its own put must return.
+const DIRECT_WRITES_MAX: usize = 4;
+
+impl DirectTx {
+    fn new(shared: bool) -> Self {
+        Self(shared.then(SharedWriter::default))
+    }
+
+    /// A producer here may write: the link has one writer, and the producer runs on no runtime's
+    /// thread (a runtime's task must not block its worker on a write, and routed messages keep
+    /// their transmit task; a thread whose tokio context is gone, at exit, does not write).
+    pub(super) fn usable(&self) -> bool {
+        self.0.is_some()
+            && matches!(tokio::runtime::Handle::try_current(), Err(e) if e.is_missing_context())
+    }
+
+    /// Writes what a deferred push left, with what else is pending, if the writer is free;
+    /// otherwise tells the transmit task, as the push would have.
+    pub(super) fn write(&self, pipeline: &TransmissionPipelineProducer, deferred: DeferredNotify) {
+        if !deferred.is_pending() {
+            return;
+        }
+        let Some(Ok(mut side)) = self.0.clone().map(|w| w.try_lock_owned()) else {
+            pipeline.notify_deferred(deferred);
+            return;
+        };
+        if side.is_none() {
+            drop(side);
+            pipeline.notify_deferred(deferred);
+            return;
+        }
+        let _runtime = zenoh_runtime::ZRuntime::TX.enter();
+        for _ in 0..DIRECT_WRITES_MAX {
+            let tx = side.as_mut().expect("checked above");
+            let (batch, priority) = match tx.consumer.stage_pull() {
+                Ok(pulled) => pulled,
+                // all written
+                Err(None) => return,
+                // a batch being filled, or backing off: the transmit task's to pull
+                Err(Some(_)) => {
+                    drop(side);
+                    pipeline.notify_consumer(deferred);
+                    return;
+                }
+            };
+            let mut write = Box::pin(async move {
+                let tx = side.as_mut().expect("checked above");
+                let res = tx.write(batch, priority).await;
+                if let Err(e) = res {
+                    tx.failed = Some(e);
+                }
+                side
+            });
+            match write
+                .as_mut()
+                .poll(&mut Context::from_waker(futures::task::noop_waker_ref()))
+            {
+                Poll::Ready(s) => side = s,
+                Poll::Pending => {
+                    // the link takes it later: the rest of the write goes on in a task, and the
+                    // transmit task takes over what more is pending once it is done
+                    let pipeline = pipeline.clone();
+                    zenoh_runtime::ZRuntime::TX.spawn(async move {
+                        drop(write.await);
+                        pipeline.notify_consumer(deferred);
+                    });
+                    return;
+                }
+            }
+            if side.as_ref().is_some_and(|tx| tx.failed.is_some()) {
+                break;
+            }
+        }
+        // what is left, and a failed write, are the transmit task's
+        drop(side);
+        pipeline.notify_consumer(deferred);
+    }
+}
+
+/// `PipelineConsumer::pull` on the shared writer: the writer and the batch it pulled, or none
+/// when the pipeline is disabled.
+async fn pull_shared(
+    writer: &SharedWriter,
+    waiter: &Waiter,
+) -> ZResult<
+    Option<(
+        tokio::sync::OwnedMutexGuard<Option<TxSide>>,
+        BoxedWBatch,
+        Priority,
+    )>,
+> {
+    loop {
+        let backoff = {
+            let mut side = writer.clone().lock_owned().await;
+            let tx = side.as_mut().expect("set while the transmit task runs");
+            if let Some(e) = tx.failed.take() {
+                return Err(e);
+            }
+            if tx.consumer.is_disabled() {
+                return Ok(None);
+            }
+            match tx.consumer.stage_pull() {
+                Ok((batch, priority)) => return Ok(Some((side, batch, priority))),
+                Err(backoff) => backoff,
+            }
+        };
+        // As in `PipelineConsumer::pull`: do not spin on a batch a producer holds.
+        tokio::task::yield_now().await;
+        let waited = match backoff {
+            Some(b) => {
+                tokio::time::timeout(Duration::from_micros(b as u64), waiter.wait_async()).await
+            }
+            None => Ok(waiter.wait_async().await),
+        };
+        if let Ok(Err(_channel_closed)) = waited {
+            return Ok(None);
+        }
+    }
+}
+
+/// `write_loop` for a link not split by priority, its writer shared with direct producers.
+async fn shared_write_loop(
+    writer: &SharedWriter,
+    waiter: Waiter,
+    keep_alive_tracker: TimeoutTracker,
+    cancellation_token: CancellationToken,
+) -> ZResult<()> {
+    let task = async {
+        loop {
+            tokio::select! {
+                pulled = pull_shared(writer, &waiter) => {
+                    let Some((mut side, batch, priority)) = pulled? else {
+                        // The queue has been disabled: break the tx loop, drain the queue, and exit
+                        break
+                    };
+                    side.as_mut().expect("set while the transmit task runs").write(batch, priority).await?;
+                },
+                _ = keep_alive_tracker.wait_if(true) => {
+                    // A timeout occurred, no control/data messages have been sent during
+                    // the keep_alive period, we need to send a KeepAlive message
+                    let message: TransportMessage = KeepAlive.into();
+                    let mut side = writer.lock().await;
+                    let tx = side.as_mut().expect("set while the transmit task runs");
+                    #[allow(unused_variables)] // Used when stats feature is enabled
+                    let n = tx.link.send(&message, Some(Priority::Control)).await?;
+                    #[cfg(feature = "stats")]
+                    {
+                        tx.stats.inc_bytes(zenoh_stats::Tx, n as u64);
+                        tx.stats.inc_transport_message(zenoh_stats::Tx, 1);
+                    }
+                }
+            }
+        }
+        ZResult::Ok(())
+    };
+    if let Some(result) = cancellation_token.run_until_cancelled(task).await {
+        result?;
+    }
+
+    // Drain the transmission pipeline and write remaining bytes on the wire, once a producer's
+    // write under way (a task holding the writer) is done
+    let mut side = tokio::time::timeout(keep_alive_tracker.timeout(), writer.lock())
+        .await
+        .map_err(|_| {
+            zerror!(
+                "flush failed: a write did not end within {:?}",
+                keep_alive_tracker.timeout()
+            )
+        })?;
+    let tx = side.as_mut().expect("set while the transmit task runs");
+    let mut batches = tx.consumer.drain();
+    for (mut b, _) in batches.drain(..) {
+        tokio::time::timeout(
+            keep_alive_tracker.timeout(),
+            tx.link.send_batch(&mut b, None),
+        )
+        .await
+        .map_err(|_| {
+            zerror!(
+                "{}: flush failed after {} ms",
+                tx.link,
+                keep_alive_tracker.timeout().as_millis()
+            )
+        })??;
+
+        #[cfg(feature = "stats")]
+        {
+            tx.stats.inc_bytes(zenoh_stats::Tx, b.len() as u64);
+            tx.stats
+                .inc_transport_message(zenoh_stats::Tx, b.stats.t_msgs as u64);
+        }
+    }
     Ok(())
 }
 
@@ -542,6 +808,12 @@ struct TimeoutTrackerInner {
     task: OnceLock<JoinHandle<()>>,
 }
 
+impl TimeoutTrackerInner {
+    fn reset(&self) {
+        *self.latest_reset.lock().unwrap() = Instant::now();
+    }
+}
+
 #[derive(Clone)]
 struct TimeoutTracker(Arc<TimeoutTrackerInner>);
 
@@ -581,7 +853,7 @@ impl TimeoutTracker {
     }
 
     fn reset(&self) {
-        *self.0.latest_reset.lock().unwrap() = Instant::now();
+        self.0.reset();
     }
 
     async fn wait_if(&self, predicate: bool) {

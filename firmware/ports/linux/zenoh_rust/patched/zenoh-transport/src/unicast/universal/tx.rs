@@ -175,6 +175,10 @@ impl TransportUnicastUniversal {
         let msg = msg.as_ref();
 
         let pipeline = transport_link.pipeline.clone();
+        let direct = transport_link
+            .direct
+            .usable()
+            .then(|| transport_link.direct.clone());
         tracing::trace!(
             "Scheduled {:?} for transmission to {} ({})",
             msg,
@@ -221,7 +225,14 @@ impl TransportUnicastUniversal {
         // block for fairly long time
         drop(transport_links);
 
-        let pushed = pipeline.push_network_message(msg)?;
+        let pushed = match direct {
+            Some(direct) => {
+                let (pushed, deferred) = pipeline.push_network_message_deferred(msg)?;
+                direct.write(&pipeline, deferred);
+                pushed
+            }
+            None => pipeline.push_network_message(msg)?,
+        };
 
         #[cfg(feature = "shared-memory")]
         if pushed {
