@@ -1,8 +1,12 @@
 """Zenoh's low-latency transport (docs/bridge.md): with --low-latency 1 and a router that enables
 it too, the thread that puts writes the link itself, so Zenoh's transmit threads (tx-*) stay
-asleep while frames flow both ways; the same bridge with a router that does not enable it falls
-back to the universal transport (negotiated), still forwards, and its transmit thread wakes for
-every sample: the contrast that shows the first test's measure can fail. A frozen router: the put
+asleep while frames flow both ways, the router's too as it forwards commands to the bridge (its
+routing puts from its own runtime's tasks: on the universal transport they wake its transmit task,
+the patched transport's direct write being for application threads); the same bridge with a router
+that does not enable it falls back to the universal transport (negotiated) and still forwards, and
+the router's transmit thread wakes for every command: the contrast that shows the measure can fail.
+(The bridge's own transmit thread stays asleep on either: its puts write the link themselves,
+docs/upstream/README.md.) A frozen router: the put
 blocks in the link's write (its send queue full), whichever thread makes it; the CAN port is still
 read, every frame accounted for and delivered in order once the router runs again, and a SIGTERM in
 the freeze exits 0 once it ends (the universal transport's rescue: test_direct_put.py)."""
@@ -10,10 +14,11 @@ from __future__ import annotations
 
 import signal
 import time
+from pathlib import Path
 
 import pytest
 from conftest import LOW_LATENCY_ROUTER, tcp_sockets, wait_for
-from test_bridge_host import Collector, wait_accounted
+from test_bridge_host import Collector, start_candump, stop_candump, wait_accounted
 from test_direct_put import HOLD_S, MAX_BACKLOG, SNDBUF, check_published_in_order, small_send_buffer, stops_cleanly
 
 from bench.common import ctx_switches
@@ -28,9 +33,10 @@ def transmit_switches(pid: int) -> int:
     return sum(n for name, n in ctx_switches(pid).items() if name.startswith("tx-"))
 
 
-def forward_both_ways(bus, bridge, session) -> int:
+def forward_both_ways(bus, bridge, router, session) -> tuple[int, int]:
     """FRAMES CAN -> Zenoh and COMMANDS Zenoh -> CAN through a --low-latency bridge, each whole and
-    in order; returns how often Zenoh's transmit threads switched meanwhile."""
+    in order; returns how often the bridge's transmit threads switched meanwhile, and the router's
+    while it forwarded the commands to the bridge."""
     rx = Collector(session, "vehicle/can/rx")
     bridge.start("--can", "vcan0", "--publish-period-ms", "0", "--low-latency", "1")
     bridge.wait_ready(session)
@@ -38,22 +44,31 @@ def forward_both_ways(bus, bridge, session) -> int:
     bus.run(["cangen", "vcan0", "-I", "321", "-L", "8", "-D", "i", "-g", "1", "-n", str(FRAMES)], timeout=60)
     got = rx.wait_frames(FRAMES)
     assert [int.from_bytes(f.data, "little") for f, _, _ in got] == list(range(FRAMES))
-    for n in range(COMMANDS):
+    dump, out = start_candump(bus, bus.workdir / "commands.log", COMMANDS)
+    router_before = transmit_switches(router.proc.pid)
+    for n in range(COMMANDS):  # each once the one before is on the bus: one routed message at a time
         session.put("vehicle/can/tx", wire.encode(wire.Frame(0x123, 2, n.to_bytes(2, "little"))))
+        wait_for(lambda n=n: Path(out.name).read_text().count("\n") > n, f"command {n} on CAN")
+    router_switches = transmit_switches(router.proc.pid) - router_before
+    assert len(stop_candump(dump, out)) == COMMANDS
     wait_for(lambda: bridge.stats(session)["buses"][0]["tx_frames"] == COMMANDS, f"{COMMANDS} commands on CAN")
-    return transmit_switches(bridge.proc.pid) - before
+    return transmit_switches(bridge.proc.pid) - before, router_switches
 
 
 @pytest.mark.parametrize("router", [LOW_LATENCY_ROUTER], indirect=True, ids=["low-latency router"])
 def test_with_a_low_latency_router_zenohs_transmit_threads_stay_asleep(bus, bridge, router, session):
-    switches = forward_both_ways(bus, bridge, session)
-    # keep-alives and the stats replies' few wakeups, never one per sample (the fallback below: >= 1)
+    switches, router_switches = forward_both_ways(bus, bridge, router, session)
+    # keep-alives and the stats replies' few wakeups, never one per sample
     assert switches < FRAMES // 20, f"Zenoh's transmit threads switched {switches} times for {FRAMES} frames"
+    # the router writes the bridge's link from its routing task (the fallback below: one wakeup a command)
+    assert router_switches < COMMANDS // 10, \
+        f"the router's transmit threads switched {router_switches} times for {COMMANDS} commands"
 
 
 def test_with_a_default_router_the_link_falls_back_and_still_forwards(bus, bridge, router, session):
-    switches = forward_both_ways(bus, bridge, session)
-    assert switches >= FRAMES // 2, f"only {switches} transmit-thread switches for {FRAMES} frames"
+    switches, router_switches = forward_both_ways(bus, bridge, router, session)
+    assert router_switches >= COMMANDS // 2, \
+        f"only {router_switches} switches of the router's transmit threads for {COMMANDS} commands"
 
 
 @pytest.mark.parametrize("args,message", [
