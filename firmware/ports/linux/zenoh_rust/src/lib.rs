@@ -5,7 +5,7 @@
 //! the FFI boundary (panic = "abort" in the release profile as a backstop).
 
 use std::cell::RefCell;
-use std::collections::HashSet;
+use std::collections::HashMap;
 use std::ffi::{c_char, c_int, c_void, CStr};
 use std::ptr;
 use std::slice;
@@ -19,7 +19,7 @@ use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority, Reliability};
 use zenoh::query::Queryable;
 use zenoh::sample::{Locality, SampleKind};
-use zenoh::session::ZenohId;
+use zenoh::session::{Transport, ZenohId};
 use zenoh::{Config, Session, Wait};
 use zenoh_buffers::ZBuf;
 
@@ -29,44 +29,91 @@ const ERR_CONFIG: c_int = -2;
 /// zn_put's result for a sample put while the session had no connection (ZN_PORT_UNROUTED).
 const UNROUTED: c_int = 1;
 
-/// A session's connections (Zenoh transports) to routers and peers, from its transport events:
-/// Zenoh's put returns Ok whether or not one is open, and a connection closed and replaced
+/// A session's connections (Zenoh transports) to routers and peers, from its transport and link
+/// events: Zenoh's put returns Ok whether or not one is open, and a connection closed and replaced
 /// within milliseconds is seen by no poll of the routers.
-/// A set of peers: a transport seen at the start and in a live Put (opened as the listener was
+/// One entry per peer: a transport seen at the start and in a live Put (opened as the listener was
 /// declared) is one. A replaced transport's Delete comes before its successor's Put (zenoh 1.10.2:
 /// the old one's closed() is called before it leaves the manager's table, and until then no new
-/// transport to that peer is made). A transport the runtime refuses after its Put (a client's
-/// second router) gets no Delete: an error towards "connected" only.
+/// transport to that peer is made).
+/// A transport is told before the runtime has accepted it, and one it then refuses (a client's
+/// second router, a client dialing a client) or one closed while it was being set up gets no
+/// Delete: its manager closes it before it has a callback to call closed() on. An accepted one
+/// tells its first link right after, a refused one never (zenoh-transport unicast/manager.rs,
+/// init_new_transport_unicast: new_unicast(), whose handlers tell the Put before the runtime's
+/// checks, then set_callback, then the link). So a transport counts from its Put, as a put it may
+/// carry is never said lost, and one still without a link at two polls of the monitor in a row
+/// (zn_routers, 500 ms apart) is dropped.
 #[derive(Default)]
 struct Connections {
-    peers: Mutex<HashSet<ZenohId>>,
-    open: AtomicUsize, // peers' size, read by every put without the lock
+    peers: Mutex<HashMap<ZenohId, Seen>>,
+    open: AtomicUsize, // the entries, read by every put without the lock
     closed: AtomicU64, // since the session opened
 }
 
+/// What the events told of a peer's transport.
+#[derive(Clone, Copy, PartialEq)]
+enum Seen {
+    Told,     // its Put, no link yet
+    Unlinked, // still no link at a poll: dropped at the next one
+    Linked,   // accepted (or there at the start): open until its Delete
+}
+
 impl Connections {
-    fn event(&self, kind: SampleKind, peer: ZenohId) {
-        let mut peers = self.peers.lock().unwrap_or_else(|e| e.into_inner());
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<ZenohId, Seen>> {
+        self.peers.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn event(&self, kind: SampleKind, transport: &Transport) {
+        let mut peers = self.lock();
         if kind == SampleKind::Delete {
-            peers.remove(&peer);
+            peers.remove(transport.zid());
             self.closed.fetch_add(1, Ordering::Relaxed);
         } else {
-            peers.insert(peer);
+            // a multicast group's peers tell no link
+            peers.insert(*transport.zid(), if transport.is_multicast() { Seen::Linked } else { Seen::Told });
         }
         self.open.store(peers.len(), Ordering::Relaxed);
     }
 
-    /// The peers already connected when the listener was declared. Not the listener's history:
+    /// A link added: its transport is accepted. One of a transport no longer here (closed before
+    /// its link was told, or dropped) is not taken for a new one.
+    fn link(&self, kind: SampleKind, peer: &ZenohId) {
+        if kind == SampleKind::Put {
+            if let Some(seen) = self.lock().get_mut(peer) {
+                *seen = Seen::Linked;
+            }
+        }
+    }
+
+    /// The monitor's poll: drops the transports that told no link since the poll before.
+    fn poll(&self) {
+        let mut peers = self.lock();
+        peers.retain(|_, seen| *seen != Seen::Unlinked);
+        for seen in peers.values_mut().filter(|seen| **seen == Seen::Told) {
+            *seen = Seen::Unlinked;
+        }
+        self.open.store(peers.len(), Ordering::Relaxed);
+    }
+
+    /// The peers already connected when the listeners were declared. Not the listener's history:
     /// it lists them through each transport's links, which the low-latency transport reads with
     /// Tokio's current runtime (none on a C thread: zenoh-transport panics).
     fn seed(&self, peers: impl Iterator<Item = ZenohId>) {
-        let mut set = self.peers.lock().unwrap_or_else(|e| e.into_inner());
-        set.extend(peers);
+        let mut set = self.lock();
+        for peer in peers {
+            set.entry(peer).or_insert(Seen::Linked); // one told meanwhile waits for its link
+        }
         self.open.store(set.len(), Ordering::Relaxed);
     }
 
     fn none_open(&self) -> bool {
         self.open.load(Ordering::Relaxed) == 0
+    }
+
+    #[cfg(test)]
+    fn holds(&self, peer: &ZenohId) -> bool {
+        self.lock().contains_key(peer)
     }
 }
 
@@ -281,6 +328,30 @@ fn check_tls_files(config: &Config) -> Result<(), String> {
     Ok(())
 }
 
+/// The session with its connections, known from its transport events from now on.
+fn watched(session: Session) -> zenoh::Result<ZnSession> {
+    let connections = Arc::new(Connections::default());
+    let (seen, linked) = (connections.clone(), connections.clone());
+    // Links first: a transport whose Put is seen has its link seen too.
+    session
+        .info()
+        .link_events_listener()
+        .callback(move |event| linked.link(event.kind(), event.link().zid()))
+        .background()
+        .wait()?;
+    // Closes from the transports, not the links: one closed by its peer, or the low-latency
+    // transport's on a failure, tells no link event.
+    session
+        .info()
+        .transport_events_listener()
+        .callback(move |event| seen.event(event.kind(), event.transport()))
+        .background()
+        .wait()?;
+    let info = session.info();
+    connections.seed(info.routers_zid().wait().chain(info.peers_zid().wait()));
+    Ok(ZnSession(session, connections))
+}
+
 #[no_mangle]
 pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession) -> c_int {
     if cfg.is_null() || out.is_null() {
@@ -302,26 +373,16 @@ pub extern "C" fn zn_open(cfg: *const ZnSessionConfig, out: *mut *mut ZnSession)
     let mut backoff = OPEN_RETRY_MIN;
     loop {
         match zenoh::open(config.clone()).wait() {
-            Ok(session) => {
-                let connections = Arc::new(Connections::default());
-                let seen = connections.clone();
-                // Transports, not links: one closed by its peer, or the low-latency transport's
-                // on a failure, tells no link event.
-                let listening = session
-                    .info()
-                    .transport_events_listener()
-                    .callback(move |event| seen.event(event.kind(), *event.transport().zid()))
-                    .background()
-                    .wait();
-                if let Err(e) = listening {
+            Ok(session) => match watched(session) {
+                Ok(s) => {
+                    unsafe { *out = Box::into_raw(Box::new(s)) };
+                    return 0;
+                }
+                Err(e) => {
                     eprintln!("zenoh-node: cannot listen to the session's transport events: {e}");
                     return ERR;
                 }
-                let info = session.info();
-                connections.seed(info.routers_zid().wait().chain(info.peers_zid().wait()));
-                unsafe { *out = Box::into_raw(Box::new(ZnSession(session, connections))) };
-                return 0;
-            }
+            },
             // only a client needs its router to open; anything else is a real error
             Err(e) if unsafe { (*cfg).mode } == 0 => {
                 eprintln!("zenoh-node: router not reachable ({e}); retrying in {} ms", backoff.as_millis());
@@ -579,6 +640,7 @@ pub extern "C" fn zn_declare_queryable(
 #[no_mangle]
 pub extern "C" fn zn_routers(s: *mut ZnSession, ids: *mut c_char, cap: usize) -> c_int {
     let Some(s) = (unsafe { s.as_ref() }) else { return ERR };
+    s.1.poll();
     let mut zids: Vec<String> = s.0.info().routers_zid().wait().map(|z| z.to_string()).collect();
     zids.sort();
     copy_c_string(&zids.join(","), ids, cap);
@@ -839,6 +901,90 @@ mod tests {
             config: &[("transport/link/tx/queue/size/data", "1")],
         };
         assert_all_in_order(&puts_from_threads(load), 2000);
+    }
+
+    /// A session on loopback (no scouting) in this mode, with these endpoints on these ports and
+    /// no others (a router's default listener is on every interface).
+    fn on_loopback(mode: &str, endpoints: &[(&str, u16)], extra: &[(&str, &str)]) -> Session {
+        let mut c = Config::default();
+        c.insert_json5("mode", &format!("{mode:?}")).unwrap();
+        c.insert_json5("listen/endpoints", "[]").unwrap();
+        c.insert_json5("scouting/multicast/enabled", "false").unwrap();
+        c.insert_json5("scouting/gossip/enabled", "false").unwrap();
+        for (key, port) in endpoints {
+            c.insert_json5(key, &format!("[\"tcp/127.0.0.1:{port}\"]")).unwrap();
+        }
+        for (key, value) in extra {
+            c.insert_json5(key, value).unwrap();
+        }
+        zenoh::open(c).wait().unwrap()
+    }
+
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    }
+
+    /// Waits until `done`, failing after 10 s with `what`.
+    fn wait_for(what: &str, mut done: impl FnMut() -> bool) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while !done() {
+            assert!(std::time::Instant::now() < deadline, "{what} never came");
+            std::thread::sleep(std::time::Duration::from_millis(10)); // polls a state, bounded
+        }
+    }
+
+    /// A client takes one router: a second one that connects to it is told to the session's
+    /// transport events, then refused, and no event says it closed.
+    fn refused_then_accepted(extra: &[(&str, &str)]) {
+        let (first_port, client_port) = (free_port(), free_port());
+        let first = on_loopback("router", &[("listen/endpoints", first_port)], extra);
+        let endpoints = [("connect/endpoints", first_port), ("listen/endpoints", client_port)];
+        let client = on_loopback("client", &endpoints, extra);
+        let client = Box::into_raw(Box::new(watched(client).unwrap()));
+        let connections = unsafe { (*client).1.clone() };
+        let second = on_loopback("router", &[("connect/endpoints", client_port)], extra);
+        let second_id = second.zid();
+        wait_for("the second router's transport event", || connections.holds(&second_id));
+        second.close().wait().unwrap(); // no more attempts
+        first.close().wait().unwrap();
+        wait_for("the first router's close", || connections.closed.load(Ordering::Relaxed) >= 1);
+
+        let qos = ZnQos { priority: 5, congestion: 1, express: 0, best_effort: 0 };
+        let mut publisher = ptr::null_mut();
+        assert_eq!(zn_declare_publisher(client, c"test/unrouted".as_ptr(), &qos, &mut publisher), 0);
+        let mut ids = [0 as c_char; 256];
+        let put = || zn_put(publisher, b"frame".as_ptr(), 5, ptr::null(), 0);
+        // no router connected: from the monitor's second poll (zn_routers) on, a put goes nowhere
+        for _ in 0..2 {
+            assert_eq!(zn_routers(client, ids.as_mut_ptr(), ids.len()), 0);
+        }
+        let unrouted = put() == UNROUTED;
+        let refused_held = connections.holds(&second_id);
+
+        // a router the client connects to after its listeners were declared stays, poll after poll
+        let third = on_loopback("router", &[("listen/endpoints", first_port)], extra);
+        wait_for("the client's reconnection", || zn_routers(client, ids.as_mut_ptr(), ids.len()) == 1);
+        let mut routed = 0;
+        for _ in 0..4 {
+            std::thread::sleep(std::time::Duration::from_millis(100)); // the monitor's polls, faster
+            zn_routers(client, ids.as_mut_ptr(), ids.len());
+            routed += (put() == 0) as u32;
+        }
+        zn_undeclare_publisher(publisher);
+        zn_close(client);
+        third.close().wait().unwrap();
+        assert!(unrouted, "a put with no connection open counted routed (the refused router held: {refused_held})");
+        assert_eq!(routed, 4, "puts over a connection counted unrouted");
+    }
+
+    #[test]
+    fn a_connection_zenoh_refuses_as_it_opens_counts_no_longer_than_two_polls_an_accepted_one_stays() {
+        refused_then_accepted(&[]);
+    }
+
+    #[test]
+    fn the_same_over_the_low_latency_transport() {
+        refused_then_accepted(&[("transport/unicast/lowlatency", "true"), ("transport/unicast/qos/enabled", "false")]);
     }
 
     #[test]
