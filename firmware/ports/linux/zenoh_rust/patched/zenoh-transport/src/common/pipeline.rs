@@ -112,36 +112,36 @@ struct AtomicBackoff {
 
 // Inner structure to link the initial stage with the final stage of the pipeline
 struct StageInOut {
-    n_out_w: Notifier,
+    notifier: ConsumerNotifier,
     s_out_w: RingBufferWriter<BoxedWBatch, RBLEN>,
-    atomic_backoff: Arc<AtomicBackoff>,
 }
 
 impl StageInOut {
     #[inline]
     fn notify(&self, bytes: BatchSize) {
-        self.atomic_backoff.bytes.store(bytes, Ordering::Relaxed);
-        if !self.atomic_backoff.active.load(Ordering::Relaxed) {
-            let _ = self.n_out_w.notify();
-        }
+        self.notifier.notify(Deferred::Bytes(bytes));
     }
 
     #[inline]
     fn move_batch(&mut self, batch: BoxedWBatch) {
         self.push_batch(batch);
-        let _ = self.n_out_w.notify();
+        self.notifier.notify(Deferred::Batch);
     }
 
     #[inline]
     fn push_batch(&mut self, batch: BoxedWBatch) {
         let _ = self.s_out_w.push(batch);
-        self.atomic_backoff.bytes.store(0, Ordering::Relaxed);
+        self.notifier
+            .atomic_backoff
+            .bytes
+            .store(0, Ordering::Relaxed);
     }
 }
 
-/// What tells one priority's consumer of new bytes without the `StageIn` lock: a producer
-/// waiting there for a free batch holds it until a write refills one, so a notification that
-/// needed it could wait on the very write it was to start.
+/// What tells one priority's consumer of new bytes: `StageInOut`'s, and a copy the producer
+/// uses without the `StageIn` lock for deferred pushes (a producer waiting there for a free
+/// batch holds it until a write refills one, so a notification that needed it could wait on
+/// the very write it was to start).
 #[derive(Clone)]
 struct ConsumerNotifier {
     n_out_w: Notifier,
@@ -149,13 +149,13 @@ struct ConsumerNotifier {
 }
 
 impl ConsumerNotifier {
+    #[inline]
     fn notify(&self, deferred: Deferred) {
         match deferred {
             Deferred::Nothing => {}
             Deferred::Batch => {
                 let _ = self.n_out_w.notify();
             }
-            // as StageInOut::notify
             Deferred::Bytes(bytes) => {
                 self.atomic_backoff.bytes.store(bytes, Ordering::Relaxed);
                 if !self.atomic_backoff.active.load(Ordering::Relaxed) {
@@ -368,7 +368,7 @@ impl StageIn {
                         None => match self.s_ref.pull() {
                             Some(mut batch) => {
                                 batch.clear();
-                                self.s_out.atomic_backoff.first_write.store(
+                                self.s_out.notifier.atomic_backoff.first_write.store(
                                     LOCAL_EPOCH.elapsed().as_micros() as MicroSeconds,
                                     Ordering::Relaxed,
                                 );
@@ -541,7 +541,7 @@ impl StageIn {
                         None => match self.s_ref.pull() {
                             Some(mut batch) => {
                                 batch.clear();
-                                self.s_out.atomic_backoff.first_write.store(
+                                self.s_out.notifier.atomic_backoff.first_write.store(
                                     LOCAL_EPOCH.elapsed().as_micros() as MicroSeconds,
                                     Ordering::Relaxed,
                                 );
@@ -828,10 +828,11 @@ impl TransmissionPipeline {
                 )),
             });
 
-            notifiers.push(ConsumerNotifier {
+            let notifier = ConsumerNotifier {
                 n_out_w: n_out_w.clone(),
                 atomic_backoff: bytes.clone(),
-            });
+            };
+            notifiers.push(notifier.clone());
             stage_in.push(Mutex::new(StageIn {
                 s_ref: StageInRefill {
                     n_ref_r,
@@ -839,11 +840,7 @@ impl TransmissionPipeline {
                     batch_config: (*num, config.batch),
                     batch_allocs,
                 },
-                s_out: StageInOut {
-                    n_out_w: n_out_w.clone(),
-                    s_out_w,
-                    atomic_backoff: bytes.clone(),
-                },
+                s_out: StageInOut { notifier, s_out_w },
                 mutex: StageInMutex {
                     current: current.clone(),
                     priority: priority[prio].clone(),

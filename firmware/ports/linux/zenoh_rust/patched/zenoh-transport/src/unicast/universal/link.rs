@@ -485,15 +485,15 @@ impl DirectTx {
         if !deferred.is_pending() {
             return;
         }
-        let Some(Ok(mut side)) = self.0.clone().map(|w| w.try_lock_owned()) else {
-            pipeline.notify_deferred(deferred);
-            return;
+        let writer = self
+            .0
+            .as_ref()
+            .and_then(|w| w.clone().try_lock_owned().ok())
+            .filter(|side| side.is_some());
+        // the writer busy, or no transmit task to hand a failed write to: as the push would
+        let Some(mut side) = writer else {
+            return pipeline.notify_deferred(deferred);
         };
-        if side.is_none() {
-            drop(side);
-            pipeline.notify_deferred(deferred);
-            return;
-        }
         let _runtime = zenoh_runtime::ZRuntime::TX.enter();
         for _ in 0..DIRECT_WRITES_MAX {
             let tx = side.as_mut().expect("checked above");
