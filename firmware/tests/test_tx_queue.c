@@ -626,15 +626,23 @@ static void stall_ends(void)
 	CHECK(mock_can_stall_ends("vcan0") == 1); /* the transmitter's write of the first command */
 }
 
-static void test_stop_writes_what_a_recovered_bus_takes(void)
+/* Starts the node with its first command (0x100) in the transmitter's write, held by the bus:
+ * what is delivered next queues behind it. */
+static void start_with_a_held_write(void)
 {
 	mock_reset();
 	zn_node_config_t cfg = config(0);
 	CHECK(zn_node_init(&cfg) == ESP_OK);
 	mock_can_stall("vcan0", MOCK_HOLD);
 	uint8_t w[16];
-	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x100, 0, 1), NULL, 0) == 0);
+	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x100, 0, 0), NULL, 0) == 0);
 	CHECK(mock_can_wait_tx_held("vcan0", 1, WAIT_MS) == 1);
+}
+
+static void test_stop_writes_what_a_recovered_bus_takes(void)
+{
+	start_with_a_held_write();
+	uint8_t w[16];
 	size_t len = command(big, 3, 0x200);
 	CHECK(mock_zenoh_deliver("vehicle/can/tx", big, len, NULL, 0) == 0);
 	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x300, 0, 2), NULL, 0) == 0);
@@ -656,13 +664,8 @@ static void stall_stays(void)
 
 static void test_stop_on_a_stalled_bus_abandons(void)
 {
-	mock_reset();
-	zn_node_config_t cfg = config(0);
-	CHECK(zn_node_init(&cfg) == ESP_OK);
-	mock_can_stall("vcan0", MOCK_HOLD);
+	start_with_a_held_write();
 	uint8_t w[16];
-	CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x100, 0, 0), NULL, 0) == 0);
-	CHECK(mock_can_wait_tx_held("vcan0", 1, WAIT_MS) == 1);
 	for (uint8_t i = 1; i <= 20; i++) /* one 100 ms timeout each, were they tried */
 		CHECK(mock_zenoh_deliver("vehicle/can/tx", w, one_frame(w, 0x200u + i, 0, i), NULL, 0) == 0);
 	CHECK(stats_soon_has("\"tx_samples\": 21"));

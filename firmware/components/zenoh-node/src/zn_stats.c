@@ -112,6 +112,7 @@ void zn_stats_monitor_thread(void *arg)
 	char ids[512];
 	int announced_wait = 0;
 	while (!zn_stop_wait(MONITOR_PERIOD_MS)) {
+		zn_poll_connections(zn_node.session);
 		int routers = zn_routers(zn_node.session, ids, sizeof(ids));
 		int connected = routers > 0 || zn_node.cfg.mode != ZN_MODE_CLIENT; /* peers need no router */
 		int was_connected = READ(zn_node.connected);
