@@ -15,7 +15,9 @@ vehicle computer with more buses would. Systems: zenoh-node in immediate mode
 Python reference, and the floor (bench/tools/floor_bridge.c, up to 8 buses):
 the least an immediate bridge does per frame - wake, read, one TCP write -
 without Zenoh, so the immediate target's ratio can be held against what no
-bridge of that design goes below.
+bridge of that design goes below; one thread polls all its buses. The floor
+with a thread per bus (floor-per-bus) reads them as zenoh-node does: where
+frames arrive together on several buses, each costs its own wakeup there.
 
 Zenoh -> CAN, the same loads the other way: zn-flood publishes stamped
 commands on every bus's tx key (9000 frames/s per bus, all keys interleaved,
@@ -84,13 +86,16 @@ LOW_LATENCY = "-low-latency"  # the bridge and its router on Zenoh's low-latency
 REFERENCE = "python-ref"
 # bench/tools/floor_bridge.c: the least an immediate CAN -> Zenoh bridge does per frame (wake, read,
 # one TCP write), no Zenoh; its CPU is the floor the immediate target is held against
-FLOOR = "floor"
-FLOOR_MAX_BUSES = 8  # one thread polls them all: the floor of the loads the bridges carry losslessly
+FLOOR = "floor"  # one thread polls all the buses
+FLOOR_PER_BUS = "floor-per-bus"  # a thread per bus blocked in its own read, as zenoh-node reads its buses
+FLOORS = (FLOOR, FLOOR_PER_BUS)
+FLOOR_MAX_BUSES = 8  # the floor of the loads the bridges carry losslessly
 BRIDGES = ("zenoh-node", f"zenoh-node{BATCH}", f"zenoh-node{LOW_LATENCY}", f"zenoh-node{LOW_LATENCY}{BATCH}")
-SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}", FLOOR)
+SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}", *FLOORS)
+FORWARDERS = tuple(s for s in SYSTEMS if s not in FLOORS)  # the floors forward to no one
 # CAN -> Zenoh the reference publishes one sample per frame whatever the bridge's mode; Zenoh -> CAN
 # "-batch" is the commands' shape, given to both
-DIRECTION_SYSTEMS = {"can-to-zenoh": (*BRIDGES, REFERENCE, FLOOR), "zenoh-to-can": SYSTEMS[:-1]}
+DIRECTION_SYSTEMS = {"can-to-zenoh": (*BRIDGES, REFERENCE, *FLOORS), "zenoh-to-can": FORWARDERS}
 DIRECTIONS = tuple(DIRECTION_SYSTEMS)
 SWITCH_TARGET = 0.05  # context switches per frame in batching mode (issue #24)
 # runs per load where a ratio is judged (both forward losslessly): a load's CPU and switches per frame are
@@ -129,15 +134,17 @@ class Bench(Rig):
         # Zenoh's thread pools of zenoh-node alone (--zenoh-runtime), never the router's, the load's or the reference's
         self.bridge_env = {**self.env, **({"ZENOH_RUNTIME": args.zenoh_runtime} if args.zenoh_runtime else {})}
 
-    def run_floor(self, buses: int) -> dict:
-        """floor-bridge on the buses under the CAN -> Zenoh load (no router: it writes to a TCP sink of
-        its own); it reports its own CPU time and switches (getrusage), from ready to done."""
+    def run_floor(self, system: str, buses: int) -> dict:
+        """floor-bridge (system: one of FLOORS) on the buses under the CAN -> Zenoh load (no router: it
+        writes to a TCP sink of its own); it reports its own CPU time and switches (getrusage), from
+        ready to done."""
         names = [f"vcan{i}" for i in range(buses)]
         self.hub.start(names)
         per_bus = int(FRAMES_PER_S * LOAD_S)
         offered = per_bus * buses
-        floor = self.procs.spawn([str(Path(self.args.can_load).with_name("floor-bridge")), ",".join(names),
-                                  offered, 1000], env=self.env, stdout=subprocess.PIPE, text=True)
+        structure = ["--thread-per-bus"] if system == FLOOR_PER_BUS else []
+        floor = self.procs.spawn([str(Path(self.args.can_load).with_name("floor-bridge")), *structure,
+                                  ",".join(names), offered, 1000], env=self.env, stdout=subprocess.PIPE, text=True)
         if floor.stdout.readline().strip() != "ready":
             sys.exit(f"floor-bridge with {buses} buses did not come up")
         gen = self.procs.spawn([self.args.can_load, "send", ",".join(names), "100", FRAMES_PER_S, per_bus],
@@ -146,7 +153,7 @@ class Bench(Rig):
         done = json.loads(floor.communicate(timeout=SETTLE_S)[0])  # after every frame, or 1 s after the last
         self.procs.close()
         received = done["frames"]
-        return {"direction": "can-to-zenoh", "system": FLOOR, "buses": buses, "offered": offered,
+        return {"direction": "can-to-zenoh", "system": system, "buses": buses, "offered": offered,
                 "delivered_fps": offered_fps if received == offered else None, "offered_fps": offered_fps,
                 "instances": 1, "received": received, "lossless": received == offered,
                 "cpu_us_per_frame": round(done["cpu_ns"] / 1e3 / max(received, 1), 2), "cpu_from_ticks": False,
@@ -154,8 +161,8 @@ class Bench(Rig):
                 "peak_rss_mib": 0.0}
 
     def run_one(self, system: str, buses: int, direction: str = "can-to-zenoh") -> dict:
-        if system == FLOOR:
-            return self.run_floor(buses)
+        if system in FLOORS:
+            return self.run_floor(system, buses)
         names = [f"vcan{i}" for i in range(buses)]
         self.hub.start(names)
         router_args, bridge_args = transport_args(LOW_LATENCY in system)
@@ -335,6 +342,9 @@ def table(results: list[dict]) -> str:
         if FLOOR in systems:
             rows.append(f"| ... relative to the {FLOOR} (wake, read, one TCP write per frame; no Zenoh) | "
                         + " | ".join(cpu_ratio(by, s, FLOOR) for s in systems) + " | |")
+        if FLOOR_PER_BUS in systems:
+            rows.append(f"| ... relative to the {FLOOR_PER_BUS} (the same, a thread per bus as zenoh-node) | "
+                        + " | ".join(cpu_ratio(by, s, FLOOR_PER_BUS) for s in systems) + " | |")
         rows.append("| context switches per frame, highest over the loads both forward losslessly (each the median "
                     "of its runs) | "
                     + " | ".join(most_switches(by, s, reference_of(s, direction)) for s in systems)
@@ -387,7 +397,7 @@ def judged_runs(args, results: list[dict], direction: str, runs: int) -> None:
     first = {(r["system"], r["buses"]): r for r in results if r["direction"] == direction}
     loads = set()
     for system, _ in first:
-        for baseline in {reference_of(system, direction), FLOOR} - {system}:
+        for baseline in {reference_of(system, direction), *FLOORS} - {system}:
             loads |= {(s, n) for n in both_lossless(first, system, baseline) for s in (system, baseline)}
     for key in loads:
         r = first[key]
@@ -438,7 +448,7 @@ def plot(results: list[dict], path: Path, direction: str) -> None:
     import matplotlib.pyplot as plt
     runs = [r for r in results if r.get("direction", DIRECTIONS[0]) == direction]
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
-    for s in SYSTEMS[:-1]:  # not the floor: it forwards to no one
+    for s in FORWARDERS:
         pts = sorted((r for r in runs if r["system"] == s), key=lambda r: r["buses"])
         if pts:
             ax.plot([r["offered_fps"] or 0 for r in pts], [r["delivered_fps"] or 0 for r in pts], marker="o",
@@ -478,7 +488,7 @@ def main() -> int:
         lossy: set[str] = set()  # systems past their first load with loss: no higher load for them
         for buses in [int(b) for b in args.buses.split(",")]:
             for system in DIRECTION_SYSTEMS[direction]:
-                if system in lossy or system not in systems or (system == FLOOR and buses > FLOOR_MAX_BUSES):
+                if system in lossy or system not in systems or (system in FLOORS and buses > FLOOR_MAX_BUSES):
                     continue
                 r = run_once(args, system, buses, direction)
                 print(json.dumps(r), flush=True)

@@ -8,17 +8,26 @@
  * peer is a child process that reads and discards (its CPU is not the
  * floor's, as the router's is not the bridge's).
  *
- * Usage: floor-bridge <iface[,iface...]> <count> <idle_ms>
+ * Two structures: one thread over all the buses (poll, then read each that is
+ * ready: frames that arrive together on several buses cost one wakeup), or
+ * with --thread-per-bus a thread per bus blocked in its own read, as
+ * zenoh-node reads its buses (each bus's frame its own wakeup), all writing
+ * to the one TCP connection.
+ *
+ * Usage: floor-bridge [--thread-per-bus] <iface[,iface...]> <count> <idle_ms>
  * Prints "ready" once its sockets are bound and the peer connected; exits
  * after count frames or idle_ms without one, printing {"frames": n,
  * "cpu_ns": ..., "switches": ...}: its CPU time (the kernel's run time of the
- * process, getrusage) and context switches from "ready" to its end.
+ * process, all its threads, getrusage) and context switches from "ready" to
+ * its end.
  * Loopback only. */
 #define _GNU_SOURCE
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <pthread.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -63,6 +72,96 @@ static int connect_sink(pid_t *child)
 	return fd;
 }
 
+/* Reads what one socket has queued (waiting for the first frame if wait) and writes each frame
+ * to the link on its own: the frames read, 0 when the wait ended without one, -1 on a failed write. */
+static int forward_burst(int fd, int wait, int link)
+{
+	struct can_frame frames[BURST];
+	struct iovec iov[BURST];
+	struct mmsghdr mm[BURST];
+	for (int i = 0; i < BURST; i++) {
+		iov[i] = (struct iovec){ .iov_base = &frames[i], .iov_len = sizeof(frames[i]) };
+		mm[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iov[i], .msg_iovlen = 1 } };
+	}
+	int r = recvmmsg(fd, mm, BURST, wait ? MSG_WAITFORONE : MSG_DONTWAIT, NULL);
+	for (int i = 0; i < r; i++)
+		if (send(link, &frames[i], sizeof(frames[i]), 0) != sizeof(frames[i])) {
+			perror("floor-bridge: send");
+			return -1;
+		}
+	return r > 0 ? r : 0;
+}
+
+/* A bus's thread (--thread-per-bus): blocks in its socket's read (SO_RCVTIMEO: idle_ms) until
+ * all the buses together forwarded count frames, or its bus fell idle. */
+struct bus_reader {
+	int fd, link;
+	long count;
+	atomic_long *got;
+	int failed;
+};
+
+static void *read_bus(void *arg)
+{
+	struct bus_reader *b = arg;
+	while (atomic_load(b->got) < b->count) {
+		int r = forward_burst(b->fd, 1, b->link);
+		if (r <= 0) {
+			b->failed = r < 0;
+			break;
+		}
+		atomic_fetch_add(b->got, r);
+	}
+	return NULL;
+}
+
+static long thread_per_bus(const int *fds, int n, int link, long count, int *failed)
+{
+	pthread_t threads[MAX_IFACES];
+	struct bus_reader readers[MAX_IFACES];
+	atomic_long got = 0;
+	for (int k = 0; k < n; k++) {
+		readers[k] = (struct bus_reader){ .fd = fds[k], .link = link, .count = count, .got = &got };
+		if (pthread_create(&threads[k], NULL, read_bus, &readers[k]) != 0) {
+			perror("floor-bridge: thread");
+			exit(1);
+		}
+	}
+	for (int k = 0; k < n; k++) {
+		pthread_join(threads[k], NULL);
+		*failed |= readers[k].failed;
+	}
+	return atomic_load(&got);
+}
+
+/* One thread: blocks in the read of a single bus; polls several, then reads each that is ready. */
+static long one_thread(const int *fds, int n, int link, long count, long idle_ms, int *failed)
+{
+	struct pollfd pfds[MAX_IFACES];
+	for (int i = 0; i < n; i++)
+		pfds[i] = (struct pollfd){ .fd = fds[i], .events = POLLIN };
+	long got = 0;
+	while (got < count) {
+		if (n > 1 && poll(pfds, (nfds_t)n, (int)idle_ms) < 1)
+			break;
+		int read_any = 0;
+		for (int k = 0; k < n; k++) {
+			if (n > 1 && !(pfds[k].revents & POLLIN))
+				continue;
+			int r = forward_burst(fds[k], n == 1, link);
+			if (r < 0) {
+				*failed = 1;
+				return got;
+			}
+			got += r;
+			read_any |= r > 0;
+		}
+		if (n == 1 && !read_any)
+			break; /* SO_RCVTIMEO: idle */
+	}
+	return got;
+}
+
 static struct rusage usage(void)
 {
 	struct rusage ru;
@@ -78,8 +177,11 @@ static int64_t cpu_ns(const struct rusage *ru)
 
 int main(int argc, char **argv)
 {
+	int per_bus = argc > 1 && strcmp(argv[1], "--thread-per-bus") == 0;
+	argc -= per_bus;
+	argv += per_bus;
 	if (argc != 4) {
-		fprintf(stderr, "Usage: floor-bridge <iface[,iface...]> <count> <idle_ms>\n");
+		fprintf(stderr, "Usage: floor-bridge [--thread-per-bus] <iface[,iface...]> <count> <idle_ms>\n");
 		return 2;
 	}
 	/* an idle bound of 0 (or none) would wait for ever on a bus that stopped: refused, as can-load does */
@@ -99,48 +201,20 @@ int main(int argc, char **argv)
 	}
 	pid_t child;
 	int link = connect_sink(&child);
-	/* one socket: block in recvmmsg itself (SO_RCVTIMEO bounds the wait); several: poll them */
+	/* a socket read blocking (one bus, or a thread per bus): SO_RCVTIMEO bounds its wait */
 	struct timeval idle = { .tv_sec = idle_ms / 1000, .tv_usec = (idle_ms % 1000) * 1000 };
-	setsockopt(fds[0], SOL_SOCKET, SO_RCVTIMEO, &idle, sizeof(idle));
-	struct pollfd pfds[MAX_IFACES];
-	for (int i = 0; i < n; i++)
-		pfds[i] = (struct pollfd){ .fd = fds[i], .events = POLLIN };
+	for (int k = 0; k < n; k++)
+		setsockopt(fds[k], SOL_SOCKET, SO_RCVTIMEO, &idle, sizeof(idle));
 	printf("ready\n");
 	fflush(stdout);
 	struct rusage start = usage();
-
-	struct can_frame frames[BURST];
-	struct iovec iov[BURST];
-	struct mmsghdr mm[BURST];
-	long got = 0;
-	while (got < count) {
-		if (n > 1 && poll(pfds, (nfds_t)n, (int)idle_ms) < 1)
-			break;
-		int read_any = 0;
-		for (int k = 0; k < n; k++) {
-			if (n > 1 && !(pfds[k].revents & POLLIN))
-				continue;
-			for (int i = 0; i < BURST; i++) {
-				iov[i] = (struct iovec){ .iov_base = &frames[i], .iov_len = sizeof(frames[i]) };
-				mm[i] = (struct mmsghdr){ .msg_hdr = { .msg_iov = &iov[i], .msg_iovlen = 1 } };
-			}
-			int r = recvmmsg(fds[k], mm, BURST, n > 1 ? MSG_DONTWAIT : MSG_WAITFORONE, NULL);
-			for (int i = 0; i < r; i++)
-				if (send(link, &frames[i], sizeof(frames[i]), 0) != sizeof(frames[i])) {
-					perror("floor-bridge: send");
-					return 1;
-				}
-			if (r > 0) {
-				got += r;
-				read_any = 1;
-			}
-		}
-		if (n == 1 && !read_any)
-			break; /* SO_RCVTIMEO: idle */
-	}
+	int failed = 0;
+	long got = per_bus ? thread_per_bus(fds, n, link, count, &failed) : one_thread(fds, n, link, count, idle_ms, &failed);
 	struct rusage last = usage(); /* an idle wait that ended the run sleeps: no CPU but its wakeup */
 	close(link);
 	waitpid(child, NULL, 0);
+	if (failed)
+		return 1;
 	printf("{\"frames\": %ld, \"cpu_ns\": %lld, \"switches\": %ld}\n", got,
 	       (long long)(cpu_ns(&last) - cpu_ns(&start)),
 	       (last.ru_nvcsw + last.ru_nivcsw) - (start.ru_nvcsw + start.ru_nivcsw));

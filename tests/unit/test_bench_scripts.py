@@ -196,6 +196,23 @@ def test_bridge_table_holds_each_system_against_the_floor_too():
     assert floor_row.split(" | ")[1:4] == ["1.25", "2.50", "1.00"]  # only the 1-bus load: the floor lost at 2
 
 
+def test_bridge_table_holds_each_system_against_the_floor_of_its_structure_too():
+    """The floor with a thread per bus (zenoh-node's structure) gets its own column and row, apart
+    from the one-thread floor's: what a bridge costs over the least a bridge reading as it does costs."""
+    ref, node, floor, per_bus = "python-ref", "zenoh-node", bench_bridge.FLOOR, bench_bridge.FLOOR_PER_BUS
+    results = [result(ref, 1, True, 40), result(node, 1, True, 18), result(floor, 1, True, 18),
+               result(per_bus, 1, True, 18), result(ref, 2, True, 30), result(node, 2, True, 17),
+               result(floor, 2, True, 8.5), result(per_bus, 2, True, 17)]
+    table = bench_bridge.table(results)
+    header = next(line for line in table.splitlines() if line.startswith("| can-to-zenoh |") and "target" in line)
+    assert header == "| can-to-zenoh | zenoh-node | python-ref | floor | floor-per-bus | target |"
+    floor_row = next(line for line in table.splitlines() if line.startswith("| ... relative to the floor (wake"))
+    assert floor_row.split(" | ")[1] == "1.50"  # median of 18 / 18 and 17 / 8.5
+    per_bus_row = next(line for line in table.splitlines() if line.startswith("| ... relative to the floor-per-bus"))
+    assert per_bus_row.split(" | ")[1:5] == ["1.00", "1.99", "0.75", "1.00"]
+    assert "floor-per-bus" not in bench_bridge.DIRECTION_SYSTEMS["zenoh-to-can"]
+
+
 def test_bridge_table_judges_switches_at_the_loads_both_forward_losslessly():
     ref, batch = "python-ref", bench_bridge.SYSTEMS[1]
     results = [result(ref, 1, True, 40), result(batch, 1, True, 3, switches=0.04),
