@@ -89,7 +89,7 @@ REFERENCE = "python-ref"
 FLOOR = "floor"  # one thread polls all the buses
 FLOOR_PER_BUS = "floor-per-bus"  # a thread per bus blocked in its own read, as zenoh-node reads its buses
 FLOORS = (FLOOR, FLOOR_PER_BUS)
-FLOOR_MAX_BUSES = 8  # the floor of the loads the bridges carry losslessly
+FLOOR_MAX_BUSES = 8  # the loads where the reference, and so a judged ratio, is lossless are far below
 BRIDGES = ("zenoh-node", f"zenoh-node{BATCH}", f"zenoh-node{LOW_LATENCY}", f"zenoh-node{LOW_LATENCY}{BATCH}")
 SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}", *FLOORS)
 FORWARDERS = tuple(s for s in SYSTEMS if s not in FLOORS)  # the floors forward to no one
@@ -146,7 +146,7 @@ class Bench(Rig):
         floor = self.procs.spawn([str(Path(self.args.can_load).with_name("floor-bridge")), *structure,
                                   ",".join(names), offered, 1000], env=self.env, stdout=subprocess.PIPE, text=True)
         if floor.stdout.readline().strip() != "ready":
-            sys.exit(f"floor-bridge with {buses} buses did not come up")
+            sys.exit(f"{system} (floor-bridge) with {buses} buses did not come up")
         gen = self.procs.spawn([self.args.can_load, "send", ",".join(names), "100", FRAMES_PER_S, per_bus],
                                env=self.env, stdout=subprocess.PIPE, text=True)
         offered_fps = round(offered / json.loads(gen.communicate(timeout=LOAD_S * 10 + SETTLE_S)[0])["seconds"])

@@ -14,14 +14,15 @@
  * zenoh-node reads its buses (each bus's frame its own wakeup), all writing
  * to the one TCP connection.
  *
- * Usage: floor-bridge [--thread-per-bus] <iface[,iface...]> <count> <idle_ms>
+ * Usage: floor-bridge [-t|--thread-per-bus] <iface[,iface...]> <count> <idle_ms>
  * Prints "ready" once its sockets are bound and the peer connected; exits
  * after count frames or idle_ms without one, printing {"frames": n,
  * "cpu_ns": ..., "switches": ...}: its CPU time (the kernel's run time of the
  * process, all its threads, getrusage) and context switches from "ready" to
- * its end.
+ * its last frame (or the idle wait that ended the run).
  * Loopback only. */
 #define _GNU_SOURCE
+#include <getopt.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
@@ -36,6 +37,7 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "can_open.h"
@@ -72,6 +74,19 @@ static int connect_sink(pid_t *child)
 	return fd;
 }
 
+static struct rusage usage(void)
+{
+	struct rusage ru;
+	getrusage(RUSAGE_SELF, &ru);
+	return ru;
+}
+
+static int64_t cpu_ns(const struct rusage *ru)
+{
+	return ((int64_t)ru->ru_utime.tv_sec + ru->ru_stime.tv_sec) * 1000000000 +
+	       ((int64_t)ru->ru_utime.tv_usec + ru->ru_stime.tv_usec) * 1000;
+}
+
 /* Reads what one socket has queued (waiting for the first frame if wait) and writes each frame
  * to the link on its own: the frames read, 0 when the wait ended without one, -1 on a failed write. */
 static int forward_burst(int fd, int wait, int link)
@@ -85,56 +100,99 @@ static int forward_burst(int fd, int wait, int link)
 	}
 	int r = recvmmsg(fd, mm, BURST, wait ? MSG_WAITFORONE : MSG_DONTWAIT, NULL);
 	for (int i = 0; i < r; i++)
-		if (send(link, &frames[i], sizeof(frames[i]), 0) != sizeof(frames[i])) {
+		if (send(link, &frames[i], sizeof(frames[i]), MSG_NOSIGNAL) != sizeof(frames[i])) {
 			perror("floor-bridge: send");
 			return -1;
 		}
 	return r > 0 ? r : 0;
 }
 
-/* A bus's thread (--thread-per-bus): blocks in its socket's read (SO_RCVTIMEO: idle_ms) until
- * all the buses together forwarded count frames, or its bus fell idle. */
-struct bus_reader {
-	int fd, link;
-	long count;
-	atomic_long *got;
-	int failed;
+/* --thread-per-bus: the readers share what they forwarded; the main thread sleeps until all of
+ * it is in (or every reader ended: a bus idle for idle_ms) and takes the CPU figure then. */
+struct shared {
+	pthread_mutex_t lock;
+	pthread_cond_t changed;
+	long got, count;
+	int live, failed;
 };
 
+struct bus_reader {
+	int fd, link;
+	struct shared *sh;
+};
+
+/* A bus's thread: blocks in its socket's read (SO_RCVTIMEO: idle_ms) as zenoh-node's reader
+ * does, until the buses together forwarded count frames, its bus fell idle, or SIGUSR1 ends
+ * its read (EINTR) once the count is in. */
 static void *read_bus(void *arg)
 {
 	struct bus_reader *b = arg;
-	while (atomic_load(b->got) < b->count) {
+	struct shared *sh = b->sh;
+	int ended = 0;
+	while (!ended) {
 		int r = forward_burst(b->fd, 1, b->link);
-		if (r <= 0) {
-			b->failed = r < 0;
-			break;
-		}
-		atomic_fetch_add(b->got, r);
+		pthread_mutex_lock(&sh->lock);
+		sh->got += r > 0 ? r : 0;
+		sh->failed |= r < 0;
+		ended = r <= 0 || sh->got >= sh->count;
+		if (ended)
+			sh->live--;
+		if (ended || sh->got >= sh->count)
+			pthread_cond_signal(&sh->changed);
+		pthread_mutex_unlock(&sh->lock);
 	}
 	return NULL;
 }
 
-static long thread_per_bus(const int *fds, int n, int link, long count, int *failed)
+static void interrupt_read(int sig)
 {
+	(void)sig; /* installed without SA_RESTART: a blocked recvmmsg returns EINTR */
+}
+
+/* Returns the frames forwarded, *at the CPU figure taken as the last came in (or the last reader
+ * ended); the readers still blocked are then interrupted, not waited idle_ms for. */
+static long thread_per_bus(const int *fds, int n, int link, long count, int *failed, struct rusage *at)
+{
+	struct sigaction sa = { .sa_handler = interrupt_read };
+	sigemptyset(&sa.sa_mask);
+	sigaction(SIGUSR1, &sa, NULL);
+	struct shared sh = { .lock = PTHREAD_MUTEX_INITIALIZER, .changed = PTHREAD_COND_INITIALIZER,
+			     .count = count, .live = n };
 	pthread_t threads[MAX_IFACES];
 	struct bus_reader readers[MAX_IFACES];
-	atomic_long got = 0;
 	for (int k = 0; k < n; k++) {
-		readers[k] = (struct bus_reader){ .fd = fds[k], .link = link, .count = count, .got = &got };
+		readers[k] = (struct bus_reader){ .fd = fds[k], .link = link, .sh = &sh };
 		if (pthread_create(&threads[k], NULL, read_bus, &readers[k]) != 0) {
 			perror("floor-bridge: thread");
 			exit(1);
 		}
 	}
-	for (int k = 0; k < n; k++) {
-		pthread_join(threads[k], NULL);
-		*failed |= readers[k].failed;
+	pthread_mutex_lock(&sh.lock);
+	while (sh.got < count && sh.live > 0)
+		pthread_cond_wait(&sh.changed, &sh.lock);
+	pthread_mutex_unlock(&sh.lock);
+	*at = usage();
+	/* a reader may be just about to block when the signal comes: signal until it has ended */
+	for (;;) {
+		pthread_mutex_lock(&sh.lock);
+		int live = sh.live;
+		pthread_mutex_unlock(&sh.lock);
+		if (!live)
+			break;
+		for (int k = 0; k < n; k++)
+			pthread_kill(threads[k], SIGUSR1); /* ended threads are not yet joined: still valid ids */
+		struct timespec pause = { .tv_nsec = 1000000 };
+		nanosleep(&pause, NULL);
 	}
-	return atomic_load(&got);
+	for (int k = 0; k < n; k++)
+		pthread_join(threads[k], NULL);
+	*failed = sh.failed;
+	return sh.got;
 }
 
-/* One thread: blocks in the read of a single bus; polls several, then reads each that is ready. */
+/* One thread over all the buses: frames that arrive together on several buses cost one wakeup
+ * (the poll), where zenoh-node's thread per bus wakes for each. A single bus needs no poll: the
+ * read itself waits. */
 static long one_thread(const int *fds, int n, int link, long count, long idle_ms, int *failed)
 {
 	struct pollfd pfds[MAX_IFACES];
@@ -162,37 +220,33 @@ static long one_thread(const int *fds, int n, int link, long count, long idle_ms
 	return got;
 }
 
-static struct rusage usage(void)
+static int usage_error(void)
 {
-	struct rusage ru;
-	getrusage(RUSAGE_SELF, &ru);
-	return ru;
-}
-
-static int64_t cpu_ns(const struct rusage *ru)
-{
-	return ((int64_t)ru->ru_utime.tv_sec + ru->ru_stime.tv_sec) * 1000000000 +
-	       ((int64_t)ru->ru_utime.tv_usec + ru->ru_stime.tv_usec) * 1000;
+	fprintf(stderr, "Usage: floor-bridge [-t|--thread-per-bus] <iface[,iface...]> <count> <idle_ms>\n");
+	return 2;
 }
 
 int main(int argc, char **argv)
 {
-	int per_bus = argc > 1 && strcmp(argv[1], "--thread-per-bus") == 0;
-	argc -= per_bus;
-	argv += per_bus;
-	if (argc != 4) {
-		fprintf(stderr, "Usage: floor-bridge [--thread-per-bus] <iface[,iface...]> <count> <idle_ms>\n");
-		return 2;
+	static const struct option options[] = { { "thread-per-bus", no_argument, NULL, 't' }, { 0 } };
+	int per_bus = 0;
+	for (int c; (c = getopt_long(argc, argv, "t", options, NULL)) != -1;) {
+		if (c != 't')
+			return usage_error();
+		per_bus = 1;
 	}
+	if (argc - optind != 3)
+		return usage_error();
+	char *ifaces = argv[optind], *count_arg = argv[optind + 1], *idle_arg = argv[optind + 2];
 	/* an idle bound of 0 (or none) would wait for ever on a bus that stopped: refused, as can-load does */
 	char *end_count, *end_idle;
-	long count = strtol(argv[2], &end_count, 10), idle_ms = strtol(argv[3], &end_idle, 10);
+	long count = strtol(count_arg, &end_count, 10), idle_ms = strtol(idle_arg, &end_idle, 10);
 	if (*end_count || count < 1 || *end_idle || idle_ms < 1 || idle_ms > 600000) {
-		fprintf(stderr, "floor-bridge: count must be >= 1 and idle_ms 1-600000 (got %s, %s)\n", argv[2], argv[3]);
+		fprintf(stderr, "floor-bridge: count must be >= 1 and idle_ms 1-600000 (got %s, %s)\n", count_arg, idle_arg);
 		return 2;
 	}
 	int fds[MAX_IFACES], n = 0;
-	for (char *save = NULL, *name = strtok_r(argv[1], ",", &save); name; name = strtok_r(NULL, ",", &save)) {
+	for (char *save = NULL, *name = strtok_r(ifaces, ",", &save); name; name = strtok_r(NULL, ",", &save)) {
 		if (n == MAX_IFACES) {
 			fprintf(stderr, "floor-bridge: at most %d interfaces\n", MAX_IFACES);
 			return 2;
@@ -207,10 +261,15 @@ int main(int argc, char **argv)
 		setsockopt(fds[k], SOL_SOCKET, SO_RCVTIMEO, &idle, sizeof(idle));
 	printf("ready\n");
 	fflush(stdout);
-	struct rusage start = usage();
+	struct rusage start = usage(), last;
 	int failed = 0;
-	long got = per_bus ? thread_per_bus(fds, n, link, count, &failed) : one_thread(fds, n, link, count, idle_ms, &failed);
-	struct rusage last = usage(); /* an idle wait that ended the run sleeps: no CPU but its wakeup */
+	long got;
+	if (per_bus) {
+		got = thread_per_bus(fds, n, link, count, &failed, &last);
+	} else {
+		got = one_thread(fds, n, link, count, idle_ms, &failed);
+		last = usage(); /* an idle wait that ended the run sleeps: no CPU but its wakeup */
+	}
 	close(link);
 	waitpid(child, NULL, 0);
 	if (failed)

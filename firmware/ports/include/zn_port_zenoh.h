@@ -62,7 +62,8 @@ int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, 
 /* 0: handed to Zenoh. ZN_PORT_UNROUTED: handed to Zenoh while the session had
  * no connection to a router or peer at all, so it went nowhere (Zenoh's put
  * returns Ok; a connection that failed an instant ago may still count as open,
- * and one refused as it opened does until the second zn_poll_connections after it). */
+ * and one refused as it opened does until the second zn_poll_connections
+ * after it). */
 int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out);
@@ -71,9 +72,10 @@ int zn_declare_queryable(zn_session_t *s, const char *key, zn_query_cb cb, void 
  * writes their Zenoh ids, sorted and comma separated, into ids. A restarted
  * router has a new id, so a restart faster than any poll is still seen. */
 int zn_routers(zn_session_t *s, char *ids, size_t cap);
-/* Call it periodically (the monitor does, every 500 ms): each call drops from
- * the connections zn_put counts one Zenoh announced before the previous call
- * and since neither accepted nor closed (it refused it as it opened). */
+/* Drops from the connections zn_put counts one Zenoh announced before the
+ * previous call and since neither accepted nor closed (it refused it as it
+ * opened): Zenoh tells no event for it. Call it at the open and periodically
+ * (the node: at start, then the monitor every 500 ms). */
 void zn_poll_connections(zn_session_t *s);
 /* Connections (Zenoh transports) of this session to a router or peer that
  * closed since it opened (the router's end, a failed write, a lost lease):

@@ -156,7 +156,9 @@ static esp_err_t start(const zn_node_config_t *cfg)
 		zn_log("E", "cannot open the Zenoh session");
 		return ESP_FAIL;
 	}
-	/* the routers we start with: a replacement seen by the first poll is a reconnect */
+	/* the routers we start with: a replacement seen by the first poll is a reconnect; and the
+	 * first of the connection polls, so one refused during the open is dropped at the monitor's first */
+	zn_poll_connections(zn_node.session);
 	int routers = zn_routers(zn_node.session, zn_node.router_ids, sizeof(zn_node.router_ids));
 	zn_node.connected = zn_node.ever_connected = routers > 0 || cfg->mode != ZN_MODE_CLIENT;
 	if (zn_node.ever_connected)
