@@ -88,7 +88,10 @@ REFERENCE = "python-ref"
 # one TCP write), no Zenoh; its CPU is the floor the immediate target is held against
 FLOOR = "floor"  # one thread polls all the buses
 FLOOR_PER_BUS = "floor-per-bus"  # a thread per bus blocked in its own read, as zenoh-node reads its buses
-FLOORS = (FLOOR, FLOOR_PER_BUS)
+# each floor and what its row of the table says it is
+FLOOR_ROWS = {FLOOR: "wake, read, one TCP write per frame; no Zenoh",
+              FLOOR_PER_BUS: "the same, a thread per bus as zenoh-node"}
+FLOORS = tuple(FLOOR_ROWS)
 FLOOR_MAX_BUSES = 8  # the loads where the reference, and so a judged ratio, is lossless are far below
 BRIDGES = ("zenoh-node", f"zenoh-node{BATCH}", f"zenoh-node{LOW_LATENCY}", f"zenoh-node{LOW_LATENCY}{BATCH}")
 SYSTEMS = (*BRIDGES, REFERENCE, f"{REFERENCE}{BATCH}", *FLOORS)
@@ -339,12 +342,10 @@ def table(results: list[dict]) -> str:
                     f"a load's CPU: the median of its {JUDGED_RUNS} runs) | "
                     + " | ".join(cpu_ratio(by, s, reference_of(s, direction)) for s in systems)
                     + " | <= 0.1 batching, <= 0.33 immediate |")
-        if FLOOR in systems:
-            rows.append(f"| ... relative to the {FLOOR} (wake, read, one TCP write per frame; no Zenoh) | "
-                        + " | ".join(cpu_ratio(by, s, FLOOR) for s in systems) + " | |")
-        if FLOOR_PER_BUS in systems:
-            rows.append(f"| ... relative to the {FLOOR_PER_BUS} (the same, a thread per bus as zenoh-node) | "
-                        + " | ".join(cpu_ratio(by, s, FLOOR_PER_BUS) for s in systems) + " | |")
+        for floor, what in FLOOR_ROWS.items():
+            if floor in systems:
+                rows.append(f"| ... relative to the {floor} ({what}) | "
+                            + " | ".join(cpu_ratio(by, s, floor) for s in systems) + " | |")
         rows.append("| context switches per frame, highest over the loads both forward losslessly (each the median "
                     "of its runs) | "
                     + " | ".join(most_switches(by, s, reference_of(s, direction)) for s in systems)

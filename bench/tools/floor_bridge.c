@@ -28,7 +28,6 @@
 #include <poll.h>
 #include <pthread.h>
 #include <signal.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -37,7 +36,6 @@
 #include <sys/socket.h>
 #include <sys/time.h>
 #include <sys/wait.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "can_open.h"
@@ -108,86 +106,62 @@ static int forward_burst(int fd, int wait, int link)
 }
 
 /* --thread-per-bus: the readers share what they forwarded; the main thread sleeps until all of
- * it is in (or every reader ended: a bus idle for idle_ms) and takes the CPU figure then. */
-struct shared {
+ * it is in (or every reader ended: a bus idle for idle_ms) and takes the CPU figure then. The
+ * readers still blocked in a read at that point end with the process (hence file scope). */
+static struct shared {
 	pthread_mutex_t lock;
-	pthread_cond_t changed;
+	pthread_cond_t ended;
 	long got, count;
 	int live, failed;
-};
+} shared = { .lock = PTHREAD_MUTEX_INITIALIZER, .ended = PTHREAD_COND_INITIALIZER };
 
-struct bus_reader {
+static struct bus_reader {
 	int fd, link;
-	struct shared *sh;
-};
+} readers[MAX_IFACES];
 
 /* A bus's thread: blocks in its socket's read (SO_RCVTIMEO: idle_ms) as zenoh-node's reader
- * does, until the buses together forwarded count frames, its bus fell idle, or SIGUSR1 ends
- * its read (EINTR) once the count is in. */
+ * does, until the buses together forwarded count frames or its bus fell idle. */
 static void *read_bus(void *arg)
 {
-	struct bus_reader *b = arg;
-	struct shared *sh = b->sh;
-	int ended = 0;
-	while (!ended) {
+	const struct bus_reader *b = arg;
+	for (int ended = 0; !ended;) {
 		int r = forward_burst(b->fd, 1, b->link);
-		pthread_mutex_lock(&sh->lock);
-		sh->got += r > 0 ? r : 0;
-		sh->failed |= r < 0;
-		ended = r <= 0 || sh->got >= sh->count;
-		if (ended)
-			sh->live--;
-		if (ended || sh->got >= sh->count)
-			pthread_cond_signal(&sh->changed);
-		pthread_mutex_unlock(&sh->lock);
+		pthread_mutex_lock(&shared.lock);
+		shared.got += r > 0 ? r : 0;
+		shared.failed |= r < 0;
+		ended = r <= 0 || shared.got >= shared.count;
+		if (ended) {
+			shared.live--;
+			pthread_cond_signal(&shared.ended);
+		}
+		pthread_mutex_unlock(&shared.lock);
 	}
 	return NULL;
 }
 
-static void interrupt_read(int sig)
-{
-	(void)sig; /* installed without SA_RESTART: a blocked recvmmsg returns EINTR */
-}
-
 /* Returns the frames forwarded, *at the CPU figure taken as the last came in (or the last reader
- * ended); the readers still blocked are then interrupted, not waited idle_ms for. */
+ * ended). */
 static long thread_per_bus(const int *fds, int n, int link, long count, int *failed, struct rusage *at)
 {
-	struct sigaction sa = { .sa_handler = interrupt_read };
-	sigemptyset(&sa.sa_mask);
-	sigaction(SIGUSR1, &sa, NULL);
-	struct shared sh = { .lock = PTHREAD_MUTEX_INITIALIZER, .changed = PTHREAD_COND_INITIALIZER,
-			     .count = count, .live = n };
-	pthread_t threads[MAX_IFACES];
-	struct bus_reader readers[MAX_IFACES];
+	shared.count = count;
+	shared.live = n;
 	for (int k = 0; k < n; k++) {
-		readers[k] = (struct bus_reader){ .fd = fds[k], .link = link, .sh = &sh };
-		if (pthread_create(&threads[k], NULL, read_bus, &readers[k]) != 0) {
+		readers[k] = (struct bus_reader){ .fd = fds[k], .link = link };
+		pthread_t thread;
+		if (pthread_create(&thread, NULL, read_bus, &readers[k]) != 0) {
 			perror("floor-bridge: thread");
 			exit(1);
 		}
+		pthread_detach(thread);
 	}
-	pthread_mutex_lock(&sh.lock);
-	while (sh.got < count && sh.live > 0)
-		pthread_cond_wait(&sh.changed, &sh.lock);
-	pthread_mutex_unlock(&sh.lock);
+	pthread_mutex_lock(&shared.lock);
+	while (shared.got < count && shared.live > 0)
+		pthread_cond_wait(&shared.ended, &shared.lock);
 	*at = usage();
-	/* a reader may be just about to block when the signal comes: signal until it has ended */
-	for (;;) {
-		pthread_mutex_lock(&sh.lock);
-		int live = sh.live;
-		pthread_mutex_unlock(&sh.lock);
-		if (!live)
-			break;
-		for (int k = 0; k < n; k++)
-			pthread_kill(threads[k], SIGUSR1); /* ended threads are not yet joined: still valid ids */
-		struct timespec pause = { .tv_nsec = 1000000 };
-		nanosleep(&pause, NULL);
-	}
-	for (int k = 0; k < n; k++)
-		pthread_join(threads[k], NULL);
-	*failed = sh.failed;
-	return sh.got;
+	*failed = shared.failed;
+	long got = shared.got;
+	pthread_mutex_unlock(&shared.lock);
+	return got;
 }
 
 /* One thread over all the buses: frames that arrive together on several buses cost one wakeup
