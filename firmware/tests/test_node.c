@@ -218,6 +218,27 @@ static void test_burst_immediate(void)
 	zn_node_stop();
 }
 
+/* Immediate mode: a burst's samples are put inside one zn_batch_start / stop (one write for the
+ * burst, not one per frame), whether the reader puts them or the publisher takes them queued. */
+static void test_burst_puts_held(void)
+{
+	mock_reset();
+	zn_node_config_t cfg = base_config(0);
+	CHECK(zn_node_init(&cfg) == ESP_OK);
+	inject_paced(10, 10, 0, 5000); /* one burst the reader puts itself */
+	CHECK(mock_zenoh_wait_puts(10, WAIT_MS) == 10);
+	unsigned first = mock_zenoh_put(0)->batch;
+	CHECK(first != 0);
+	for (size_t i = 1; i < 10; i++)
+		CHECK(mock_zenoh_put(i)->batch == first);
+	inject_paced(200, 64, 0, 6000); /* full bursts: queued, the publisher puts them */
+	CHECK(mock_zenoh_wait_puts(210, WAIT_MS) == 210);
+	for (size_t i = 10; i < 210; i++)
+		CHECK(mock_zenoh_put(i)->batch != 0 && mock_zenoh_put(i)->batch != first);
+	CHECK(mock_zenoh_batch_misuse() == 0);
+	zn_node_stop();
+}
+
 /* Batching mode: the reader wakes about once per period, not once per frame. */
 static void test_burst_batching(void)
 {
@@ -496,6 +517,7 @@ int main(void)
 	test_flush_on_stop();
 	test_immediate_stop_publishes_frames_read_meanwhile();
 	test_burst_immediate();
+	test_burst_puts_held();
 	test_burst_batching();
 	test_burst_port_capacity();
 	test_commands();

@@ -65,6 +65,15 @@ int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, 
  * and one refused as it opened does until the second zn_poll_connections
  * after it). */
 int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);
+/* Until zn_batch_stop, the puts this thread makes add their samples to their
+ * link's batch without writing it, so a burst of samples leaves as one write
+ * where each would have been its own (zenoh-pico's zp_batch_start/stop; this
+ * Linux port holds per thread, whatever the session). Nothing waits for the
+ * stop: a sample that fills a batch or is express leaves at once, and another
+ * thread's write takes what is held along. Call them in pairs around puts made
+ * back to back; a port without batching makes them no-ops. */
+void zn_batch_start(zn_session_t *s);
+void zn_batch_stop(zn_session_t *s);
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
 int zn_declare_token(zn_session_t *s, const char *key, zn_token_t **out);
 int zn_declare_queryable(zn_session_t *s, const char *key, zn_query_cb cb, void *ctx, zn_queryable_t **out);

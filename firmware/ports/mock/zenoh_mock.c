@@ -55,6 +55,10 @@ static struct {
 	size_t len;
 } on_declare;
 
+/* the batch this thread's puts are held in (0: none), numbered from 1 since mock_reset */
+static __thread unsigned held_batch;
+static unsigned batches, batch_misuse;
+
 void mock_reset(void)
 {
 	pthread_mutex_lock(&lock);
@@ -69,6 +73,7 @@ void mock_reset(void)
 	on_declare.key[0] = 0;
 	__atomic_store_n(&connections_closed, 0, __ATOMIC_RELAXED);
 	unrouted = 0;
+	batches = batch_misuse = 0;
 	pthread_mutex_unlock(&lock);
 	mock_can_reset();
 }
@@ -137,6 +142,7 @@ int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_
 			memcpy(p->attachment, attachment, attachment_len);
 		p->attachment_len = attachment_len;
 		p->publisher = pub->index;
+		p->batch = held_batch;
 	}
 	pthread_cond_broadcast(&put_made);
 	int rc = unrouted ? ZN_PORT_UNROUTED : 0;
@@ -209,6 +215,34 @@ int zn_routers(zn_session_t *s, char *ids, size_t cap)
 	(void)s;
 	strncpy(ids, "mockrouter", cap);
 	return 1;
+}
+
+void zn_batch_start(zn_session_t *s)
+{
+	(void)s;
+	pthread_mutex_lock(&lock);
+	if (held_batch)
+		batch_misuse++; /* nested */
+	held_batch = ++batches;
+	pthread_mutex_unlock(&lock);
+}
+
+void zn_batch_stop(zn_session_t *s)
+{
+	(void)s;
+	pthread_mutex_lock(&lock);
+	if (!held_batch)
+		batch_misuse++; /* no start */
+	held_batch = 0;
+	pthread_mutex_unlock(&lock);
+}
+
+unsigned mock_zenoh_batch_misuse(void)
+{
+	pthread_mutex_lock(&lock);
+	unsigned n = batch_misuse;
+	pthread_mutex_unlock(&lock);
+	return n;
 }
 
 void zn_poll_connections(zn_session_t *s)

@@ -22,6 +22,7 @@ struct mock_put {
 	uint8_t attachment[MOCK_ATTACHMENT_MAX];
 	size_t attachment_len;
 	int publisher; /* which declared publisher made it (mock_zenoh_publisher) */
+	unsigned batch; /* the zn_batch_start its thread made it under, numbered from 1 (0: none) */
 };
 
 /* A publisher as declared: its key and QoS, in declaration order since mock_reset. */
@@ -107,6 +108,8 @@ void mock_zenoh_open_result(int rc);
 void mock_zenoh_close_connection(void);
 /* 1: the session has no connection; puts are recorded and answered ZN_PORT_UNROUTED. */
 void mock_zenoh_unrouted(int on);
+/* zn_batch_start calls nested in another, and zn_batch_stop calls without one, since mock_reset. */
+unsigned mock_zenoh_batch_misuse(void);
 /* Once: the next subscriber declared on key gets this command at once, from within its
  * declaration (a command that arrives while the node starts). */
 void mock_zenoh_deliver_on_declare(const char *key, const uint8_t *payload, size_t len);

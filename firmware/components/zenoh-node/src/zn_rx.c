@@ -361,8 +361,12 @@ void zn_rx_publisher_thread(void *arg)
 				zn_mutex_lock(b->lock);
 			size_t n = take(b, c, taken, take_max);
 			zn_mutex_unlock(b->lock);
+			if (n > 1)
+				zn_batch_start(zn_node.session); /* what queued leaves as one write */
 			if (n)
 				publish_runs(b, c, taken, n, 1);
+			if (n > 1)
+				zn_batch_stop(zn_node.session);
 			round += n;
 			if (n)
 				break;
@@ -436,6 +440,9 @@ static void put_direct(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx
 	}
 	/* the port goes unread from now on: what counts is the whole burst's time, not one put's */
 	b->direct_since = zn_monotonic_ns();
+	int held = k > 1; /* a burst's samples leave as one write, not one each (zn_batch_start) */
+	if (held)
+		zn_batch_start(zn_node.session);
 	while (done < k && !b->degraded && !b->rescuing) {
 		zn_mutex_unlock(b->lock);
 		publish(b, zn_qos_class_of(&b->qos, &own[done].msg), &own[done], 1);
@@ -445,6 +452,11 @@ static void put_direct(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx
 		done++;
 		if (away >= DIRECT_STALL_NS)
 			b->degraded = 1; /* slow even without a rescue: the queue takes the rest */
+	}
+	if (held) {
+		zn_mutex_unlock(b->lock);
+		zn_batch_stop(zn_node.session);
+		zn_mutex_lock(b->lock);
 	}
 	b->direct = 0;
 	/* before the rescue ends: the publisher takes from the queue as soon as it does, and

@@ -189,6 +189,16 @@ impl DeferredNotify {
     pub(crate) fn is_pending(&self) -> bool {
         self.what != Deferred::Nothing
     }
+
+    /// The push added bytes to the current batch (moved none out).
+    pub(crate) fn is_bytes(&self) -> bool {
+        matches!(self.what, Deferred::Bytes(_))
+    }
+
+    /// The priority queue it is about.
+    pub(crate) fn idx(&self) -> usize {
+        self.idx
+    }
 }
 
 struct Current {

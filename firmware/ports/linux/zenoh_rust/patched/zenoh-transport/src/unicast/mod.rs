@@ -20,6 +20,7 @@ pub(crate) mod manager;
 pub mod test_helpers;
 pub(crate) mod transport_unicast_inner;
 pub(crate) mod universal;
+pub use universal::{hold_direct_writes, release_direct_writes};
 
 use std::{
     fmt,

@@ -24,6 +24,7 @@
 ))]
 use std::fmt::Debug;
 use std::{
+    cell::RefCell,
     future::{poll_fn, Future},
     sync::{
         atomic::{AtomicBool, Ordering},
@@ -480,9 +481,10 @@ impl DirectTx {
     }
 
     /// Writes what a deferred push left, with what else is pending, if the writer is free;
-    /// otherwise tells the transmit task, as the push would have.
+    /// otherwise tells the transmit task, as the push would have. While this thread holds its
+    /// writes (`hold_direct_writes`) bytes added to a batch wait for `release_direct_writes`.
     pub(super) fn write(&self, pipeline: &TransmissionPipelineProducer, deferred: DeferredNotify) {
-        if !deferred.is_pending() {
+        if !deferred.is_pending() || held(self, pipeline, deferred) {
             return;
         }
         let writer = self
@@ -539,6 +541,73 @@ impl DirectTx {
         // what is left, and a failed write, are the transmit task's
         drop(side);
         pipeline.notify_consumer(deferred);
+    }
+}
+
+/// The links whose writes a thread holds, at most this many (more are written at once).
+const HELD_LINKS_MAX: usize = 8;
+
+/// A thread's held writes: whether it holds, and each link's last deferred notification.
+#[derive(Default)]
+struct HeldWrites {
+    holding: bool,
+    links: Vec<(DirectTx, TransmissionPipelineProducer, DeferredNotify)>,
+}
+
+thread_local! {
+    static HELD: RefCell<HeldWrites> = RefCell::new(HeldWrites::default());
+}
+
+/// Holds a direct write of bytes a put added to its link's current batch, while this thread
+/// holds its writes; a batch moved out (full, or an express message) is written at once, so a
+/// producer never waits for a free batch on a write it holds itself.
+fn held(
+    direct: &DirectTx,
+    pipeline: &TransmissionPipelineProducer,
+    deferred: DeferredNotify,
+) -> bool {
+    let (Some(writer), true) = (direct.0.as_ref(), deferred.is_bytes()) else {
+        return false;
+    };
+    HELD.with(|h| {
+        let mut h = h.borrow_mut();
+        if !h.holding {
+            return false;
+        }
+        let same = |d: &DirectTx| d.0.as_ref().is_some_and(|w| Arc::ptr_eq(w, writer));
+        if let Some(link) = h
+            .links
+            .iter_mut()
+            .find(|(d, _, n)| same(d) && n.idx() == deferred.idx())
+        {
+            link.2 = deferred;
+            return true;
+        }
+        if h.links.len() == HELD_LINKS_MAX {
+            return false;
+        }
+        h.links.push((direct.clone(), pipeline.clone(), deferred));
+        true
+    })
+}
+
+/// The puts this thread makes until `release_direct_writes` add their messages to their links'
+/// batches without writing them (zenoh-pico's `zp_batch_start`, for one thread): a producer that
+/// has several messages at hand (a burst it read) writes them as one batch, one write where each
+/// would have been its own. A message that fills a batch, an express one, a link split by
+/// priority, the low-latency transport and a producer on Zenoh's runtime are written as before.
+/// Nothing waits for the release: another producer's write or the transmit task takes a held
+/// batch along.
+pub fn hold_direct_writes() {
+    HELD.with(|h| h.borrow_mut().holding = true);
+}
+
+/// Writes what this thread held since `hold_direct_writes` (as a put would have, the writer
+/// busy: the transmit task is told) and holds no more.
+pub fn release_direct_writes() {
+    HELD.with(|h| h.borrow_mut().holding = false);
+    while let Some((direct, pipeline, deferred)) = HELD.with(|h| h.borrow_mut().links.pop()) {
+        direct.write(&pipeline, deferred);
     }
 }
 

@@ -14,5 +14,6 @@
 pub(crate) mod transport;
 
 mod link;
+pub use link::{hold_direct_writes, release_direct_writes};
 mod rx;
 mod tx;
