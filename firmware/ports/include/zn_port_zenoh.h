@@ -67,11 +67,14 @@ int zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, 
 int zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment, size_t attachment_len);
 /* Until zn_batch_stop, the puts this thread makes add their samples to their
  * link's batch without writing it, so a burst of samples leaves as one write
- * where each would have been its own (zenoh-pico's zp_batch_start/stop; this
- * Linux port holds per thread, whatever the session). Nothing waits for the
- * stop: a sample that fills a batch or is express leaves at once, and another
- * thread's write takes what is held along. Call them in pairs around puts made
- * back to back; a port without batching makes them no-ops. */
+ * where each would have been its own. No put waits for the stop: a batch that
+ * fills or an express sample leaves at once, and another thread's write takes
+ * what is held along. Call them in pairs around puts made back to back; the
+ * node calls them from several threads at once (a bus's reader and publisher),
+ * zn_batch_start with a lock held: it must not block. Linux: held per thread,
+ * whatever the session. A port whose batching is per session (zenoh-pico's
+ * zp_batch_start/stop, the planned ESP32 port) counts the starts and flushes at
+ * the last stop; a port without batching makes them no-ops. */
 void zn_batch_start(zn_session_t *s);
 void zn_batch_stop(zn_session_t *s);
 int zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);

@@ -361,12 +361,13 @@ void zn_rx_publisher_thread(void *arg)
 				zn_mutex_lock(b->lock);
 			size_t n = take(b, c, taken, take_max);
 			zn_mutex_unlock(b->lock);
-			if (n > 1)
-				zn_batch_start(zn_node.session); /* what queued leaves as one write */
-			if (n)
+			if (n > 1) { /* what queued leaves as one write */
+				zn_batch_start(zn_node.session);
 				publish_runs(b, c, taken, n, 1);
-			if (n > 1)
 				zn_batch_stop(zn_node.session);
+			} else if (n) {
+				publish_runs(b, c, taken, n, 1);
+			}
 			round += n;
 			if (n)
 				break;
@@ -455,8 +456,11 @@ static void put_direct(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx
 	}
 	if (held) {
 		zn_mutex_unlock(b->lock);
-		zn_batch_stop(zn_node.session);
+		zn_batch_stop(zn_node.session); /* a port that flushes here may take as long as a put */
+		int64_t away = zn_monotonic_ns() - b->direct_since;
 		zn_mutex_lock(b->lock);
+		if (away >= DIRECT_STALL_NS)
+			b->degraded = 1;
 	}
 	b->direct = 0;
 	/* before the rescue ends: the publisher takes from the queue as soon as it does, and

@@ -941,6 +941,32 @@ mod tests {
     }
 
     #[test]
+    fn samples_held_arrive_only_at_the_stop() {
+        // a quiet link: nothing writes a hold's batch before its stop (the lease's keep-alive is 15 s)
+        let (publishing, subscribing) = peer_pair(&[]);
+        let got = Arc::new(AtomicUsize::new(0));
+        let sink = got.clone();
+        let _sub = subscribing
+            .declare_subscriber("bench/held")
+            .callback(move |_| {
+                sink.fetch_add(1, Ordering::SeqCst);
+            })
+            .wait()
+            .unwrap();
+        let publisher = publishing.declare_publisher("bench/held").wait().unwrap();
+        wait_for("the subscriber's match", || publisher.matching_status().wait().unwrap().matching());
+        zn_batch_start(ptr::null_mut());
+        for n in 0..10u8 {
+            publisher.put(vec![n; 8]).wait().unwrap();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100)); // the window a write of the hold would show in
+        let early = got.load(Ordering::SeqCst);
+        zn_batch_stop(ptr::null_mut());
+        wait_for("the held samples", || got.load(Ordering::SeqCst) == 10);
+        assert_eq!(early, 0, "{early} of 10 held samples arrived before the stop");
+    }
+
+    #[test]
     fn a_few_samples_held_leave_at_the_stop() {
         // no batch fills, no other thread writes: the stop alone writes them
         let load = Load { threads: 1, each: 40, size: |_| 64, stall_every: 0, express: false, config: &[], held: 16 };

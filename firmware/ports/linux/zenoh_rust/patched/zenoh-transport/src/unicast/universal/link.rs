@@ -569,7 +569,8 @@ fn held(
     let (Some(writer), true) = (direct.0.as_ref(), deferred.is_bytes()) else {
         return false;
     };
-    HELD.with(|h| {
+    // a put from a thread whose locals are being destroyed (at its exit) holds nothing
+    HELD.try_with(|h| {
         let mut h = h.borrow_mut();
         if !h.holding {
             return false;
@@ -589,6 +590,7 @@ fn held(
         h.links.push((direct.clone(), pipeline.clone(), deferred));
         true
     })
+    .unwrap_or(false)
 }
 
 /// The puts this thread makes until `release_direct_writes` add their messages to their links'
@@ -599,14 +601,16 @@ fn held(
 /// Nothing waits for the release: another producer's write or the transmit task takes a held
 /// batch along.
 pub fn hold_direct_writes() {
-    HELD.with(|h| h.borrow_mut().holding = true);
+    let _ = HELD.try_with(|h| h.borrow_mut().holding = true);
 }
 
 /// Writes what this thread held since `hold_direct_writes` (as a put would have, the writer
 /// busy: the transmit task is told) and holds no more.
 pub fn release_direct_writes() {
-    HELD.with(|h| h.borrow_mut().holding = false);
-    while let Some((direct, pipeline, deferred)) = HELD.with(|h| h.borrow_mut().links.pop()) {
+    let _ = HELD.try_with(|h| h.borrow_mut().holding = false);
+    while let Some((direct, pipeline, deferred)) =
+        HELD.try_with(|h| h.borrow_mut().links.pop()).ok().flatten()
+    {
         direct.write(&pipeline, deferred);
     }
 }
