@@ -780,6 +780,13 @@ mod tests {
         held: u32,                                        // puts between zn_batch_start and stop (0: none)
     }
 
+    impl Load {
+        /// threads x each samples of this size, no stall, no express, no hold, default config
+        fn of(threads: u32, each: u32, size: fn(u32) -> usize) -> Self {
+            Load { threads, each, size, stall_every: 0, express: false, config: &[], held: 0 }
+        }
+    }
+
     /// Two peer sessions over loopback (no scouting): the publisher's and the subscriber's. The
     /// lease is long: a batch left unwritten would wait for a keep-alive (lease / 4), longer
     /// than the tests wait, where the default's 2.5 s would hide it.
@@ -889,13 +896,13 @@ mod tests {
 
     #[test]
     fn samples_put_from_many_threads_arrive_all_and_in_each_threads_order() {
-        let load = Load { threads: 4, each: 5000, size: |_| 64, stall_every: 0, express: false, config: &[], held: 0 };
+        let load = Load::of(4, 5000, |_| 64);
         assert_all_in_order(&puts_from_threads(load), 5000);
     }
 
     #[test]
     fn samples_put_while_the_link_is_full_arrive_all_and_in_order() {
-        let load = Load { threads: 3, each: 3000, size: |_| 8192, stall_every: 1000, express: false, config: &[], held: 0 };
+        let load = Load { stall_every: 1000, ..Load::of(3, 3000, |_| 8192) };
         assert_all_in_order(&puts_from_threads(load), 3000);
     }
 
@@ -903,15 +910,7 @@ mod tests {
     fn samples_in_fragments_between_small_ones_arrive_all_and_in_order() {
         // a put larger than a batch waits for free batches, one per fragment, while a write the
         // link did not take at once still holds one
-        let load = Load {
-            threads: 1,
-            each: 400,
-            size: |n| if n % 4 == 3 { 200_000 } else { 100 },
-            stall_every: 100,
-            express: false,
-            config: &[],
-            held: 0,
-        };
+        let load = Load { stall_every: 100, ..Load::of(1, 400, |n| if n % 4 == 3 { 200_000 } else { 100 }) };
         assert_all_in_order(&puts_from_threads(load), 400);
     }
 
@@ -919,13 +918,10 @@ mod tests {
     fn express_samples_through_a_queue_of_one_batch_arrive_all_and_in_order() {
         // every put its own batch, and a producer waits for the only one while others notify
         let load = Load {
-            threads: 3,
-            each: 2000,
-            size: |_| 512,
             stall_every: 500,
             express: true,
             config: &[("transport/link/tx/queue/size/data", "1")],
-            held: 0,
+            ..Load::of(3, 2000, |_| 512)
         };
         assert_all_in_order(&puts_from_threads(load), 2000);
     }
@@ -936,7 +932,7 @@ mod tests {
 
     #[test]
     fn samples_put_in_holds_from_many_threads_arrive_all_and_in_each_threads_order() {
-        let load = Load { threads: 4, each: 5000, size: |_| 64, stall_every: 0, express: false, config: &[], held: 16 };
+        let load = Load { held: 16, ..Load::of(4, 5000, |_| 64) };
         assert_all_in_order(&puts_from_threads(load), 5000);
     }
 
@@ -969,22 +965,14 @@ mod tests {
     #[test]
     fn a_few_samples_held_leave_at_the_stop() {
         // no batch fills, no other thread writes: the stop alone writes them
-        let load = Load { threads: 1, each: 40, size: |_| 64, stall_every: 0, express: false, config: &[], held: 16 };
+        let load = Load { held: 16, ..Load::of(1, 40, |_| 64) };
         assert_all_in_order(&puts_from_threads(load), 40);
     }
 
     #[test]
     fn samples_held_past_a_full_batch_while_the_link_is_full_arrive_all_and_in_order() {
         // 12 samples of 8 KiB are more than a batch: one moves out (written at once) mid-hold
-        let load = Load {
-            threads: 3,
-            each: 3000,
-            size: |_| 8192,
-            stall_every: 1000,
-            express: false,
-            config: &[],
-            held: 12,
-        };
+        let load = Load { stall_every: 1000, held: 12, ..Load::of(3, 3000, |_| 8192) };
         assert_all_in_order(&puts_from_threads(load), 3000);
     }
 
