@@ -39,13 +39,16 @@ def test_one_zenoh_and_the_routers_version_everywhere():
     # the port's zenoh features are the build's (zenohd's defaults are off): zenoh's own defaults
     # (every link protocol: 75 crates more) must not come back through the port
     assert port_dep.get("default-features") is False
-    # and zenoh's own buffer crate (a put's reused buffers), at the same version, asking no feature
-    # of its own: what zenoh gives it, so nothing compiles twice
-    buffers = tomllib.loads((PORT / "Cargo.toml").read_text())["dependencies"]["zenoh-buffers"]
-    assert buffers == {"version": f"={zenohd}", "default-features": False}
-    assert versions["zenoh-buffers"] == {zenohd}
+    # and zenoh's own crates the port uses directly (its buffers: a put's reused buffers; its
+    # transport: held direct writes), at the same version, asking no feature of their own: what
+    # zenoh gives them, so nothing compiles twice
+    own = ("zenoh-buffers", "zenoh-transport")
+    deps = tomllib.loads((PORT / "Cargo.toml").read_text())["dependencies"]
+    for crate in own:
+        assert deps[crate] == {"version": f"={zenohd}", "default-features": False}, crate
+        assert versions[crate] == {zenohd}, crate
     port = next(p for p in lock if p["name"] == "zn_port_zenoh")
-    assert port["dependencies"] == ["zenoh", "zenoh-buffers"]
+    assert port["dependencies"] == ["zenoh", *own]
 
 
 def test_every_workspace_build_leaves_zenohds_defaults_off_and_zn_flood_adds_no_feature():
