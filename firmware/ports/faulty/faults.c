@@ -1,7 +1,8 @@
 /* faults.c - seeded faults: a broken bridge on purpose, so the bench can prove
  * each of its checks fails for the fault it exists for. A port that wraps the
  * real ones (linker --wrap of zn_declare_publisher, zn_put,
- * zn_undeclare_publisher, zn_can_transmit, zn_can_send_burst and zn_declare_subscriber), linked only into the
+ * zn_undeclare_publisher, zn_can_transmit, zn_can_send_burst, zn_declare_subscriber and
+ * zn_batch_start/stop), linked only into the
  * zenoh-node-faulty test executable: the component itself has no fault code.
  *
  * ZN_FAULT=<kind>[:<n>] selects one, on the CAN -> Zenoh samples (the
@@ -43,6 +44,8 @@ int __real_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 void __real_zn_undeclare_publisher(zn_publisher_t *pub);
 esp_err_t __real_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
 int __real_zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
+void __real_zn_batch_start(zn_session_t *s);
+void __real_zn_batch_stop(zn_session_t *s);
 
 int __wrap_zn_declare_publisher(zn_session_t *s, const char *key, const zn_qos_t *qos, zn_publisher_t **out);
 int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *attachment,
@@ -50,6 +53,8 @@ int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const
 void __wrap_zn_undeclare_publisher(zn_publisher_t *pub);
 esp_err_t __wrap_zn_can_transmit(zn_can_t *can, const can_message_t *msg, int timeout_ms);
 int __wrap_zn_declare_subscriber(zn_session_t *s, const char *key, zn_sample_cb cb, void *ctx, zn_subscriber_t **out);
+void __wrap_zn_batch_start(zn_session_t *s);
+void __wrap_zn_batch_stop(zn_session_t *s);
 
 enum kind { NONE, DROP, DUP, SWAP, FLIP, DELAY, WRONGKEY, TXDROP, TXFLIP, NOFRESH, JITTER, KINDS };
 static const char *const names[KINDS] = { "", "drop", "dup", "swap", "flip", "delay", "wrongkey", "txdrop", "txflip",
@@ -165,7 +170,26 @@ void __wrap_zn_undeclare_publisher(zn_publisher_t *pub)
 	free(p);
 }
 
-/* A pipeline delay, not a throughput cap: hold until CAN receive time + hold_us. */
+/* Whether this thread holds its puts (zn_batch_start), and for which session. */
+static __thread zn_session_t *holding;
+static __thread int holds;
+
+void __wrap_zn_batch_start(zn_session_t *s)
+{
+	holding = s;
+	holds = 1;
+	__real_zn_batch_start(s);
+}
+
+void __wrap_zn_batch_stop(zn_session_t *s)
+{
+	holds = 0;
+	__real_zn_batch_stop(s);
+}
+
+/* A pipeline delay, not a throughput cap: hold until CAN receive time + hold_us. The samples this
+ * thread holds (zn_batch_start) leave before the wait, each at its own due time, not with the
+ * sample after it. */
 static void delay_until_due(const uint8_t *att, size_t att_len, int64_t hold_us)
 {
 	if (att_len < ZN_ATTACHMENT_SIZE(1))
@@ -174,9 +198,15 @@ static void delay_until_due(const uint8_t *att, size_t att_len, int64_t hold_us)
 	for (int i = 7; i >= 0; i--)
 		rx_ns = rx_ns << 8 | att[ZN_ATTACHMENT_HEADER + i];
 	int64_t due = rx_ns + hold_us * 1000;
-	struct timespec ts = { .tv_sec = due / 1000000000, .tv_nsec = due % 1000000000 };
+	struct timespec ts = { .tv_sec = due / 1000000000, .tv_nsec = due % 1000000000 }, now;
+	clock_gettime(CLOCK_REALTIME, &now);
+	int waits = now.tv_sec < ts.tv_sec || (now.tv_sec == ts.tv_sec && now.tv_nsec < ts.tv_nsec);
+	if (waits && holds)
+		__real_zn_batch_stop(holding);
 	while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, NULL) != 0)
 		;
+	if (waits && holds)
+		__real_zn_batch_start(holding);
 }
 
 int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
