@@ -421,6 +421,13 @@ static void requeue_front_locked(struct bus *b, const struct rx_entry *f, size_t
 	}
 }
 
+/* Has the reader been away from its port, putting, for DIRECT_STALL_NS? Read without b->lock:
+ * only the reader writes direct_since, and the time counted stops before it waits for the lock. */
+static int away_too_long(const struct bus *b)
+{
+	return zn_monotonic_ns() - b->direct_since >= DIRECT_STALL_NS;
+}
+
 /* The reader puts a burst itself, one sample per frame (b->lock held on entry, released on
  * return). When a put stalls (the publisher's rescue, or the reader sees it took too long),
  * the rest goes to the queue, and the reader back to its port. */
@@ -447,19 +454,19 @@ static void put_direct(struct bus *b, const zn_can_rx_t *rx, size_t n, struct rx
 	while (done < k && !b->degraded && !b->rescuing) {
 		zn_mutex_unlock(b->lock);
 		publish(b, zn_qos_class_of(&b->qos, &own[done].msg), &own[done], 1);
-		int64_t away = zn_monotonic_ns() - b->direct_since; /* only the reader writes it */
+		int stalled = away_too_long(b);
 		COUNT(b->n.direct_frames);
 		zn_mutex_lock(b->lock);
 		done++;
-		if (away >= DIRECT_STALL_NS)
+		if (stalled)
 			b->degraded = 1; /* slow even without a rescue: the queue takes the rest */
 	}
 	if (held) {
 		zn_mutex_unlock(b->lock);
 		zn_batch_stop(zn_node.session); /* a port that flushes here may take as long as a put */
-		int64_t away = zn_monotonic_ns() - b->direct_since;
+		int stalled = away_too_long(b);
 		zn_mutex_lock(b->lock);
-		if (away >= DIRECT_STALL_NS)
+		if (stalled)
 			b->degraded = 1;
 	}
 	b->direct = 0;
