@@ -60,6 +60,19 @@ def candump_stamps(path: Path, can_id: int) -> list[tuple[int, int]]:
             if f.can_id == can_id and not f.extended and f.dlc == 8]
 
 
+def bunched_share(sent_ns, rate: int) -> float | None:
+    """The share of a paced load's frames sent less than a quarter of its interval after the one
+    before (their send stamps; None for fewer than two): about 0 for a load paced frame by frame,
+    up to 0.5 for one that sends in pairs. A pair's second frame rides the first one's wakeups
+    downstream, so a bunched load is faster per frame than an even one at the same rate."""
+    sent = sorted(set(sent_ns))
+    if len(sent) < 2 or rate <= 0:
+        return None
+    quarter_ns = 1e9 / rate / 4
+    gaps = (b - a for a, b in zip(sent, sent[1:], strict=False))
+    return round(sum(1 for gap in gaps if gap < quarter_ns) / (len(sent) - 1), 3)
+
+
 def load_rate(report: str, count: int) -> int | None:
     """The rate a load really offered, from its own report (can-load: JSON; zn-flood: "N frames in S s")."""
     m = re.search(r'"seconds": ([\d.]+)', report) or re.search(r"frames in ([\d.]+) s", report)

@@ -297,6 +297,36 @@ def test_paired_can_to_zenoh_cell_splits_at_the_can_stamp(monkeypatch):
     assert "| zenoh-to-can | zenoh-node | +40.0 (+50.0, +30.0, +40.0) |" in table
 
 
+def test_bunched_share_tells_a_load_sent_in_pairs_from_one_paced_frame_by_frame():
+    gap = 1e9 / 8100
+    even = [T0 + round(i * gap) + (i % 7) * 1000 for i in range(1000)]  # late by up to 6 µs of 123
+    pairs = [T0 + round((i // 2) * 2 * gap) + (i % 2) * 8000 for i in range(1000)]  # every other one 8 µs after
+    assert stamps.bunched_share(even, 8100) == 0.0
+    assert stamps.bunched_share(pairs, 8100) == pytest.approx(0.5, abs=0.002)
+    # a frame captured twice is one send
+    assert stamps.bunched_share(pairs + pairs, 8100) == pytest.approx(0.5, abs=0.002)
+    assert stamps.bunched_share([T0], 8100) is None and stamps.bunched_share(even, 0) is None
+
+
+def test_paired_cells_are_not_judged_where_the_loads_differ_in_shape(monkeypatch):
+    """Raw Zenoh's load sent in pairs where the bridge's did not: the cell shows both shares and the
+    row has no verdict, met or not; loads of one shape are judged as before."""
+    def fake_measure(args, path, system, mode, rate, seconds):
+        if path == "zenoh":
+            return {"p50_us": 100.0, "bunched": 0.44 if rate == 8100 else 0.02}
+        return {"p50_us": 130.0, "bunched": 0.01}
+    monkeypatch.setattr(bench_paths, "measure", fake_measure)
+    monkeypatch.setattr(bench_paths, "PAIRED_PATHS", ("can-to-zenoh",))
+    monkeypatch.setattr(bench_paths, "PAIRED_SYSTEMS", ("zenoh-node",))
+    cells = bench_paths.paired_added(None, {"10%": 900, "90%": 8100}, 3)
+    assert [c["median_bunched"] for c in cells] == [[0.02, 0.01], [0.44, 0.01]]
+    row = next(line for line in bench_paths.paired_table(cells).splitlines() if line.startswith("| can-to-zenoh"))
+    assert "sent bunched: raw 0.44, the bridge's load 0.01" in row
+    assert row.endswith("| not judged: the loads differ in shape |")
+    row = next(line for line in bench_paths.paired_table(cells[:1]).splitlines() if line.startswith("| can-to-zenoh"))
+    assert row.endswith("| met |") and "bunched" not in row
+
+
 def test_bridge_table_says_where_a_lossy_run_lost_its_frames():
     node = "zenoh-node"
     lossy = dict(result(node, 8, False, 4), direction="zenoh-to-can",

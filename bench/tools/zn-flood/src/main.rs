@@ -22,10 +22,6 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use zenoh::qos::CongestionControl;
 use zenoh::{Config, Wait};
 
-/// Paces by "send what is due, then sleep at most this long": a sleep per sample would cap
-/// the rate at the timer's resolution.
-const SLICE: Duration = Duration::from_millis(1);
-
 fn usage() -> ! {
     eprintln!(
         "usage: zn-flood --connect ENDPOINT --key KEY[,KEY...] --count N_PER_KEY [--rate FRAMES_PER_S] [--block] [--stamp-data] \
@@ -97,7 +93,7 @@ fn main() {
     let mut seq = 0u64;
     let mut last_stamp = 0u64;
     while seq < samples {
-        // send what is due by now (everything when unpaced), then sleep a slice
+        // send what is due by now (everything when unpaced), then sleep until the next sample is due
         let due = if rate == 0 { samples } else { (start.elapsed().as_secs_f64() * sample_rate) as u64 + 1 };
         while seq < due.min(samples) {
             let slot = (seq % keys) as usize;
@@ -129,7 +125,11 @@ fn main() {
             seq += 1;
         }
         if seq < samples {
-            std::thread::sleep(SLICE.min(Duration::from_secs_f64(1.0 / sample_rate.max(1.0))));
+            // paced as can-load paces CAN frames (a deadline per sample), so raw Zenoh and the
+            // bridge's CAN -> Zenoh path get loads of one shape: a sleep of one interval after
+            // sending overran by the timer's slack and sent samples in pairs at high rates
+            let next = start + Duration::from_secs_f64(seq as f64 / sample_rate);
+            std::thread::sleep(next.saturating_duration_since(Instant::now()));
         }
     }
     let count = count * keys;
