@@ -22,7 +22,8 @@ PATCHES = {
     "zenoh-link-tls": (["docs/upstream/zenoh-link-tls-split-stream.patch"], 2),
     "zenoh-sync": (["docs/upstream/zenoh-sync-lifo-queue-notify-waiters.patch"], 3),
     "zenoh-transport": (["docs/upstream/zenoh-transport-lowlatency-buffered-read.patch",
-                         "docs/upstream/zenoh-transport-universal-direct-write.patch"], 3),
+                         "docs/upstream/zenoh-transport-universal-direct-write.patch",
+                         "docs/upstream/zenoh-transport-universal-buffered-read.patch"], 3),
 }
 # workspace root -> the patched crates it uses (zn-flood speaks TCP only and receives nothing)
 WORKSPACES = {

@@ -23,6 +23,7 @@ use zenoh_protocol::{
 use zenoh_result::{zerror, ZResult};
 
 use crate::common::batch::{BatchConfig, Decode, Encode, Finalize, RBatch, WBatch};
+use crate::unicast::lowlatency::StreamedRx;
 #[cfg(feature = "shared-memory")]
 use crate::{
     common::shm::interop::LinkShmHandoffConfig,
@@ -309,6 +310,44 @@ impl TransportLinkUnicastRx {
 
         // tracing::trace!("RBytes: {:02x?}", &into.as_slice()[0..end]);
 
+        self.batch_of(into, end, buff)
+    }
+
+    /// recv_batch on a streamed link read through `rx`: one read takes a batch's length and body
+    /// together (or several batches), where recv_batch reads the length, then the body, then (its
+    /// reads filling what they asked for) finds the socket empty.
+    pub(crate) async fn recv_batch_streamed<C, T>(
+        &mut self,
+        buff: C,
+        rx: &mut StreamedRx,
+    ) -> ZResult<RBatch<ZSlice>>
+    where
+        C: Fn() -> T + Copy,
+        T: AsMut<[u8]> + ZSliceBuffer + 'static,
+    {
+        const LEN: usize = BatchSize::MIN.to_le_bytes().len();
+        rx.hold(self, LEN).await?;
+        let mut len = BatchSize::MIN.to_le_bytes();
+        len.copy_from_slice(&rx.held()[..LEN]);
+        let end = LEN + BatchSize::from_le_bytes(len) as usize;
+
+        let mut into = (buff)();
+        let slice = into.as_mut().get_mut(..end).ok_or_else(|| {
+            zerror!("Read error from link: {self}. Invalid batch length or buffer size.")
+        })?;
+        rx.hold(self, end).await?;
+        slice.copy_from_slice(&rx.held()[..end]);
+        rx.consume(end);
+        self.batch_of(into, end, buff)
+    }
+
+    /// The batch in `into[..end]` (its length's bytes first on a streamed link).
+    fn batch_of<C, T>(&self, into: T, end: usize, buff: C) -> ZResult<RBatch<ZSlice>>
+    where
+        C: Fn() -> T + Copy,
+        T: AsMut<[u8]> + ZSliceBuffer + 'static,
+    {
+        const ERR: &str = "Read error from link: ";
         let buffer = ZSlice::new(Arc::new(into), 0, end)
             .map_err(|_| zerror!("{ERR}{self}. ZSlice index(es) out of bounds"))?;
         let mut batch = RBatch::new(self.config.batch, buffer);

@@ -94,7 +94,7 @@ impl StreamedRx {
 
     /// At least `want` bytes held from `start` (want <= the buffer's size), reading what the link
     /// has: a read cancelled (the lease, the token) leaves what earlier reads brought held.
-    async fn hold(&mut self, link: &TransportLinkUnicastRx, want: usize) -> ZResult<()> {
+    pub(crate) async fn hold(&mut self, link: &TransportLinkUnicastRx, want: usize) -> ZResult<()> {
         if self.start + want > self.buf.len() {
             self.buf.copy_within(self.start..self.end, 0);
             self.end -= self.start;
@@ -108,6 +108,19 @@ impl StreamedRx {
             self.end += n;
         }
         Ok(())
+    }
+
+    /// The bytes held, from the message being taken on.
+    pub(crate) fn held(&self) -> &[u8] {
+        &self.buf[self.start..self.end]
+    }
+
+    /// Takes `n` held bytes.
+    pub(crate) fn consume(&mut self, n: usize) {
+        self.start += n;
+        if self.start == self.end {
+            (self.start, self.end) = (0, 0);
+        }
     }
 }
 

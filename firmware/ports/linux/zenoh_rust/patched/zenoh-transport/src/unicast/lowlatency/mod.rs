@@ -14,4 +14,5 @@
 pub(crate) mod transport;
 
 mod link;
+pub(crate) use link::StreamedRx; // the universal link reads a streamed link so too
 mod rx;

@@ -90,7 +90,10 @@ use crate::{
         },
         priority::TransportPriorityTx,
     },
-    unicast::link::{TransportLinkUnicast, TransportLinkUnicastRx, TransportLinkUnicastTx},
+    unicast::{
+        link::{TransportLinkUnicast, TransportLinkUnicastRx, TransportLinkUnicastTx},
+        lowlatency::StreamedRx,
+    },
 };
 
 #[derive(Clone)]
@@ -846,17 +849,23 @@ async fn read_loop<F: Fn() -> Box<[u8]>>(
     async fn read<F: Fn() -> Box<[u8]>>(
         link: &mut TransportLinkUnicastRx,
         priority: Option<Priority>,
+        streamed: Option<&mut StreamedRx>,
         pool: &RecyclingObjectPool<Box<[u8]>, F>,
     ) -> ZResult<RBatch<ZSlice>> {
-        let batch = link
-            .recv_batch(|| pool.try_take().unwrap_or_else(|| pool.alloc()), priority)
-            .await?;
-        Ok(batch)
+        let buff = || pool.try_take().unwrap_or_else(|| pool.alloc());
+        match streamed {
+            Some(rx) => link.recv_batch_streamed(buff, rx).await,
+            None => link.recv_batch(buff, priority).await,
+        }
     }
 
+    // a streamed link read as it comes, batches taken from what one read brought (a link split
+    // by priority reads each priority's own way, as before)
+    let mut streamed = (priority.is_none() && link.link.is_streamed())
+        .then(|| StreamedRx::new(link.config.batch.mtu as usize));
     loop {
         tokio::select! {
-            batch = read(link, priority, pool) => {
+            batch = read(link, priority, streamed.as_mut(), pool) => {
                 let batch = batch?;
                 lease_tracker.reset();
                 #[cfg(feature = "stats")]
