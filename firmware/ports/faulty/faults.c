@@ -170,20 +170,18 @@ void __wrap_zn_undeclare_publisher(zn_publisher_t *pub)
 	free(p);
 }
 
-/* Whether this thread holds its puts (zn_batch_start), and for which session. */
+/* The session this thread holds its puts for (zn_batch_start), NULL when it holds none. */
 static __thread zn_session_t *holding;
-static __thread int holds;
 
 void __wrap_zn_batch_start(zn_session_t *s)
 {
 	holding = s;
-	holds = 1;
 	__real_zn_batch_start(s);
 }
 
 void __wrap_zn_batch_stop(zn_session_t *s)
 {
-	holds = 0;
+	holding = NULL;
 	__real_zn_batch_stop(s);
 }
 
@@ -200,13 +198,13 @@ static void delay_until_due(const uint8_t *att, size_t att_len, int64_t hold_us)
 	int64_t due = rx_ns + hold_us * 1000;
 	struct timespec ts = { .tv_sec = due / 1000000000, .tv_nsec = due % 1000000000 }, now;
 	clock_gettime(CLOCK_REALTIME, &now);
-	int waits = now.tv_sec < ts.tv_sec || (now.tv_sec == ts.tv_sec && now.tv_nsec < ts.tv_nsec);
-	if (waits && holds)
-		__real_zn_batch_stop(holding);
+	zn_session_t *release = (int64_t)now.tv_sec * 1000000000 + now.tv_nsec < due ? holding : NULL;
+	if (release)
+		__real_zn_batch_stop(release);
 	while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, NULL) != 0)
 		;
-	if (waits && holds)
-		__real_zn_batch_start(holding);
+	if (release)
+		__real_zn_batch_start(release);
 }
 
 int __wrap_zn_put(zn_publisher_t *pub, const uint8_t *payload, size_t len, const uint8_t *att, size_t att_len)
