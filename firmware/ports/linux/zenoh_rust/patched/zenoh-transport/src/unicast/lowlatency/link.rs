@@ -133,18 +133,15 @@ pub(crate) async fn read_with_link(
         // 32 bits for reading the batch length
         rx.hold(link, 4).await?;
         let mut length = [0_u8; 4];
-        length.copy_from_slice(&rx.buf[rx.start..rx.start + 4]);
+        length.copy_from_slice(&rx.held()[..4]);
         let n = u32::from_le_bytes(length) as usize;
         let len = buffer.len();
         let b = buffer.get_mut(0..n).ok_or_else(|| {
             zerror!("Batch len is invalid. Received {n} but negotiated max len is {len}.")
         })?;
         rx.hold(link, 4 + n).await?;
-        b.copy_from_slice(&rx.buf[rx.start + 4..rx.start + 4 + n]);
-        rx.start += 4 + n;
-        if rx.start == rx.end {
-            (rx.start, rx.end) = (0, 0);
-        }
+        b.copy_from_slice(&rx.held()[4..4 + n]);
+        rx.consume(4 + n);
         Ok(n)
     } else {
         link.link.read(buffer, None).await
