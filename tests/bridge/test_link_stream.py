@@ -10,11 +10,7 @@ streamed link's messages from what one read brings, on the universal and the low
   connections_closed, opens a new one and forwards again, and no frame that nobody sent reaches
   the bus - under the ASan/UBSan build too (make check-bridge runs this file on both builds).
 
-Seen once in about 700 runs of the corrupt tests (ASan build, low-latency, a length past any
-batch, two CPU hogs beside it), not since: the new link opened (the proxy's events) and the router
-routed the first stats query to it, but no reply came and later queries found no bridge for 30 s,
-the link still open. If it comes back: the proxy's events, the bridge's and the router's logs and
-both thread dumps are in the report (the proxies stop after it).
+One unexplained failure seen (docs/faults.md, Hostile input: the Zenoh link).
 
 Loopback only; every load bounded."""
 from __future__ import annotations
@@ -34,6 +30,9 @@ COMMANDS_PER_PHASE = 50  # before and after a fault
 TRIGGER = 0xFFFF  # the command put once the fault is armed
 SEED = 20261207
 RECOVER_S = 30.0  # a dropped link to a new one and the bridge's stats answering through it
+# a bad length to the bridge closing that link: well under Zenoh's lease (10 s), which would drop a
+# link that waits for bytes that never come, and pass the test for a reader that trusts the length
+DETECT_S = 3.0
 
 TRANSPORTS = [
     pytest.param((), [], id="universal"),
@@ -44,9 +43,9 @@ TRANSPORTS = [
 def faults(long_lengths: bool) -> dict[str, Fault]:
     size = 4 if long_lengths else 2
     return {
-        "a length past any batch": Fault(b"\xff" * size + bytes(16), close=False),
-        "the stream ends inside a length": Fault((16).to_bytes(size, "little")[:size - 1], close=True),
-        "the stream ends inside a message": Fault((64).to_bytes(size, "little") + bytes(10), close=True),
+        "a length past any batch": Fault(b"\xff" * size + bytes(16), then_close=False),
+        "the stream ends inside a length": Fault((16).to_bytes(size, "little")[:size - 1], then_close=True),
+        "the stream ends inside a message": Fault((64).to_bytes(size, "little") + bytes(10), then_close=True),
     }
 
 
@@ -109,12 +108,17 @@ def test_a_corrupt_stream_drops_the_link_and_the_bridge_forwards_on_a_new_one(bu
     dump, out = start_candump(bus, bus.workdir / "commands.log", 2 * COMMANDS_PER_PHASE)
     put_commands(session, range(COMMANDS_PER_PHASE))
     on_the_bus(Path(out.name), COMMANDS_PER_PHASE)
-    proxy.arm(faults(bool(args))[fault])
-    put_commands(session, range(TRIGGER, TRIGGER + 1))  # the message the fault replaces: never on the bus
+    chosen = faults(bool(args))[fault]
+    proxy.arm(chosen)
+    # the router's next message but a keep-alive, which the fault replaces: never on the bus
+    put_commands(session, range(TRIGGER, TRIGGER + 1))
     wait_for(proxy.injected.is_set, f"the proxy writing {fault!r} to the bridge")
+    if not chosen.then_close:  # the bridge must find the length bad itself
+        wait_for(lambda: 1 in proxy.bridge_closed_at, "the bridge closing the bad link", timeout=DETECT_S)
+        assert proxy.injected_at is not None and proxy.bridge_closed_at[1] - proxy.injected_at < DETECT_S
     wait_for(lambda: proxy.connections >= 2, "the bridge's new link", timeout=RECOVER_S)
 
-    def counted():  # more than once where the router refused the new link while it still held the old one
+    def counted():  # >= 1: the router may refuse the first new link while it still holds the old one
         stats = bridge.try_stats(session)
         return stats is not None and stats["connections_closed"] >= 1
     wait_for(counted, "the bridge counting the dropped link, through the new one", timeout=RECOVER_S)
