@@ -68,8 +68,7 @@ class LinkProxy:
         self.lock = threading.Lock()
         self.connections = 0
         self.fault: Fault | None = None
-        self.injected = threading.Event()
-        self.injected_at: float | None = None
+        self.injected_at: float | None = None  # when the armed fault went to the bridge
         self.bridge_closed_at: dict[int, float] = {}  # connection number: when its bridge side ended
         self.errors: list[str] = []
         self.events: list[str] = []  # what happened to each connection, for a failing test's report
@@ -90,11 +89,8 @@ class LinkProxy:
         self.stopping = True
         with self.lock:
             sockets = [self.listener, *self.sockets]
+        self._close(*sockets)
         for s in sockets:
-            try:
-                s.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
             s.close()
         for t in self.threads:  # each ends once its sockets are shut; the events are then complete
             t.join(timeout=5)
@@ -173,7 +169,6 @@ class LinkProxy:
                     continue
                 bridge.sendall(fault.data)
                 self.injected_at = time.monotonic()
-                self.injected.set()
                 why = f"fault written: {fault}"
                 if fault.then_close:
                     break

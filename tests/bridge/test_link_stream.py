@@ -112,10 +112,10 @@ def test_a_corrupt_stream_drops_the_link_and_the_bridge_forwards_on_a_new_one(bu
     proxy.arm(chosen)
     # the router's next message but a keep-alive, which the fault replaces: never on the bus
     put_commands(session, range(TRIGGER, TRIGGER + 1))
-    wait_for(proxy.injected.is_set, f"the proxy writing {fault!r} to the bridge")
+    injected_at = wait_for(lambda: proxy.injected_at, f"the proxy writing {fault!r} to the bridge")
     if not chosen.then_close:  # the bridge must find the length bad itself
         wait_for(lambda: 1 in proxy.bridge_closed_at, "the bridge closing the bad link", timeout=DETECT_S)
-        assert proxy.injected_at is not None and proxy.bridge_closed_at[1] - proxy.injected_at < DETECT_S
+        assert proxy.bridge_closed_at[1] - injected_at < DETECT_S
     wait_for(lambda: proxy.connections >= 2, "the bridge's new link", timeout=RECOVER_S)
 
     def counted():  # >= 1: the router may refuse the first new link while it still holds the old one
